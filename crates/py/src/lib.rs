@@ -1,0 +1,13 @@
+//! PyO3 glue between `backlashkit-core` and the Python package (`backlashkit._core`).
+//! No modelling here: argument conversion, GIL release, and Rust errors turned into
+//! `ValueError`.
+
+use pyo3::prelude::*;
+
+mod sim;
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    sim::register(m)?;
+    Ok(())
+}

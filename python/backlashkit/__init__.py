@@ -1,0 +1,29 @@
+"""backlashkit: simulate drive trains with gear backlash, identify the backlash from
+measured speeds, and cancel it with adaptive backlash-inverse control.
+
+Units are SI throughout. Every backlash figure called ``theta`` is the half-width of
+the dead zone (the total gap is ``2 * theta``).
+"""
+
+from __future__ import annotations
+
+from .errors import InputError, SensitivityWarning
+from .laws import ShaftLaw
+from .plants import DriveChain, TwoMassDrive
+from .simulate import ContactEvent, DriveResponse, NearGrazing, simulate_batch, simulate_drive
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ContactEvent",
+    "DriveChain",
+    "DriveResponse",
+    "InputError",
+    "NearGrazing",
+    "SensitivityWarning",
+    "ShaftLaw",
+    "TwoMassDrive",
+    "__version__",
+    "simulate_batch",
+    "simulate_drive",
+]

@@ -1,0 +1,88 @@
+"""Argument checks shared by the public API.
+
+Messages follow one pattern: the parameter's name, the constraint, the value received,
+and, where useful, what to do.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from .errors import InputError
+
+#: Relative tolerance on the spacing of a time vector for it to count as uniform.
+UNIFORM_RTOL = 1e-6
+
+
+def positive(name: str, value: float) -> float:
+    """Return ``value`` as a float, or raise if it is not finite and > 0."""
+    v = finite_scalar(name, value)
+    if not v > 0:
+        raise InputError(f"{name} must be > 0, got {value!r}")
+    return v
+
+
+def nonnegative(name: str, value: float) -> float:
+    """Return ``value`` as a float, or raise if it is not finite and >= 0."""
+    v = finite_scalar(name, value)
+    if not v >= 0:
+        raise InputError(f"{name} must be >= 0, got {value!r}")
+    return v
+
+
+def finite_scalar(name: str, value: float) -> float:
+    """Return ``value`` as a float, or raise if it is not a finite real number."""
+    if isinstance(value, bool):
+        raise InputError(f"{name} must be a real number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a real number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise InputError(f"{name} must be finite, got {value!r}")
+    return v
+
+
+def finite_array(name: str, values: Sequence[float] | np.ndarray, *, ndim: int = 1) -> np.ndarray:
+    """Return ``values`` as a C-contiguous float64 array with every sample finite."""
+    try:
+        arr = np.ascontiguousarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an array of real numbers") from None
+    if arr.ndim != ndim:
+        raise InputError(f"{name} must be {ndim}-dimensional, got shape {arr.shape}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        first = np.argwhere(bad)[0]
+        where = int(first[0]) if ndim == 1 else tuple(int(i) for i in first)
+        raise InputError(
+            f"{name} has a non-finite value ({arr[tuple(first)]}) at index {where}; "
+            "remove or fill NaN/inf samples first"
+        )
+    return arr
+
+
+def time_grid(t: Sequence[float] | np.ndarray, *, name: str = "t", min_samples: int = 2) -> tuple[np.ndarray, float]:
+    """Check a uniform, increasing time vector; return it and its sample time ``Ts``."""
+    arr = finite_array(name, t)
+    if arr.size < min_samples:
+        raise InputError(f"{name} must have at least {min_samples} samples, got {arr.size}")
+    dt = np.diff(arr)
+    if not (dt > 0).all():
+        i = int(np.argmax(~(dt > 0)))
+        raise InputError(
+            f"{name} must be strictly increasing; {name}[{i + 1}] = {arr[i + 1]!r} "
+            f"follows {name}[{i}] = {arr[i]!r}"
+        )
+    ts = (arr[-1] - arr[0]) / (arr.size - 1)
+    dev = np.abs(dt - ts)
+    if dev.max() > UNIFORM_RTOL * ts:
+        i = int(np.argmax(dev))
+        raise InputError(
+            f"{name} must be uniformly sampled; step {i} is {dt[i]!r} s but the mean step is "
+            f"{ts!r} s; resample the data onto a uniform grid first"
+        )
+    return arr, float(ts)

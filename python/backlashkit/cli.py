@@ -1,0 +1,81 @@
+"""Command-line interface: ``backlashkit <command> ...``.
+
+Each subcommand lives in its own module (``_cli_<name>.py``) exposing
+``add_parser(subparsers)``, which registers the subcommand and sets ``func`` to a
+callable ``func(args) -> int``. Conventions shared by every subcommand:
+
+* results go to stdout (``--json``: one JSON document, nothing else), progress and
+  messages to stderr;
+* bad input exits with status 2 and a single line ``backlashkit: error: <reason>`` on
+  stderr, never a traceback;
+* nothing the user gave is overwritten unless ``--force`` is passed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from .errors import InputError
+
+__all__ = ["main"]
+
+#: Modules that register subcommands, in the order they are listed by ``--help``.
+SUBCOMMAND_MODULES = ("_cli_simulate", "_cli_identify", "_cli_control", "_cli_reproduce")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, status 2, as argparse does, without usage spam
+        self.exit(2, f"backlashkit: error: {message} (see '{self.prog} --help')\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser with every available subcommand registered."""
+    from . import __version__
+
+    parser = _Parser(
+        prog="backlashkit",
+        description="Simulate drive trains with backlash, identify the backlash, cancel it.",
+    )
+    parser.add_argument("--version", action="version", version=f"backlashkit {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name in SUBCOMMAND_MODULES:
+        try:
+            module = importlib.import_module(f".{name}", __package__)
+        except ModuleNotFoundError as exc:  # a subcommand not built yet
+            if exc.name != f"{__package__}.{name}":
+                raise
+            continue
+        module.add_parser(sub)
+    return parser
+
+
+def fail(message: str) -> int:
+    """Print a one-line error on stderr and return exit status 2."""
+    print(f"backlashkit: error: {message}", file=sys.stderr)
+    return 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        return fail(str(exc))
+    except FileNotFoundError as exc:
+        return fail(f"file not found: {exc.filename}")
+    except IsADirectoryError as exc:
+        return fail(f"expected a file, got a directory: {exc.filename}")
+    except PermissionError as exc:
+        return fail(f"permission denied: {exc.filename}")
+    except KeyboardInterrupt:
+        return fail("interrupted")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

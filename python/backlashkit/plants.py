@@ -1,0 +1,264 @@
+"""Drive-train models with backlash.
+
+Two models share one compiled kernel:
+
+* :class:`TwoMassDrive` -- paper A, eq. 2: a motor and a load joined by an elastic
+  shaft with backlash.
+* :class:`DriveChain` -- ``N`` inertias joined by ``N - 1`` elastic shafts, each with
+  its own backlash. ``TwoMassDrive`` is its ``N = 2`` case.
+
+Conventions (SI throughout): inertias in kg m^2, viscous frictions and shaft damping
+in N m s/rad, stiffness in N m/rad, angles in rad, speeds in rad/s, torques in N m.
+Every backlash figure named ``theta`` is the **half-width** of the dead zone (the
+paper's convention): the total gap is ``2 * theta``. python-control's
+``friction_backlash_nonlinearity(b)`` and Modelica's ``ElastoBacklash(b=...)`` use the
+total gap ``b = 2 * theta``.
+
+The state vector of a chain is ``[w_1, ..., w_N, phi_1, ..., phi_{N-1}]`` with
+``phi_j`` the twist of shaft ``j`` (angle of inertia ``j`` minus angle of inertia
+``j + 1``); for the two-mass drive that is ``[w_M, w_L, phi_d]``. The input torque acts
+on inertia 1 (the motor).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import _validate as v
+from .errors import InputError
+
+if TYPE_CHECKING:
+    from .laws import ShaftLaw
+    from .simulate import DriveResponse
+
+__all__ = ["DriveChain", "TwoMassDrive"]
+
+#: Largest chain the compiled kernel handles (state dimension 2 N - 1 = 15).
+MAX_INERTIAS = 8
+
+
+def _vector(name: str, values: Sequence[float], size: int | None, check) -> tuple[float, ...]:
+    arr = np.atleast_1d(np.asarray(values, dtype=object))
+    if arr.ndim != 1:
+        raise InputError(f"{name} must be a sequence of numbers, got {values!r}")
+    if size is not None and arr.size != size:
+        raise InputError(f"{name} must have {size} entries, got {arr.size}")
+    return tuple(check(f"{name}[{i}]", x) for i, x in enumerate(arr))
+
+
+@dataclass(frozen=True)
+class DriveChain:
+    """A chain of ``N`` inertias joined by ``N - 1`` elastic shafts with backlash.
+
+    Inertia ``i`` obeys ``J_i dw_i/dt = -f_i w_i + T_{i-1} - T_i`` (plus the input
+    torque on inertia 1), where ``T_j`` is the torque carried by shaft ``j``: zero while
+    the twist ``phi_j`` is inside the gap ``(-theta_j, theta_j)``, and
+    ``k_j (phi_j -+ theta_j) + d_j dphi_j/dt`` in contact (see :class:`ShaftLaw` for
+    the two contact laws).
+
+    Parameters
+    ----------
+    J : sequence of float
+        Inertias ``J_1 .. J_N`` in kg m^2, each > 0. ``2 <= N <= 8``.
+    f : sequence of float
+        Viscous frictions to ground ``f_1 .. f_N`` in N m s/rad, each >= 0.
+    k : sequence of float
+        Shaft stiffnesses ``k_1 .. k_{N-1}`` in N m/rad, each > 0.
+    d : sequence of float
+        Shaft damping coefficients ``d_1 .. d_{N-1}`` in N m s/rad, each >= 0.
+    theta : sequence of float
+        Backlash half-widths ``theta_1 .. theta_{N-1}`` in rad, each >= 0 (the total
+        gap of shaft ``j`` is ``2 theta_j``).
+    """
+
+    J: tuple[float, ...]
+    f: tuple[float, ...]
+    k: tuple[float, ...]
+    d: tuple[float, ...]
+    theta: tuple[float, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        J = _vector("J", self.J, None, v.positive)
+        n = len(J)
+        if not 2 <= n <= MAX_INERTIAS:
+            raise InputError(f"J must have between 2 and {MAX_INERTIAS} inertias, got {n}")
+        object.__setattr__(self, "J", J)
+        object.__setattr__(self, "f", _vector("f", self.f, n, v.nonnegative))
+        object.__setattr__(self, "k", _vector("k", self.k, n - 1, v.positive))
+        object.__setattr__(self, "d", _vector("d", self.d, n - 1, v.nonnegative))
+        object.__setattr__(self, "theta", _vector("theta", self.theta, n - 1, v.nonnegative))
+
+    @property
+    def n_inertias(self) -> int:
+        """Number of inertias ``N``."""
+        return len(self.J)
+
+    @property
+    def n_states(self) -> int:
+        """Dimension ``2 N - 1`` of the state vector."""
+        return 2 * len(self.J) - 1
+
+    def to_chain(self) -> DriveChain:
+        """Return ``self`` (for symmetry with :meth:`TwoMassDrive.to_chain`)."""
+        return self
+
+    def steady_state(self, torque: float) -> np.ndarray:
+        """State reached under a constant motor torque.
+
+        All inertias turn at ``w = torque / sum(f)``; shaft ``j`` carries the friction
+        torque of the inertias beyond it, ``T_j = w * sum(f[j+1:])``, so its twist is
+        ``theta_j + T_j / k_j`` (``-theta_j + T_j / k_j`` when ``T_j < 0``). A shaft
+        carrying no torque is placed in the middle of its gap (twist 0): with zero
+        torque the twist is not determined by the dynamics.
+
+        Parameters
+        ----------
+        torque : float
+            Constant motor torque in N m.
+
+        Returns
+        -------
+        numpy.ndarray
+            State ``[w_1 .. w_N, phi_1 .. phi_{N-1}]``.
+        """
+        u = v.finite_scalar("torque", torque)
+        f = np.asarray(self.f)
+        total = f.sum()
+        if total <= 0:
+            if u == 0:
+                return np.zeros(self.n_states)
+            raise InputError(
+                "steady_state needs some viscous friction (sum of f > 0): without it a "
+                f"constant torque {u!r} N m accelerates the drive forever"
+            )
+        w = u / total
+        torques = w * np.cumsum(f[::-1])[::-1][1:]
+        theta = np.asarray(self.theta)
+        phi = np.where(torques > 0, theta, np.where(torques < 0, -theta, 0.0))
+        phi = phi + torques / np.asarray(self.k)
+        return np.concatenate([np.full(self.n_inertias, w), phi])
+
+    def simulate(
+        self,
+        t: Sequence[float] | np.ndarray,
+        torque: Sequence[float] | np.ndarray,
+        *,
+        law: ShaftLaw | str = "paper",
+        initial_state: Sequence[float] | np.ndarray | None = None,
+    ) -> DriveResponse:
+        """Simulate the chain under a zero-order-hold motor torque.
+
+        See :func:`backlashkit.simulate.simulate_drive` for the full description.
+        """
+        from .simulate import simulate_drive
+
+        return simulate_drive(self, t, torque, law=law, initial_state=initial_state)
+
+
+@dataclass(frozen=True)
+class TwoMassDrive:
+    """Motor and load joined by an elastic shaft with backlash (paper A, eq. 2).
+
+    ::
+
+        J_M dw_M/dt + f_M w_M = C_M - C_sh
+        J_L dw_L/dt + f_L w_L = C_sh
+        dphi_d/dt = w_M - w_L
+        C_sh = k_sh (phi_d -+ theta) + f_sh (w_M - w_L)   in contact, 0 in the gap
+
+    Parameters
+    ----------
+    J_M, J_L : float
+        Motor and load inertias in kg m^2, > 0.
+    k_sh : float
+        Shaft stiffness in N m/rad, > 0.
+    f_M, f_L : float
+        Motor and load viscous frictions in N m s/rad, >= 0.
+    f_sh : float
+        Shaft damping in N m s/rad, >= 0.
+    theta : float or None
+        Backlash **half-width** in rad, >= 0 (total gap ``2 theta``). ``None`` for a
+        drive whose backlash is unknown (e.g. a prior for identification); such a drive
+        cannot be simulated until a value is given with :meth:`with_theta`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from backlashkit import TwoMassDrive
+    >>> drive = TwoMassDrive(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2,
+    ...                      f_L=0.5e-2, f_sh=1.575e-2, theta=np.deg2rad(2.0))
+    >>> t = np.arange(0.0, 2.0, 1e-3)
+    >>> response = drive.simulate(t, np.full(t.size, 0.157))
+    >>> response.w_motor.shape
+    (2000,)
+    """
+
+    J_M: float
+    J_L: float
+    k_sh: float
+    f_M: float
+    f_L: float
+    f_sh: float
+    theta: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("J_M", "J_L", "k_sh"):
+            object.__setattr__(self, name, v.positive(name, getattr(self, name)))
+        for name in ("f_M", "f_L", "f_sh"):
+            object.__setattr__(self, name, v.nonnegative(name, getattr(self, name)))
+        if self.theta is not None:
+            object.__setattr__(self, "theta", v.nonnegative("theta", self.theta))
+
+    @property
+    def n_states(self) -> int:
+        """Dimension of the state ``[w_M, w_L, phi_d]``: 3."""
+        return 3
+
+    def with_theta(self, theta: float) -> TwoMassDrive:
+        """Return a copy with the backlash half-width ``theta`` (rad)."""
+        return replace(self, theta=theta)
+
+    def _require_theta(self) -> float:
+        if self.theta is None:
+            raise InputError(
+                "this TwoMassDrive has no backlash value (theta is None); give one with "
+                "drive.with_theta(theta) before simulating"
+            )
+        return self.theta
+
+    def to_chain(self) -> DriveChain:
+        """The equivalent :class:`DriveChain` with ``N = 2``."""
+        return DriveChain(
+            J=(self.J_M, self.J_L),
+            f=(self.f_M, self.f_L),
+            k=(self.k_sh,),
+            d=(self.f_sh,),
+            theta=(self._require_theta(),),
+        )
+
+    def steady_state(self, torque: float) -> np.ndarray:
+        """State ``[w_M, w_L, phi_d]`` reached under a constant motor torque (N m).
+
+        See :meth:`DriveChain.steady_state`.
+        """
+        return self.to_chain().steady_state(torque)
+
+    def simulate(
+        self,
+        t: Sequence[float] | np.ndarray,
+        torque: Sequence[float] | np.ndarray,
+        *,
+        law: ShaftLaw | str = "paper",
+        initial_state: Sequence[float] | np.ndarray | None = None,
+    ) -> DriveResponse:
+        """Simulate the drive under a zero-order-hold motor torque.
+
+        See :func:`backlashkit.simulate.simulate_drive` for the full description.
+        """
+        from .simulate import simulate_drive
+
+        return simulate_drive(self, t, torque, law=law, initial_state=initial_state)

@@ -1,0 +1,421 @@
+"""Event-accurate simulation of drive trains with backlash.
+
+The drive is piecewise affine: inside each contact configuration (every shaft either
+in its gap, on its positive flank or on its negative flank) it is a linear
+time-invariant system, so with a zero-order-hold input its flow over one sample has a
+closed form (a matrix exponential). The compiled kernel advances the state sample by
+sample with that closed form and, whenever a contact changes inside a sample, locates
+the switching instant inside the sample (to about 1e-15 of the sample time) from the
+Taylor expansion of the flow, switches the dynamics there, and finishes the sample.
+Nothing is rounded to the grid, so the result is exact up to floating-point error.
+
+A near-grazing contact (the twist comes within a hair of a flank with almost no
+relative speed) makes the trajectory ill-conditioned; the kernel records every such
+pass in :attr:`DriveResponse.near_grazing` and warns with
+:class:`~backlashkit.errors.SensitivityWarning`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from . import _validate as v
+from .errors import InputError, SensitivityWarning
+from .laws import ShaftLaw
+
+if TYPE_CHECKING:
+    import matplotlib.figure
+    import pandas
+
+    from .plants import DriveChain, TwoMassDrive
+
+__all__ = ["ContactEvent", "DriveResponse", "NearGrazing", "simulate_batch", "simulate_drive"]
+
+Backend = Literal["rust", "numpy"]
+
+#: Mode codes used by the kernels for each shaft.
+GAP, POSITIVE, NEGATIVE = 0, 1, -1
+_FLANK = {POSITIVE: "positive", NEGATIVE: "negative"}
+
+
+@dataclass(frozen=True)
+class ContactEvent:
+    """A change of contact of one shaft.
+
+    Attributes
+    ----------
+    time : float
+        Instant of the change in s, located inside the sample (not on the grid).
+    shaft : int
+        Index of the shaft (0 for the two-mass drive's only shaft).
+    kind : {"contact_made", "contact_lost"}
+        Whether the flanks met or separated.
+    flank : {"positive", "negative"}
+        The flank met or left: ``"positive"`` is ``phi = +theta``.
+    """
+
+    time: float
+    shaft: int
+    kind: str
+    flank: str
+
+
+@dataclass(frozen=True)
+class NearGrazing:
+    """A pass of a shaft's twist close to a contact boundary with little speed.
+
+    Attributes
+    ----------
+    time : float
+        Instant of the closest approach in s.
+    shaft : int
+        Index of the shaft.
+    margin : float
+        Signed distance of the closest approach, in the units of the switching
+        function (rad for the twist; N m for the no-pull torque condition): negative
+        when the boundary was missed, positive when it was crossed.
+    """
+
+    time: float
+    shaft: int
+    margin: float
+
+
+@dataclass(frozen=True, eq=False)
+class DriveResponse:
+    """Result of a drive simulation, sampled on the input's time grid.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        Time in s, shape ``(n,)``.
+    torque : numpy.ndarray
+        Motor torque in N m (zero-order hold: ``torque[i]`` acts on
+        ``[t[i], t[i+1])``), shape ``(n,)``.
+    states : numpy.ndarray
+        States ``[w_1 .. w_N, phi_1 .. phi_{N-1}]`` at ``t``, shape ``(n, 2N - 1)``.
+    modes : numpy.ndarray
+        Contact mode of each shaft at ``t`` (0 gap, +1 positive flank, -1 negative
+        flank), ``int8``, shape ``(n, N - 1)``.
+    events : tuple of ContactEvent
+        Every contact change, in time order.
+    near_grazing : tuple of NearGrazing
+        Passes close to grazing, where the trajectory is ill-conditioned.
+    law : ShaftLaw
+        The shaft law used.
+    drive : DriveChain
+        The simulated chain (a two-mass drive is simulated as its chain).
+    """
+
+    t: np.ndarray
+    torque: np.ndarray
+    states: np.ndarray
+    modes: np.ndarray
+    events: tuple[ContactEvent, ...]
+    near_grazing: tuple[NearGrazing, ...]
+    law: ShaftLaw
+    drive: DriveChain
+
+    @property
+    def n_inertias(self) -> int:
+        """Number of inertias ``N``."""
+        return self.drive.n_inertias
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """Speeds of all inertias in rad/s, shape ``(n, N)``."""
+        return self.states[:, : self.n_inertias]
+
+    @property
+    def twists(self) -> np.ndarray:
+        """Twists ``phi_j`` of all shafts in rad, shape ``(n, N - 1)``."""
+        return self.states[:, self.n_inertias :]
+
+    @property
+    def w_motor(self) -> np.ndarray:
+        """Motor speed (inertia 1) in rad/s."""
+        return self.states[:, 0]
+
+    @property
+    def w_load(self) -> np.ndarray:
+        """Load speed (last inertia) in rad/s."""
+        return self.states[:, self.n_inertias - 1]
+
+    @property
+    def phi_d(self) -> np.ndarray:
+        """Twist of the first shaft (``phi_M - phi_L`` for a two-mass drive) in rad."""
+        return self.states[:, self.n_inertias]
+
+    @property
+    def shaft_torques(self) -> np.ndarray:
+        """Torque carried by every shaft in N m, shape ``(n, N - 1)``."""
+        return shaft_torques(self.drive, self.states, self.modes, self.law)
+
+    @property
+    def shaft_torque(self) -> np.ndarray:
+        """Torque carried by the first shaft in N m."""
+        return self.shaft_torques[:, 0]
+
+    def plot(self, ax: Sequence[matplotlib.axes.Axes] | None = None) -> matplotlib.figure.Figure:
+        """Plot speeds, twist and shaft torque against time, with contact changes.
+
+        Parameters
+        ----------
+        ax : sequence of three matplotlib Axes, optional
+            Axes for speeds, twist and shaft torque. New ones are created when omitted.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            The figure holding the axes. The function never calls ``plt.show()``.
+        """
+        from .report import plot_drive_response
+
+        return plot_drive_response(self, ax=ax)
+
+    def to_pandas(self) -> pandas.DataFrame:
+        """The response as a :class:`pandas.DataFrame` indexed by ``t``.
+
+        Columns: ``torque``, ``w_1 .. w_N``, ``phi_1 .. phi_{N-1}`` and, for a two-mass
+        drive, the aliases ``w_motor``, ``w_load``, ``phi_d``, ``shaft_torque``.
+        """
+        import pandas as pd
+
+        return pd.DataFrame(self.to_columns()).set_index("t")
+
+    def to_columns(self) -> dict[str, np.ndarray]:
+        """The response as a dict of named 1-D columns (``t`` first)."""
+        cols: dict[str, np.ndarray] = {"t": self.t, "torque": self.torque}
+        if self.n_inertias == 2:
+            cols.update(
+                w_motor=self.w_motor,
+                w_load=self.w_load,
+                phi_d=self.phi_d,
+                shaft_torque=self.shaft_torque,
+            )
+            return cols
+        for i in range(self.n_inertias):
+            cols[f"w_{i + 1}"] = self.speeds[:, i]
+        for j in range(self.n_inertias - 1):
+            cols[f"phi_{j + 1}"] = self.twists[:, j]
+        for j in range(self.n_inertias - 1):
+            cols[f"shaft_torque_{j + 1}"] = self.shaft_torques[:, j]
+        return cols
+
+
+def shaft_torques(drive: DriveChain, states: np.ndarray, modes: np.ndarray, law: ShaftLaw) -> np.ndarray:
+    """Shaft torques (N m) from states and contact modes, shape ``(n, N - 1)``."""
+    n = drive.n_inertias
+    w = states[:, :n]
+    phi = states[:, n:]
+    k = np.asarray(drive.k)
+    d = np.asarray(drive.d)
+    theta = np.asarray(drive.theta)
+    spring_damper = k * (phi - modes * theta) + d * (w[:, :-1] - w[:, 1:])
+    torque = np.where(modes != GAP, spring_damper, 0.0)
+    if law is ShaftLaw.NO_PULL:
+        torque = np.where(modes == POSITIVE, np.maximum(torque, 0.0), torque)
+        torque = np.where(modes == NEGATIVE, np.minimum(torque, 0.0), torque)
+    return torque
+
+
+def _as_chain(drive: DriveChain | TwoMassDrive) -> DriveChain:
+    to_chain = getattr(drive, "to_chain", None)
+    if to_chain is None:
+        raise InputError(f"drive must be a TwoMassDrive or a DriveChain, got {type(drive).__name__}")
+    return to_chain()
+
+
+def _initial_state(chain: DriveChain, initial_state) -> np.ndarray:
+    if initial_state is None:
+        return np.zeros(chain.n_states)
+    x0 = v.finite_array("initial_state", initial_state)
+    if x0.size != chain.n_states:
+        raise InputError(
+            f"initial_state must have {chain.n_states} entries "
+            f"[w_1..w_{chain.n_inertias}, phi_1..phi_{chain.n_inertias - 1}], got {x0.size}"
+        )
+    return x0
+
+
+def _kernel(backend: Backend):
+    if backend == "rust":
+        from . import _core
+
+        return _core
+    if backend == "numpy":
+        from . import _numpy_kernels
+
+        return _numpy_kernels
+    raise InputError(f"backend must be 'rust' or 'numpy', got {backend!r}")
+
+
+def _response(chain, t, torque, law, raw) -> DriveResponse:
+    states, modes, ev, gr = raw
+    events = tuple(
+        ContactEvent(
+            time=float(time),
+            shaft=int(shaft),
+            kind="contact_made" if int(src) == GAP else "contact_lost",
+            flank=_FLANK[int(dst)] if int(src) == GAP else _FLANK[int(src)],
+        )
+        for time, shaft, src, dst in ev
+    )
+    grazes = tuple(NearGrazing(float(a), int(b), float(c)) for a, b, c in gr)
+    if grazes:
+        first = grazes[0]
+        warnings.warn(
+            f"the simulation passed within {abs(first.margin):.3g} of a grazing contact "
+            f"(shaft {first.shaft}, t = {first.time:.6g} s; {len(grazes)} such pass(es)): "
+            "what happens after it is sensitive to tiny changes of the inputs and "
+            "parameters; see response.near_grazing",
+            SensitivityWarning,
+            stacklevel=3,
+        )
+    return DriveResponse(
+        t=t,
+        torque=torque,
+        states=states,
+        modes=modes,
+        events=events,
+        near_grazing=grazes,
+        law=law,
+        drive=chain,
+    )
+
+
+def _check_inputs(drive, t, torque, law, initial_state):
+    chain = _as_chain(drive)
+    t_arr, ts = v.time_grid(t)
+    u = v.finite_array("torque", torque)
+    if u.shape != t_arr.shape:
+        raise InputError(f"torque must have one sample per time step ({t_arr.size}), got {u.size}")
+    return chain, t_arr, ts, u, ShaftLaw.parse(law), _initial_state(chain, initial_state)
+
+
+def simulate_drive(
+    drive: DriveChain | TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    law: ShaftLaw | str = "paper",
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    backend: Backend = "rust",
+) -> DriveResponse:
+    """Simulate a drive with backlash under a zero-order-hold motor torque.
+
+    Parameters
+    ----------
+    drive : TwoMassDrive or DriveChain
+        The drive; its ``theta`` must be set.
+    t : array_like
+        Uniform, strictly increasing time grid in s, at least 2 samples.
+    torque : array_like
+        Motor torque in N m, one sample per entry of ``t``, held constant over
+        ``[t[i], t[i+1])`` (the last sample is not used).
+    law : {"paper", "no-pull"} or ShaftLaw, optional
+        Contact law of the shafts; default ``"paper"`` (paper A, eq. 2).
+    initial_state : array_like, optional
+        State at ``t[0]``: ``[w_M, w_L, phi_d]`` for a two-mass drive. Default: rest,
+        twist 0 (the middle of the gap). Use ``drive.steady_state(torque)`` to start
+        from a steady state.
+    backend : {"rust", "numpy"}, optional
+        ``"rust"`` (default) is the compiled kernel; ``"numpy"`` its plain-NumPy
+        reference (same algorithm, about 100 times slower), for verification.
+
+    Returns
+    -------
+    DriveResponse
+        States, contact modes and contact events on the grid ``t``.
+
+    Warns
+    -----
+    SensitivityWarning
+        When the run passes close to a grazing contact (see
+        :attr:`DriveResponse.near_grazing`).
+    """
+    chain, t_arr, ts, u, law_, x0 = _check_inputs(drive, t, torque, law, initial_state)
+    raw = _kernel(backend).simulate_chain(
+        np.asarray(chain.J),
+        np.asarray(chain.f),
+        np.asarray(chain.k),
+        np.asarray(chain.d),
+        np.asarray(chain.theta),
+        law_.code,
+        float(t_arr[0]),
+        ts,
+        u,
+        x0,
+    )
+    return _response(chain, t_arr, u, law_, raw)
+
+
+def simulate_batch(
+    drives: Sequence[DriveChain | TwoMassDrive],
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    law: ShaftLaw | str = "paper",
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    workers: int | None = None,
+) -> list[DriveResponse]:
+    """Simulate many drives in parallel (compiled kernel, the GIL released).
+
+    Parameters
+    ----------
+    drives : sequence of TwoMassDrive or DriveChain
+        The drives, all with the same number of inertias (e.g. one drive per value of
+        a ``theta`` grid).
+    t : array_like
+        Uniform time grid in s shared by all runs.
+    torque : array_like
+        Motor torque in N m: shape ``(n,)`` shared by all runs, or ``(len(drives), n)``.
+    law : {"paper", "no-pull"} or ShaftLaw, optional
+        Contact law, default ``"paper"``.
+    initial_state : array_like, optional
+        Shape ``(2N - 1,)`` shared, or ``(len(drives), 2N - 1)``; default rest.
+    workers : int, optional
+        Number of threads; default all cores. The result does not depend on it.
+
+    Returns
+    -------
+    list of DriveResponse
+        One response per drive, in order.
+    """
+    from . import _core
+
+    chains = [_as_chain(d) for d in drives]
+    if not chains:
+        raise InputError("drives must contain at least one drive")
+    n_in = chains[0].n_inertias
+    if any(c.n_inertias != n_in for c in chains):
+        raise InputError("drives must all have the same number of inertias")
+    t_arr, ts = v.time_grid(t)
+    law_ = ShaftLaw.parse(law)
+    u = np.asarray(torque, dtype=np.float64)
+    u = np.broadcast_to(u, (len(chains), t_arr.size)) if u.ndim == 1 else u
+    u = v.finite_array("torque", u, ndim=2)
+    if u.shape != (len(chains), t_arr.size):
+        raise InputError(
+            f"torque must have shape ({t_arr.size},) or ({len(chains)}, {t_arr.size}), got {u.shape}"
+        )
+    x0 = np.zeros(chains[0].n_states) if initial_state is None else np.asarray(initial_state, float)
+    x0 = np.broadcast_to(x0, (len(chains), chains[0].n_states)) if x0.ndim == 1 else x0
+    x0 = v.finite_array("initial_state", x0, ndim=2)
+    if x0.shape != (len(chains), chains[0].n_states):
+        raise InputError(f"initial_state must have shape ({chains[0].n_states},) or "
+                         f"({len(chains)}, {chains[0].n_states}), got {x0.shape}")
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InputError(f"workers must be a positive integer, got {workers!r}")
+    params = np.array(
+        [np.concatenate([c.J, c.f, c.k, c.d, c.theta]) for c in chains], dtype=np.float64
+    )
+    raws = _core.simulate_chain_batch(
+        n_in, params, law_.code, float(t_arr[0]), ts, u, np.ascontiguousarray(x0), workers or 0
+    )
+    return [_response(c, t_arr, u[i], law_, raw) for i, (c, raw) in enumerate(zip(chains, raws))]
