@@ -16,7 +16,7 @@ from scipy.linalg import expm
 
 from .errors import InputError
 
-TAYLOR_TERMS = 24
+TAYLOR_TERMS = 18
 SCAN_POINTS = 16
 MAX_RHO_H = 0.5
 MAX_EVENTS_PER_STEP = 64

@@ -230,7 +230,7 @@ impl<const S: usize> HybridModel<S> for ChainModel<S> {
 /// Result of a chain simulation.
 pub type ChainOutput = Trajectory;
 
-fn run_sized<const S: usize>(
+fn run_sized<const S: usize, const W: usize>(
     p: &ChainParams,
     law: Law,
     t0: f64,
@@ -245,7 +245,7 @@ fn run_sized<const S: usize>(
     if !x0.iter().all(|v| v.is_finite()) || !u.iter().all(|v| v.is_finite()) {
         return Err(Error::InvalidArgument("input and initial state must be finite".into()));
     }
-    Engine::new(&model, ts)?.run(t0, ts, u, &x0)
+    Engine::<S, W, _>::new(&model, ts)?.run(t0, ts, u, &x0)
 }
 
 /// Simulate a chain from `x0` at `t0` under ZOH torque `u` sampled every `ts` seconds.
@@ -258,13 +258,13 @@ pub fn simulate_chain(
     x0: &[f64],
 ) -> Result<ChainOutput, Error> {
     match p.n_inertias() {
-        2 => run_sized::<3>(p, law, t0, ts, u, x0),
-        3 => run_sized::<5>(p, law, t0, ts, u, x0),
-        4 => run_sized::<7>(p, law, t0, ts, u, x0),
-        5 => run_sized::<9>(p, law, t0, ts, u, x0),
-        6 => run_sized::<11>(p, law, t0, ts, u, x0),
-        7 => run_sized::<13>(p, law, t0, ts, u, x0),
-        8 => run_sized::<15>(p, law, t0, ts, u, x0),
+        2 => run_sized::<3, 4>(p, law, t0, ts, u, x0),
+        3 => run_sized::<5, 8>(p, law, t0, ts, u, x0),
+        4 => run_sized::<7, 12>(p, law, t0, ts, u, x0),
+        5 => run_sized::<9, 16>(p, law, t0, ts, u, x0),
+        6 => run_sized::<11, 20>(p, law, t0, ts, u, x0),
+        7 => run_sized::<13, 24>(p, law, t0, ts, u, x0),
+        8 => run_sized::<15, 28>(p, law, t0, ts, u, x0),
         n => Err(Error::InvalidArgument(format!("a chain needs 2 to {MAX_INERTIAS} inertias, got {n}"))),
     }
 }
