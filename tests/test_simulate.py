@@ -98,14 +98,19 @@ def test_free_flight_inside_the_gap_is_first_order_decay():
     t = np.arange(201) * 1e-3
     r = drive.simulate(t, np.zeros(t.size), initial_state=[3.0, -1.0, 0.0])
     assert r.events == ()
-    np.testing.assert_allclose(r.w_motor, 3.0 * np.exp(-PAPER["f_M"] / PAPER["J_M"] * t), rtol=1e-13)
-    np.testing.assert_allclose(r.w_load, -1.0 * np.exp(-PAPER["f_L"] / PAPER["J_L"] * t), rtol=1e-13)
+    np.testing.assert_allclose(
+        r.w_motor, 3.0 * np.exp(-PAPER["f_M"] / PAPER["J_M"] * t), rtol=1e-13
+    )
+    np.testing.assert_allclose(
+        r.w_load, -1.0 * np.exp(-PAPER["f_L"] / PAPER["J_L"] * t), rtol=1e-13
+    )
 
 
 @pytest.mark.parametrize("law", ["paper", "no-pull"])
 def test_steady_state_is_an_equilibrium(law):
-    chain = bk.DriveChain(J=[0.01, 0.02, 0.05], f=[0.01, 0.02, 0.03], k=[50, 80], d=[0.01, 0.02],
-                          theta=[0.01, 0.03])
+    chain = bk.DriveChain(
+        J=[0.01, 0.02, 0.05], f=[0.01, 0.02, 0.03], k=[50, 80], d=[0.01, 0.02], theta=[0.01, 0.03]
+    )
     for torque in (0.6, -0.4):
         x0 = chain.steady_state(torque)
         t = np.arange(500) * 1e-3
@@ -180,7 +185,7 @@ def test_batch_equals_single_runs_whatever_the_workers():
     u = np.where(t < 2.0, 0.157, -0.05)
     one = bk.simulate_batch(drives, t, u, workers=1)
     two = bk.simulate_batch(drives, t, u, workers=2)
-    for d, a, b in zip(drives, one, two):
+    for d, a, b in zip(drives, one, two, strict=True):
         single = d.simulate(t, u)
         assert np.array_equal(a.states, single.states) and np.array_equal(b.states, single.states)
         assert a.events == single.events == b.events
@@ -254,5 +259,6 @@ def test_stiff_drive_uses_substeps_and_stays_exact():
     coarse = chain.simulate(t, u)
     tf = np.arange(199 * 50 + 1) * 2e-5
     fine = chain.simulate(tf, np.repeat(u, 50)[: tf.size])
-    np.testing.assert_allclose(coarse.states, fine.states[::50], rtol=0,
-                               atol=1e-8 * np.abs(fine.states).max())
+    np.testing.assert_allclose(
+        coarse.states, fine.states[::50], rtol=0, atol=1e-8 * np.abs(fine.states).max()
+    )

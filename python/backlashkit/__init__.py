@@ -7,14 +7,44 @@ the dead zone (the total gap is ``2 * theta``).
 
 from __future__ import annotations
 
+from .control import (
+    AdaptiveLaw,
+    DiscreteAdaptiveController,
+    SumOfSines,
+    TableReference,
+    design_mrc,
+    simulate_closed_loop,
+)
 from .errors import InputError, SensitivityWarning
 from .laws import ShaftLaw
+from .lti import LinearPlantWithBacklash
+from .nonlinearities import (
+    Backlash,
+    ExactInverse,
+    GainOnlyInverse,
+    NoInverse,
+    SmoothFilterInverse,
+    SmoothRampInverse,
+)
 from .plants import DriveChain, TwoMassDrive
 from .simulate import ContactEvent, DriveResponse, NearGrazing, simulate_batch, simulate_drive
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "AdaptiveLaw",
+    "Backlash",
+    "DiscreteAdaptiveController",
+    "ExactInverse",
+    "GainOnlyInverse",
+    "LinearPlantWithBacklash",
+    "NoInverse",
+    "SmoothFilterInverse",
+    "SmoothRampInverse",
+    "SumOfSines",
+    "TableReference",
+    "design_mrc",
+    "simulate_closed_loop",
     "ContactEvent",
     "DriveChain",
     "DriveResponse",

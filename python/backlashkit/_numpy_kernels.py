@@ -27,7 +27,9 @@ MIN_TWIST_SCALE = 1e-6
 
 class _Chain:
     def __init__(self, J, f, k, d, theta, law):
-        self.J, self.f, self.k, self.d, self.theta = (np.asarray(a, float) for a in (J, f, k, d, theta))
+        self.J, self.f, self.k, self.d, self.theta = (
+            np.asarray(a, float) for a in (J, f, k, d, theta)
+        )
         self.n = self.J.size
         self.s = 2 * self.n - 1
         self.law = law
@@ -185,7 +187,9 @@ def _find_crossing(md, v, t_start, rem, grazes):
                     se = _bisect(lambda s, p=p: _poly_deriv(p, s) > 0, lo, hi)
                     ve = value(se)
                     if ve > EVENT_RTOL:
-                        crossing_before = se if crossing_before is None else min(crossing_before, se)
+                        crossing_before = (
+                            se if crossing_before is None else min(crossing_before, se)
+                        )
                     elif ve > -GRAZE_RTOL:
                         close.append((se, (t_start + se * rem, shaft, ve)))
             if crossing_before is not None:
@@ -208,7 +212,9 @@ def _find_crossing(md, v, t_start, rem, grazes):
 def simulate_chain(J, f, k, d, theta, law, t0, ts, u, x0):
     """NumPy twin of ``_core.simulate_chain``; same arguments and outputs."""
     chain = _Chain(J, f, k, d, theta, law)
-    rho = max(_spectral_radius(chain.dynamics(m)[0]) for m in ([0] * (chain.n - 1), [1] * (chain.n - 1)))
+    rho = max(
+        _spectral_radius(chain.dynamics(m)[0]) for m in ([0] * (chain.n - 1), [1] * (chain.n - 1))
+    )
     substeps = max(1, math.ceil(rho * ts / MAX_RHO_H))
     h = ts / substeps
     cache: dict[tuple, _Mode] = {}

@@ -65,7 +65,9 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, *, ndim: int =
     return arr
 
 
-def time_grid(t: Sequence[float] | np.ndarray, *, name: str = "t", min_samples: int = 2) -> tuple[np.ndarray, float]:
+def time_grid(
+    t: Sequence[float] | np.ndarray, *, name: str = "t", min_samples: int = 2
+) -> tuple[np.ndarray, float]:
     """Check a uniform, increasing time vector; return it and its sample time ``Ts``."""
     arr = finite_array(name, t)
     if arr.size < min_samples:
@@ -74,15 +76,15 @@ def time_grid(t: Sequence[float] | np.ndarray, *, name: str = "t", min_samples: 
     if not (dt > 0).all():
         i = int(np.argmax(~(dt > 0)))
         raise InputError(
-            f"{name} must be strictly increasing; {name}[{i + 1}] = {arr[i + 1]!r} "
-            f"follows {name}[{i}] = {arr[i]!r}"
+            f"{name} must be strictly increasing; {name}[{i + 1}] = {float(arr[i + 1])!r} "
+            f"follows {name}[{i}] = {float(arr[i])!r}"
         )
     ts = (arr[-1] - arr[0]) / (arr.size - 1)
     dev = np.abs(dt - ts)
     if dev.max() > UNIFORM_RTOL * ts:
         i = int(np.argmax(dev))
         raise InputError(
-            f"{name} must be uniformly sampled; step {i} is {dt[i]!r} s but the mean step is "
-            f"{ts!r} s; resample the data onto a uniform grid first"
+            f"{name} must be uniformly sampled; step {i} is {float(dt[i])!r} s but the mean "
+            f"step is {float(ts)!r} s; resample the data onto a uniform grid first"
         )
     return arr, float(ts)

@@ -69,5 +69,7 @@ def plot_drive_response(
     ax_phi.set_ylabel("twist [rad]\n(dashed: ±theta)")
     ax_t.set_ylabel("shaft torque [N m]")
     ax_t.set_xlabel("time [s]")
-    ax_w.set_title(f"drive response ({response.law.value} law, {len(response.events)} contact changes)")
+    ax_w.set_title(
+        f"drive response ({response.law.value} law, {len(response.events)} contact changes)"
+    )
     return fig

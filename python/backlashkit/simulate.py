@@ -208,7 +208,9 @@ class DriveResponse:
         return cols
 
 
-def shaft_torques(drive: DriveChain, states: np.ndarray, modes: np.ndarray, law: ShaftLaw) -> np.ndarray:
+def shaft_torques(
+    drive: DriveChain, states: np.ndarray, modes: np.ndarray, law: ShaftLaw
+) -> np.ndarray:
     """Shaft torques (N m) from states and contact modes, shape ``(n, N - 1)``."""
     n = drive.n_inertias
     w = states[:, :n]
@@ -227,7 +229,9 @@ def shaft_torques(drive: DriveChain, states: np.ndarray, modes: np.ndarray, law:
 def _as_chain(drive: DriveChain | TwoMassDrive) -> DriveChain:
     to_chain = getattr(drive, "to_chain", None)
     if to_chain is None:
-        raise InputError(f"drive must be a TwoMassDrive or a DriveChain, got {type(drive).__name__}")
+        raise InputError(
+            f"drive must be a TwoMassDrive or a DriveChain, got {type(drive).__name__}"
+        )
     return to_chain()
 
 
@@ -392,30 +396,36 @@ def simulate_batch(
     chains = [_as_chain(d) for d in drives]
     if not chains:
         raise InputError("drives must contain at least one drive")
-    n_in = chains[0].n_inertias
+    n_in, b = chains[0].n_inertias, len(chains)
     if any(c.n_inertias != n_in for c in chains):
         raise InputError("drives must all have the same number of inertias")
     t_arr, ts = v.time_grid(t)
     law_ = ShaftLaw.parse(law)
     u = np.asarray(torque, dtype=np.float64)
-    u = np.broadcast_to(u, (len(chains), t_arr.size)) if u.ndim == 1 else u
-    u = v.finite_array("torque", u, ndim=2)
-    if u.shape != (len(chains), t_arr.size):
+    if u.ndim == 1:
+        u = v.finite_array("torque", u)[np.newaxis, :]  # one row shared by every run
+    else:
+        u = v.finite_array("torque", u, ndim=2)
+    if u.shape[1] != t_arr.size or u.shape[0] not in (1, b):
         raise InputError(
-            f"torque must have shape ({t_arr.size},) or ({len(chains)}, {t_arr.size}), got {u.shape}"
+            f"torque must have shape ({t_arr.size},) or ({b}, {t_arr.size}), got {np.shape(torque)}"
         )
-    x0 = np.zeros(chains[0].n_states) if initial_state is None else np.asarray(initial_state, float)
-    x0 = np.broadcast_to(x0, (len(chains), chains[0].n_states)) if x0.ndim == 1 else x0
+    n_states = chains[0].n_states
+    x0 = np.zeros(n_states) if initial_state is None else np.asarray(initial_state, float)
+    x0 = np.broadcast_to(x0, (b, n_states)) if x0.ndim == 1 else x0
     x0 = v.finite_array("initial_state", x0, ndim=2)
-    if x0.shape != (len(chains), chains[0].n_states):
-        raise InputError(f"initial_state must have shape ({chains[0].n_states},) or "
-                         f"({len(chains)}, {chains[0].n_states}), got {x0.shape}")
+    if x0.shape != (b, n_states):
+        raise InputError(
+            f"initial_state must have shape ({n_states},) or ({b}, {n_states}), "
+            f"got {np.shape(initial_state)}"
+        )
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InputError(f"workers must be a positive integer, got {workers!r}")
-    params = np.array(
-        [np.concatenate([c.J, c.f, c.k, c.d, c.theta]) for c in chains], dtype=np.float64
+    params = np.array([np.concatenate([c.J, c.f, c.k, c.d, c.theta]) for c in chains])
+    states, modes, events = _core.simulate_chain_batch(
+        n_in, params, law_.code, float(t_arr[0]), ts, u, x0, workers or 0
     )
-    raws = _core.simulate_chain_batch(
-        n_in, params, law_.code, float(t_arr[0]), ts, u, np.ascontiguousarray(x0), workers or 0
-    )
-    return [_response(c, t_arr, u[i], law_, raw) for i, (c, raw) in enumerate(zip(chains, raws))]
+    return [
+        _response(c, t_arr, u[i if u.shape[0] > 1 else 0], law_, (states[i], modes[i], *events[i]))
+        for i, c in enumerate(chains)
+    ]

@@ -9,11 +9,23 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let which = args.get(1).map(String::as_str).unwrap_or("both");
     let reps: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(300);
-    let p = ChainParams { j: vec![4.88e-3, 6.8e-2], f: vec![0.5e-2, 0.5e-2], k: vec![78.0], d: vec![1.575e-2], theta: vec![3.49e-2] };
+    let p = ChainParams {
+        j: vec![4.88e-3, 6.8e-2],
+        f: vec![0.5e-2, 0.5e-2],
+        k: vec![78.0],
+        d: vec![1.575e-2],
+        theta: vec![3.49e-2],
+    };
     let ts = 1e-3;
-    let u: Vec<f64> = (0..80_001).map(|i| if (i as f64) * ts < 40.0 { 0.157 } else { 0.0 }).collect();
+    let u: Vec<f64> = (0..80_001)
+        .map(|i| if (i as f64) * ts < 40.0 { 0.157 } else { 0.0 })
+        .collect();
     let (jm, jl, k, fm, fl, fs) = (4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2);
-    let a = [[-(fm + fs) / jm, fs / jm, -k / jm], [fs / jl, -(fl + fs) / jl, k / jl], [1.0, -1.0, 0.0]];
+    let a = [
+        [-(fm + fs) / jm, fs / jm, -k / jm],
+        [fs / jl, -(fl + fs) / jl, k / jl],
+        [1.0, -1.0, 0.0],
+    ];
     let (e, f) = expm_and_integral(&a, ts);
     let fb = [f[0][0] / jm, f[1][0] / jm, f[2][0] / jm];
     let mut best = [f64::INFINITY; 2];
@@ -31,5 +43,9 @@ fn main() {
             best[1] = best[1].min(t0.elapsed().as_secs_f64());
         }
     }
-    println!("simulator {:.3} ms, bare {:.3} ms (best of {reps})", best[0] * 1e3, best[1] * 1e3);
+    println!(
+        "simulator {:.3} ms, bare {:.3} ms (best of {reps})",
+        best[0] * 1e3,
+        best[1] * 1e3
+    );
 }

@@ -4,7 +4,13 @@
 //! Benchmarks compare the simulator against it; it is not used to simulate.
 
 /// Run `x <- E x + fb u_k + fc` over `u`, storing every state (row-major `n x 3`).
-pub fn bare_recurrence3(e: &[[f64; 3]; 3], fb: &[f64; 3], fc: &[f64; 3], u: &[f64], x0: &[f64; 3]) -> Vec<f64> {
+pub fn bare_recurrence3(
+    e: &[[f64; 3]; 3],
+    fb: &[f64; 3],
+    fc: &[f64; 3],
+    u: &[f64],
+    x0: &[f64; 3],
+) -> Vec<f64> {
     let n = u.len();
     let mut out = vec![0.0; 3 * n];
     if n == 0 {

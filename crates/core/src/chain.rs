@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use crate::hybrid::{Engine, GuardFn, GuardSpec, HybridModel, Trajectory};
+use crate::hybrid::{Engine, Event, Graze, GuardFn, GuardSpec, HybridModel, Trajectory};
 use crate::linalg::{Mat, Vector};
 use crate::Error;
 
@@ -29,7 +29,9 @@ impl Law {
         match code {
             0 => Ok(Law::Paper),
             1 => Ok(Law::NoPull),
-            _ => Err(Error::InvalidArgument(format!("law code must be 0 (paper) or 1 (no-pull), got {code}"))),
+            _ => Err(Error::InvalidArgument(format!(
+                "law code must be 0 (paper) or 1 (no-pull), got {code}"
+            ))),
         }
     }
 }
@@ -63,7 +65,13 @@ impl ChainParams {
         let (f, rest) = rest.split_at(n);
         let (k, rest) = rest.split_at(n - 1);
         let (d, theta) = rest.split_at(n - 1);
-        let params = ChainParams { j: j.to_vec(), f: f.to_vec(), k: k.to_vec(), d: d.to_vec(), theta: theta.to_vec() };
+        let params = ChainParams {
+            j: j.to_vec(),
+            f: f.to_vec(),
+            k: k.to_vec(),
+            d: d.to_vec(),
+            theta: theta.to_vec(),
+        };
         params.validate()?;
         Ok(params)
     }
@@ -75,17 +83,24 @@ impl ChainParams {
     pub fn validate(&self) -> Result<(), Error> {
         let n = self.j.len();
         if !(2..=MAX_INERTIAS).contains(&n) {
-            return Err(Error::InvalidArgument(format!("a chain needs 2 to {MAX_INERTIAS} inertias, got {n}")));
+            return Err(Error::InvalidArgument(format!(
+                "a chain needs 2 to {MAX_INERTIAS} inertias, got {n}"
+            )));
         }
         let check = |name: &str, v: &[f64], len: usize, positive: bool| -> Result<(), Error> {
             if v.len() != len {
-                return Err(Error::InvalidArgument(format!("{name} must have {len} entries, got {}", v.len())));
+                return Err(Error::InvalidArgument(format!(
+                    "{name} must have {len} entries, got {}",
+                    v.len()
+                )));
             }
             for (i, &x) in v.iter().enumerate() {
                 let ok = x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
                 if !ok {
                     let c = if positive { "> 0" } else { ">= 0" };
-                    return Err(Error::InvalidArgument(format!("{name}[{i}] must be finite and {c}, got {x}")));
+                    return Err(Error::InvalidArgument(format!(
+                        "{name}[{i}] must be finite and {c}, got {x}"
+                    )));
                 }
             }
             Ok(())
@@ -110,7 +125,9 @@ impl<const S: usize> ChainModel<S> {
     pub fn new(p: ChainParams, law: Law) -> Result<Self, Error> {
         p.validate()?;
         if 2 * p.n_inertias() - 1 != S {
-            return Err(Error::InvalidArgument("state dimension does not match the chain".into()));
+            return Err(Error::InvalidArgument(
+                "state dimension does not match the chain".into(),
+            ));
         }
         Ok(ChainModel { p, law })
     }
@@ -123,7 +140,11 @@ impl<const S: usize> ChainModel<S> {
     fn twist_fn(&self, j: usize, side: f64) -> GuardFn<S> {
         let mut h = [0.0; S];
         h[Self::N + j] = 1.0;
-        GuardFn { h, d: -side * self.p.theta[j], scale: self.twist_scale(j) }
+        GuardFn {
+            h,
+            d: -side * self.p.theta[j],
+            scale: self.twist_scale(j),
+        }
     }
 
     /// Spring-damper torque on flank `side`: `k (phi - side theta) + d (w_j - w_{j+1})`.
@@ -132,7 +153,11 @@ impl<const S: usize> ChainModel<S> {
         h[Self::N + j] = self.p.k[j];
         h[j] = self.p.d[j];
         h[j + 1] = -self.p.d[j];
-        GuardFn { h, d: -side * self.p.k[j] * self.p.theta[j], scale: self.p.k[j] * self.twist_scale(j) }
+        GuardFn {
+            h,
+            d: -side * self.p.k[j] * self.p.theta[j],
+            scale: self.p.k[j] * self.twist_scale(j),
+        }
     }
 }
 
@@ -181,7 +206,11 @@ impl<const S: usize> HybridModel<S> for ChainModel<S> {
     fn guards(&self, modes: &[i8]) -> Vec<GuardSpec<S>> {
         let mut out = Vec::new();
         for (j, &m) in modes.iter().enumerate() {
-            let spec = |funcs: Vec<GuardFn<S>>, target: i8| GuardSpec { funcs, index: j, target };
+            let spec = |funcs: Vec<GuardFn<S>>, target: i8| GuardSpec {
+                funcs,
+                index: j,
+                target,
+            };
             match (self.law, m) {
                 (Law::Paper, 0) => {
                     out.push(spec(vec![self.twist_fn(j, 1.0)], 1));
@@ -191,7 +220,13 @@ impl<const S: usize> HybridModel<S> for ChainModel<S> {
                 (Law::Paper, _) => out.push(spec(vec![self.twist_fn(j, -1.0)], 0)),
                 (Law::NoPull, 0) => {
                     out.push(spec(vec![self.twist_fn(j, 1.0), self.torque_fn(j, 1.0)], 1));
-                    out.push(spec(vec![negate(self.twist_fn(j, -1.0)), negate(self.torque_fn(j, -1.0))], -1));
+                    out.push(spec(
+                        vec![
+                            negate(self.twist_fn(j, -1.0)),
+                            negate(self.torque_fn(j, -1.0)),
+                        ],
+                        -1,
+                    ));
                 }
                 (Law::NoPull, 1) => out.push(spec(vec![negate(self.torque_fn(j, 1.0))], 0)),
                 (Law::NoPull, _) => out.push(spec(vec![self.torque_fn(j, -1.0)], 0)),
@@ -206,9 +241,8 @@ impl<const S: usize> HybridModel<S> for ChainModel<S> {
             .map(|j| {
                 let phi = x[n + j];
                 let th = self.p.theta[j];
-                let spring_damper = |side: f64| {
-                    self.p.k[j] * (phi - side * th) + self.p.d[j] * (x[j] - x[j + 1])
-                };
+                let spring_damper =
+                    |side: f64| self.p.k[j] * (phi - side * th) + self.p.d[j] * (x[j] - x[j + 1]);
                 let pos = phi > th && (self.law == Law::Paper || spring_damper(1.0) > 0.0);
                 let neg = phi < -th && (self.law == Law::Paper || spring_damper(-1.0) < 0.0);
                 if pos {
@@ -230,6 +264,10 @@ impl<const S: usize> HybridModel<S> for ChainModel<S> {
 /// Result of a chain simulation.
 pub type ChainOutput = Trajectory;
 
+/// Events and near-grazing passes of one run.
+pub type RunEvents = (Vec<Event>, Vec<Graze>);
+
+#[allow(clippy::too_many_arguments)]
 fn run_sized<const S: usize, const W: usize>(
     p: &ChainParams,
     law: Law,
@@ -237,15 +275,49 @@ fn run_sized<const S: usize, const W: usize>(
     ts: f64,
     u: &[f64],
     x0: &[f64],
-) -> Result<ChainOutput, Error> {
+    states: &mut [f64],
+    modes: &mut [i8],
+) -> Result<RunEvents, Error> {
     let model = ChainModel::<S>::new(p.clone(), law)?;
-    let x0: Vector<S> = x0
-        .try_into()
-        .map_err(|_| Error::InvalidArgument(format!("initial state must have {S} entries, got {}", x0.len())))?;
+    let x0: Vector<S> = x0.try_into().map_err(|_| {
+        Error::InvalidArgument(format!(
+            "initial state must have {S} entries, got {}",
+            x0.len()
+        ))
+    })?;
     if !x0.iter().all(|v| v.is_finite()) || !u.iter().all(|v| v.is_finite()) {
-        return Err(Error::InvalidArgument("input and initial state must be finite".into()));
+        return Err(Error::InvalidArgument(
+            "input and initial state must be finite".into(),
+        ));
     }
-    Engine::<S, W, _>::new(&model, ts)?.run(t0, ts, u, &x0)
+    Engine::<S, W, _>::new(&model, ts)?.run_into(t0, ts, u, &x0, states, modes)
+}
+
+/// As [`simulate_chain`], writing states (`u.len() x (2N - 1)`) and modes
+/// (`u.len() x (N - 1)`) into caller-provided row-major buffers.
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_chain_into(
+    p: &ChainParams,
+    law: Law,
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    x0: &[f64],
+    states: &mut [f64],
+    modes: &mut [i8],
+) -> Result<RunEvents, Error> {
+    match p.n_inertias() {
+        2 => run_sized::<3, 4>(p, law, t0, ts, u, x0, states, modes),
+        3 => run_sized::<5, 8>(p, law, t0, ts, u, x0, states, modes),
+        4 => run_sized::<7, 12>(p, law, t0, ts, u, x0, states, modes),
+        5 => run_sized::<9, 16>(p, law, t0, ts, u, x0, states, modes),
+        6 => run_sized::<11, 20>(p, law, t0, ts, u, x0, states, modes),
+        7 => run_sized::<13, 24>(p, law, t0, ts, u, x0, states, modes),
+        8 => run_sized::<15, 28>(p, law, t0, ts, u, x0, states, modes),
+        n => Err(Error::InvalidArgument(format!(
+            "a chain needs 2 to {MAX_INERTIAS} inertias, got {n}"
+        ))),
+    }
 }
 
 /// Simulate a chain from `x0` at `t0` under ZOH torque `u` sampled every `ts` seconds.
@@ -257,42 +329,74 @@ pub fn simulate_chain(
     u: &[f64],
     x0: &[f64],
 ) -> Result<ChainOutput, Error> {
-    match p.n_inertias() {
-        2 => run_sized::<3, 4>(p, law, t0, ts, u, x0),
-        3 => run_sized::<5, 8>(p, law, t0, ts, u, x0),
-        4 => run_sized::<7, 12>(p, law, t0, ts, u, x0),
-        5 => run_sized::<9, 16>(p, law, t0, ts, u, x0),
-        6 => run_sized::<11, 20>(p, law, t0, ts, u, x0),
-        7 => run_sized::<13, 24>(p, law, t0, ts, u, x0),
-        8 => run_sized::<15, 28>(p, law, t0, ts, u, x0),
-        n => Err(Error::InvalidArgument(format!("a chain needs 2 to {MAX_INERTIAS} inertias, got {n}"))),
-    }
+    let n_in = p.n_inertias().clamp(2, MAX_INERTIAS);
+    let mut states = vec![0.0; u.len() * (2 * n_in - 1)];
+    let mut modes = vec![0; u.len() * (n_in - 1)];
+    let (events, grazes) = simulate_chain_into(p, law, t0, ts, u, x0, &mut states, &mut modes)?;
+    Ok(Trajectory {
+        states,
+        modes,
+        events,
+        grazes,
+    })
 }
 
-/// Simulate many chains in parallel. `u` and `x0` hold one row per chain
-/// (row-major). `workers == 0` uses rayon's global pool (all cores).
-pub fn simulate_chain_batch(
+/// Simulate many chains of the same size in parallel into one pair of buffers:
+/// `states` holds `B x n x (2N - 1)` and `modes` `B x n x (N - 1)` values (row-major).
+/// `u` holds one input row shared by all chains, or one row per chain; `x0` one
+/// initial state per chain. `workers == 0` uses rayon's global pool (all cores). The
+/// result does not depend on the number of workers.
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_chain_batch_into(
     params: &[ChainParams],
     law: Law,
     t0: f64,
     ts: f64,
+    n_samples: usize,
     u: &[f64],
     x0: &[f64],
+    states: &mut [f64],
+    modes: &mut [i8],
     workers: usize,
-) -> Result<Vec<ChainOutput>, Error> {
+) -> Result<Vec<RunEvents>, Error> {
     let b = params.len();
     if b == 0 {
         return Ok(Vec::new());
     }
-    if u.len() % b != 0 || x0.len() % b != 0 {
-        return Err(Error::InvalidArgument("inputs and initial states must have one row per chain".into()));
+    let n_in = params[0].n_inertias();
+    if params.iter().any(|p| p.n_inertias() != n_in) {
+        return Err(Error::InvalidArgument(
+            "all chains of a batch must have the same number of inertias".into(),
+        ));
     }
-    let (n, s) = (u.len() / b, x0.len() / b);
-    let job = || -> Result<Vec<ChainOutput>, Error> {
-        params
-            .par_iter()
+    let (s, m) = (2 * n_in - 1, n_in - 1);
+    let shared = u.len() == n_samples;
+    if !(shared || u.len() == b * n_samples) || x0.len() != b * s {
+        return Err(Error::InvalidArgument(
+            "inputs and initial states must have one row per chain".into(),
+        ));
+    }
+    if states.len() != b * n_samples * s || modes.len() != b * n_samples * m {
+        return Err(Error::InvalidArgument(
+            "output buffers do not match the batch".into(),
+        ));
+    }
+    if n_samples == 0 {
+        return Ok(vec![(Vec::new(), Vec::new()); b]);
+    }
+    let mut job = move || -> Result<Vec<RunEvents>, Error> {
+        states
+            .par_chunks_mut(n_samples * s)
+            .zip(modes.par_chunks_mut(n_samples * m))
             .enumerate()
-            .map(|(i, p)| simulate_chain(p, law, t0, ts, &u[i * n..(i + 1) * n], &x0[i * s..(i + 1) * s]))
+            .map(|(i, (st, md))| {
+                let ui = if shared {
+                    u
+                } else {
+                    &u[i * n_samples..(i + 1) * n_samples]
+                };
+                simulate_chain_into(&params[i], law, t0, ts, ui, &x0[i * s..(i + 1) * s], st, md)
+            })
             .collect()
     };
     if workers == 0 {
@@ -301,7 +405,9 @@ pub fn simulate_chain_batch(
         rayon::ThreadPoolBuilder::new()
             .num_threads(workers)
             .build()
-            .map_err(|e| Error::InvalidArgument(format!("cannot start {workers} worker threads: {e}")))?
+            .map_err(|e| {
+                Error::InvalidArgument(format!("cannot start {workers} worker threads: {e}"))
+            })?
             .install(job)
     }
 }
@@ -322,7 +428,9 @@ mod tests {
 
     fn paper_input(ts: f64) -> Vec<f64> {
         let n = (80.0 / ts) as usize + 1;
-        (0..n).map(|i| if (i as f64) * ts < 40.0 { 0.157 } else { 0.0 }).collect()
+        (0..n)
+            .map(|i| if (i as f64) * ts < 40.0 { 0.157 } else { 0.0 })
+            .collect()
     }
 
     #[test]
@@ -364,7 +472,10 @@ mod tests {
             assert!(out.events.is_empty());
             let last = &out.states[out.states.len() - 3..];
             for i in 0..3 {
-                assert!((last[i] - x0[i]).abs() < 1e-9 * x0[i].abs().max(1.0), "{law:?} {last:?}");
+                assert!(
+                    (last[i] - x0[i]).abs() < 1e-9 * x0[i].abs().max(1.0),
+                    "{law:?} {last:?}"
+                );
             }
         }
     }
@@ -391,13 +502,24 @@ mod tests {
         let e = out.events[0];
         assert_eq!((e.from, e.to), (0, 1));
         assert!((e.time - lo).abs() < 1e-12, "{} vs {}", e.time, lo);
-        assert!(((e.time / 1e-3).fract()).abs() > 1e-3, "event should not sit on the grid");
+        assert!(
+            ((e.time / 1e-3).fract()).abs() > 1e-3,
+            "event should not sit on the grid"
+        );
     }
 
     #[test]
     fn no_pull_torque_never_negative_on_positive_flank() {
         let p = paper_drive(0.0349);
-        let out = simulate_chain(&p, Law::NoPull, 0.0, 1e-3, &paper_input(1e-3)[..45_000], &[0.0; 3]).unwrap();
+        let out = simulate_chain(
+            &p,
+            Law::NoPull,
+            0.0,
+            1e-3,
+            &paper_input(1e-3)[..45_000],
+            &[0.0; 3],
+        )
+        .unwrap();
         for (row, m) in out.states.chunks(3).zip(&out.modes) {
             if *m == 1 {
                 let t = 78.0 * (row[2] - 0.0349) + 1.575e-2 * (row[0] - row[1]);
@@ -405,7 +527,15 @@ mod tests {
             }
         }
         // and the paper law does pull at some point after the step-down
-        let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &paper_input(1e-3)[..45_000], &[0.0; 3]).unwrap();
+        let out = simulate_chain(
+            &p,
+            Law::Paper,
+            0.0,
+            1e-3,
+            &paper_input(1e-3)[..45_000],
+            &[0.0; 3],
+        )
+        .unwrap();
         let min_t = out
             .states
             .chunks(3)
@@ -420,15 +550,33 @@ mod tests {
     fn batch_matches_single_runs_for_any_worker_count() {
         let params: Vec<_> = (0..8).map(|i| paper_drive(0.005 * i as f64)).collect();
         let u = paper_input(1e-3)[..5000].to_vec();
-        let us: Vec<f64> = params.iter().flat_map(|_| u.clone()).collect();
         let xs = vec![0.0; 3 * params.len()];
-        let one = simulate_chain_batch(&params, Law::Paper, 0.0, 1e-3, &us, &xs, 1).unwrap();
-        let two = simulate_chain_batch(&params, Law::Paper, 0.0, 1e-3, &us, &xs, 2).unwrap();
+        let (b, n) = (params.len(), u.len());
+        let run = |workers| {
+            let mut st = vec![0.0; b * n * 3];
+            let mut md = vec![0i8; b * n];
+            let ev = simulate_chain_batch_into(
+                &params,
+                Law::Paper,
+                0.0,
+                1e-3,
+                n,
+                &u,
+                &xs,
+                &mut st,
+                &mut md,
+                workers,
+            )
+            .unwrap();
+            (st, md, ev)
+        };
+        let (one, two) = (run(1), run(2));
         for (i, p) in params.iter().enumerate() {
             let single = simulate_chain(p, Law::Paper, 0.0, 1e-3, &u, &[0.0; 3]).unwrap();
-            assert_eq!(single.states, one[i].states);
-            assert_eq!(single.states, two[i].states);
-            assert_eq!(single.events, two[i].events);
+            assert_eq!(single.states[..], one.0[i * n * 3..(i + 1) * n * 3]);
+            assert_eq!(single.states[..], two.0[i * n * 3..(i + 1) * n * 3]);
+            assert_eq!(single.modes[..], two.1[i * n..(i + 1) * n]);
+            assert_eq!(single.events, two.2[i].0);
         }
     }
 

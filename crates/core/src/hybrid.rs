@@ -14,7 +14,9 @@
 //! there and finishes the step in the new mode. The switching instants are therefore
 //! located inside the sample, not rounded to the grid.
 
-use crate::linalg::{dot, expm_and_integral, matvec, spectral_radius_estimate, vecmat, Mat, Vector};
+use crate::linalg::{
+    dot, expm_and_integral, matvec, spectral_radius_estimate, vecmat, Mat, Vector,
+};
 use crate::Error;
 
 /// Terms of the Taylor expansion of the flow used to locate events: with
@@ -90,6 +92,14 @@ pub struct Trajectory {
     pub grazes: Vec<Graze>,
 }
 
+/// Where a run writes: borrowed output buffers and growing event lists.
+struct Sink<'a> {
+    states: &'a mut [f64],
+    modes: &'a mut [i8],
+    events: Vec<Event>,
+    grazes: Vec<Graze>,
+}
+
 #[derive(Clone, Debug)]
 struct FuncData<const S: usize> {
     h: Vector<S>,
@@ -139,7 +149,10 @@ const NEVER: u32 = 1 << 31;
 
 impl<const S: usize, const W: usize> FastGuards<S, W> {
     fn new(funcs: &[FuncData<S>], guards: &[GuardData]) -> Self {
-        assert!(funcs.len() <= W && guards.len() <= W && W <= 28, "too many guard functions");
+        assert!(
+            funcs.len() <= W && guards.len() <= W && W <= 28,
+            "too many guard functions"
+        );
         let mut fg = FastGuards {
             h: [[0.0; S]; W],
             d: [-1.0; W],
@@ -159,7 +172,10 @@ impl<const S: usize, const W: usize> FastGuards<S, W> {
 }
 
 fn encode(modes: &[i8]) -> usize {
-    modes.iter().rev().fold(0usize, |acc, &m| acc * 3 + (m + 1) as usize)
+    modes
+        .iter()
+        .rev()
+        .fold(0usize, |acc, &m| acc * 3 + (m + 1) as usize)
 }
 
 /// The simulator for one model and one internal step.
@@ -178,7 +194,9 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
     /// `substeps` the smallest integer giving `rho(A) h <= 1/2` in every mode.
     pub fn new(model: &'m M, ts: f64) -> Result<Self, Error> {
         if !(ts.is_finite() && ts > 0.0) {
-            return Err(Error::InvalidArgument(format!("sample time must be > 0, got {ts}")));
+            return Err(Error::InvalidArgument(format!(
+                "sample time must be > 0, got {ts}"
+            )));
         }
         let rho = model
             .extreme_modes()
@@ -194,7 +212,12 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             )));
         }
         let n_modes = 3usize.pow(model.n_switches() as u32);
-        Ok(Engine { model, h: ts / substeps as f64, substeps, cache: vec![None; n_modes] })
+        Ok(Engine {
+            model,
+            h: ts / substeps as f64,
+            substeps,
+            cache: vec![None; n_modes],
+        })
     }
 
     /// Internal steps per sample.
@@ -230,20 +253,73 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                     d: g.d / g.scale,
                 });
             }
-            guards.push(GuardData { funcs: start..funcs.len(), index: spec.index, target: spec.target });
+            guards.push(GuardData {
+                funcs: start..funcs.len(),
+                index: spec.index,
+                target: spec.target,
+            });
         }
         let fast = FastGuards::new(&funcs, &guards);
-        ModeData { a, b, c, fb: matvec(&f, &b), fc: matvec(&f, &c), e, funcs, guards, fast }
+        ModeData {
+            a,
+            b,
+            c,
+            fb: matvec(&f, &b),
+            fc: matvec(&f, &c),
+            e,
+            funcs,
+            guards,
+            fast,
+        }
     }
 
     /// Simulate from `x0` at `t0` with ZOH input `u` (one value per sample); the
     /// trajectory has `u.len()` samples, the last input value is not used.
-    pub fn run(&mut self, t0: f64, ts: f64, u: &[f64], x0: &Vector<S>) -> Result<Trajectory, Error> {
+    pub fn run(
+        &mut self,
+        t0: f64,
+        ts: f64,
+        u: &[f64],
+        x0: &Vector<S>,
+    ) -> Result<Trajectory, Error> {
+        let (n, ns) = (u.len(), self.model.n_switches());
+        let mut states = vec![0.0; n * S];
+        let mut modes = vec![0; n * ns];
+        let (events, grazes) = self.run_into(t0, ts, u, x0, &mut states, &mut modes)?;
+        Ok(Trajectory {
+            states,
+            modes,
+            events,
+            grazes,
+        })
+    }
+
+    /// As [`Self::run`], writing states and modes into caller-provided row-major buffers
+    /// of `u.len() * S` and `u.len() * n_switches` entries; returns events and grazes.
+    pub fn run_into(
+        &mut self,
+        t0: f64,
+        ts: f64,
+        u: &[f64],
+        x0: &Vector<S>,
+        states: &mut [f64],
+        modes_out: &mut [i8],
+    ) -> Result<(Vec<Event>, Vec<Graze>), Error> {
         let n = u.len();
         let ns = self.model.n_switches();
-        let mut out = Trajectory { states: vec![0.0; n * S], modes: vec![0; n * ns], ..Default::default() };
+        if states.len() != n * S || modes_out.len() != n * ns {
+            return Err(Error::InvalidArgument(
+                "output buffers do not match the input length".into(),
+            ));
+        }
+        let mut out = Sink {
+            states,
+            modes: modes_out,
+            events: Vec::new(),
+            grazes: Vec::new(),
+        };
         if n == 0 {
-            return Ok(out);
+            return Ok((out.events, out.grazes));
         }
         let mut x = *x0;
         let mut modes = self.model.classify(&x);
@@ -259,15 +335,15 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         while k + 1 < n {
             let md = self.cache[id].as_deref().expect("mode built before use");
             let fired = if self.substeps == 1 {
-                self.fast_run_blocks(md, &mut x, u, &mut k, &mut out.states)
+                self.fast_run_blocks(md, &mut x, u, &mut k, out.states)
             } else {
-                self.fast_run(md, &mut x, &mut cur, u, &mut k, &mut sub, &mut out.states)
+                self.fast_run(md, &mut x, &mut cur, u, &mut k, &mut sub, out.states)
             };
             if !fired {
                 break;
             }
             // A guard may fire inside internal step `sub` of sample `k`: redo it closely.
-            fill_modes(&mut out.modes, &modes, filled, k + 1);
+            fill_modes(out.modes, &modes, filled, k + 1);
             filled = k + 1;
             let start = t0 + (k as f64) * ts + (sub as f64) * self.h;
             id = self.slow_step(&mut modes, &mut x, u[k], start, &mut out)?;
@@ -279,13 +355,15 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                 out.states[k * S..(k + 1) * S].copy_from_slice(&x);
             }
         }
-        fill_modes(&mut out.modes, &modes, filled, n);
+        fill_modes(out.modes, &modes, filled, n);
         // NaN/inf propagate, so one look at the end finds a divergence.
         if !x.iter().all(|v| v.is_finite()) {
             let first = out.states.iter().position(|v| !v.is_finite()).unwrap_or(0) / S;
-            return Err(Error::Diverged { time: t0 + first as f64 * ts });
+            return Err(Error::Diverged {
+                time: t0 + first as f64 * ts,
+            });
         }
-        Ok(out)
+        Ok((out.events, out.grazes))
     }
 
     /// Per guard function of the mode at `x`: its value, and the input-free part of its
@@ -303,6 +381,7 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
     /// until a guard may fire inside an internal step; returns `true` in the latter
     /// case, with `x` and the position `(k, sub)` at the start of that step (`cur` is
     /// then stale: the caller refreshes it). Modes are not written: they do not change.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn fast_run(
         &self,
@@ -330,7 +409,9 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                 positive |= ((g1 > 0.0) as u32) << i;
                 // An extremum towards the boundary inside the step: the function rises
                 // at the start and falls at the end; tangent lines bound its peak.
-                peak |= (s0 > 0.0) & (s1 < 0.0) & ((g0 + s0 * h > -GRAZE_RTOL) | (g1 - s1 * h > -GRAZE_RTOL));
+                peak |= (s0 > 0.0)
+                    & (s1 < 0.0)
+                    & ((g0 + s0 * h > -GRAZE_RTOL) | (g1 - s1 * h > -GRAZE_RTOL));
                 cur.0[i] = g1;
                 cur.1[i] = q1;
             }
@@ -382,7 +463,11 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             for c in 0..S {
                 cols[c][0] = xx[c];
             }
-            for (j, (uk, dst)) in uu.iter().zip(states[(kb + 1) * S..(kb + m + 1) * S].chunks_exact_mut(S)).enumerate() {
+            for (j, (uk, dst)) in uu
+                .iter()
+                .zip(states[(kb + 1) * S..(kb + m + 1) * S].chunks_exact_mut(S))
+                .enumerate()
+            {
                 xx = flow(&md.e, &md.fb, &md.fc, &xx, *uk);
                 dst.copy_from_slice(&xx);
                 for c in 0..S {
@@ -398,10 +483,16 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                 for c in 0..S {
                     let (a, b) = (fg.h[i][c], fg.ha[i][c]);
                     if a != 0.0 {
-                        gv[..=m].iter_mut().zip(&cols[c][..=m]).for_each(|(g, v)| *g += a * v);
+                        gv[..=m]
+                            .iter_mut()
+                            .zip(&cols[c][..=m])
+                            .for_each(|(g, v)| *g += a * v);
                     }
                     if b != 0.0 {
-                        qv[..=m].iter_mut().zip(&cols[c][..=m]).for_each(|(q, v)| *q += b * v);
+                        qv[..=m]
+                            .iter_mut()
+                            .zip(&cols[c][..=m])
+                            .for_each(|(q, v)| *q += b * v);
                     }
                 }
                 let hb = fg.hb[i];
@@ -430,7 +521,8 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                     let (s0, s1) = (qv[j] + hb * uu[j], qv[j + 1] + hb * uu[j]);
                     // An extremum towards the boundary inside the sample: the function
                     // rises at the start and falls at the end; tangent lines bound its peak.
-                    let near = ((g0 + s0 * h > -GRAZE_RTOL) as u64) | ((g1 - s1 * h > -GRAZE_RTOL) as u64);
+                    let near =
+                        ((g0 + s0 * h > -GRAZE_RTOL) as u64) | ((g1 - s1 * h > -GRAZE_RTOL) as u64);
                     flag[j] |= ((s0 > 0.0) as u64) & ((s1 < 0.0) as u64) & near;
                     lane[j] = (g1 > 0.0) as u64;
                 }
@@ -472,7 +564,7 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         x: &mut Vector<S>,
         u: f64,
         start: f64,
-        out: &mut Trajectory,
+        out: &mut Sink<'_>,
     ) -> Result<usize, Error> {
         let mut id = encode(modes);
         let mut done = 0.0;
@@ -490,7 +582,12 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                     *x = taylor.state(s);
                     let guard = &md.guards[gi];
                     let (index, target) = (guard.index, guard.target);
-                    out.events.push(Event { time: start + done + s * rem, index, from: modes[index], to: target });
+                    out.events.push(Event {
+                        time: start + done + s * rem,
+                        index,
+                        from: modes[index],
+                        to: target,
+                    });
                     modes[index] = target;
                     id = self.mode(modes);
                     done += s * rem;
@@ -501,16 +598,17 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
     }
 }
 
-/// Values of the guard functions and the input-free parts of their slopes.
-
-
 /// Samples per block of the optimistic fast path.
 const BLOCK: usize = 64;
 
 /// Whether some guard has all its lanes set in `positive`.
 #[inline(always)]
 fn crossed(positive: u32, lanes: &[u32]) -> bool {
-    lanes.iter().any(|&l| positive & l == l)
+    let mut any = false;
+    for &l in lanes {
+        any |= positive & l == l; // all lanes of this guard are set
+    }
+    any
 }
 
 /// Write `modes` into grid rows `from..to` of the row-major mode output.
@@ -527,7 +625,13 @@ fn fill_modes(out: &mut [i8], modes: &[i8], from: usize, to: usize) {
 /// Exact flow over one internal step, `E x + (fb u + fc)`, summed pairwise to keep
 /// the dependency chain from `x` to the next state short.
 #[inline(always)]
-pub fn flow<const S: usize>(e: &Mat<S>, fb: &Vector<S>, fc: &Vector<S>, x: &Vector<S>, u: f64) -> Vector<S> {
+pub fn flow<const S: usize>(
+    e: &Mat<S>,
+    fb: &Vector<S>,
+    fc: &Vector<S>,
+    x: &Vector<S>,
+    u: f64,
+) -> Vector<S> {
     let mut y = [0.0; S];
     for i in 0..S {
         let r = &e[i];
@@ -593,7 +697,9 @@ fn poly(p: &[f64; TAYLOR_TERMS + 1], s: f64) -> f64 {
 }
 
 fn poly_deriv(p: &[f64; TAYLOR_TERMS + 1], s: f64) -> f64 {
-    (1..=TAYLOR_TERMS).rev().fold(0.0, |acc, k| acc * s + k as f64 * p[k])
+    (1..=TAYLOR_TERMS)
+        .rev()
+        .fold(0.0, |acc, k| acc * s + k as f64 * p[k])
 }
 
 /// Earliest `s` in `(0, 1]` at which a guard fires, with the guard's index. Close
@@ -608,8 +714,16 @@ fn find_crossing<const S: usize, const W: usize>(
     let mut best: Option<(f64, usize)> = None;
     let mut close: Vec<(f64, Graze)> = Vec::new();
     for (gi, g) in md.guards.iter().enumerate() {
-        let polys: Vec<_> = md.funcs[g.funcs.clone()].iter().map(|f| taylor.project(f)).collect();
-        let value = |s: f64| polys.iter().map(|p| poly(p, s)).fold(f64::INFINITY, f64::min);
+        let polys: Vec<_> = md.funcs[g.funcs.clone()]
+            .iter()
+            .map(|f| taylor.project(f))
+            .collect();
+        let value = |s: f64| {
+            polys
+                .iter()
+                .map(|p| poly(p, s))
+                .fold(f64::INFINITY, f64::min)
+        };
         let limit = best.map_or(1.0, |b| b.0);
         let mut lo = 0.0;
         for j in 1..=SCAN_POINTS {
@@ -625,7 +739,14 @@ fn find_crossing<const S: usize, const W: usize>(
                     if ve > EVENT_RTOL {
                         crossing_before = Some(crossing_before.map_or(se, |c: f64| c.min(se)));
                     } else if ve > -GRAZE_RTOL {
-                        close.push((se, Graze { time: t_start + se * rem, index: g.index, margin: ve }));
+                        close.push((
+                            se,
+                            Graze {
+                                time: t_start + se * rem,
+                                index: g.index,
+                                margin: ve,
+                            },
+                        ));
                     }
                 }
             }
@@ -635,7 +756,11 @@ fn find_crossing<const S: usize, const W: usize>(
                 None => None,
             };
             if let Some(end) = end {
-                let s = if value(lo) >= 0.0 { lo } else { bisect(|s| value(s) <= 0.0, lo, end) };
+                let s = if value(lo) >= 0.0 {
+                    lo
+                } else {
+                    bisect(|s| value(s) <= 0.0, lo, end)
+                };
                 if best.is_none_or(|b| s < b.0) {
                     best = Some((s, gi));
                 }
@@ -645,7 +770,12 @@ fn find_crossing<const S: usize, const W: usize>(
         }
     }
     let limit = best.map_or(f64::INFINITY, |b| b.0);
-    grazes.extend(close.into_iter().filter(|(s, _)| *s < limit).map(|(_, g)| g));
+    grazes.extend(
+        close
+            .into_iter()
+            .filter(|(s, _)| *s < limit)
+            .map(|(_, g)| g),
+    );
     best
 }
 

@@ -7,10 +7,16 @@
 //!
 //! Units are SI; every backlash `theta` is the half-width of the dead zone.
 
+// Numeric kernels index several arrays with one loop variable; iterator chains would
+// obscure the maths without making it faster.
+#![allow(clippy::needless_range_loop)]
+
 pub mod bare;
 pub mod chain;
+pub mod control;
 pub mod hybrid;
 pub mod linalg;
+pub mod play;
 
 use std::fmt;
 

@@ -78,7 +78,11 @@ pub fn vecmat<const S: usize>(h: &Vector<S>, a: &Mat<S>) -> Vector<S> {
 pub fn expm_and_integral<const S: usize>(a: &Mat<S>, tau: f64) -> (Mat<S>, Mat<S>) {
     const DEGREE: usize = 20;
     let nrm = norm1(a) * tau.abs();
-    let squarings = if nrm > 0.5 { (nrm / 0.5).log2().ceil() as i32 } else { 0 };
+    let squarings = if nrm > 0.5 {
+        (nrm / 0.5).log2().ceil() as i32
+    } else {
+        0
+    };
     let t = tau / 2f64.powi(squarings);
     let mut at = *a;
     for row in at.iter_mut() {
@@ -176,9 +180,21 @@ mod tests {
         for i in 0..3 {
             let l: f64 = a[i][i];
             let want_e = (l * tau).exp();
-            let want_f = if l == 0.0 { tau } else { (l * tau).exp_m1() / l };
-            assert!((e[i][i] - want_e).abs() < 1e-14 * want_e.abs(), "E {i}: {} vs {want_e}", e[i][i]);
-            assert!((f[i][i] - want_f).abs() < 1e-14 * want_f.abs(), "F {i}: {} vs {want_f}", f[i][i]);
+            let want_f = if l == 0.0 {
+                tau
+            } else {
+                (l * tau).exp_m1() / l
+            };
+            assert!(
+                (e[i][i] - want_e).abs() < 1e-14 * want_e.abs(),
+                "E {i}: {} vs {want_e}",
+                e[i][i]
+            );
+            assert!(
+                (f[i][i] - want_f).abs() < 1e-14 * want_f.abs(),
+                "F {i}: {} vs {want_f}",
+                f[i][i]
+            );
         }
         assert_eq!(e[0][1], 0.0);
     }

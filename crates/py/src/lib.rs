@@ -4,10 +4,12 @@
 
 use pyo3::prelude::*;
 
+mod control;
 mod sim;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sim::register(m)?;
+    control::register(m)?;
     Ok(())
 }

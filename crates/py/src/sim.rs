@@ -2,9 +2,10 @@
 
 use backlashkit_core::bare::bare_recurrence3;
 use backlashkit_core::chain::{self, ChainOutput, ChainParams, Law};
+use backlashkit_core::hybrid::{Event, Graze};
 use backlashkit_core::linalg::expm_and_integral;
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -12,24 +13,32 @@ fn value_error(e: backlashkit_core::Error) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
 
-type RawOutput<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<i8>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+type RawOutput<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<i8>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+);
 
 /// Convert a trajectory into numpy arrays: states (n, S), modes (n, M),
 /// events (E, 4) = [time, shaft, from, to], grazes (G, 3) = [time, shaft, margin].
-fn to_numpy<'py>(py: Python<'py>, out: ChainOutput, s: usize, m: usize) -> PyResult<RawOutput<'py>> {
+fn to_numpy<'py>(
+    py: Python<'py>,
+    out: ChainOutput,
+    s: usize,
+    m: usize,
+) -> PyResult<RawOutput<'py>> {
     let n = out.states.len() / s;
     let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
     let states = Array2::from_shape_vec((n, s), out.states).map_err(shape_err)?;
     let modes = Array2::from_shape_vec((n, m), out.modes).map_err(shape_err)?;
-    let ev: Vec<f64> = out
-        .events
-        .iter()
-        .flat_map(|e| [e.time, e.index as f64, e.from as f64, e.to as f64])
-        .collect();
-    let events = Array2::from_shape_vec((out.events.len(), 4), ev).map_err(shape_err)?;
-    let gr: Vec<f64> = out.grazes.iter().flat_map(|g| [g.time, g.index as f64, g.margin]).collect();
-    let grazes = Array2::from_shape_vec((out.grazes.len(), 3), gr).map_err(shape_err)?;
-    Ok((states.into_pyarray(py), modes.into_pyarray(py), events.into_pyarray(py), grazes.into_pyarray(py)))
+    let (events, grazes) = event_arrays(py, &out.events, &out.grazes)?;
+    Ok((
+        states.into_pyarray(py),
+        modes.into_pyarray(py),
+        events,
+        grazes,
+    ))
 }
 
 /// Simulate one chain; see `backlashkit.simulate.simulate_drive`.
@@ -57,13 +66,51 @@ fn simulate_chain<'py>(
     };
     let law = Law::from_code(law).map_err(value_error)?;
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);
-    let out = py.detach(|| chain::simulate_chain(&p, law, t0, ts, u, x0)).map_err(value_error)?;
+    let out = py
+        .detach(|| chain::simulate_chain(&p, law, t0, ts, u, x0))
+        .map_err(value_error)?;
     let n_in = p.n_inertias();
     to_numpy(py, out, 2 * n_in - 1, n_in - 1)
 }
 
-/// Simulate many chains in parallel with the GIL released. `params` has one packed
-/// row `[J.., f.., k.., d.., theta..]` per chain; `u` and `x0` one row per chain.
+/// A pair of 2-D float arrays (events and grazes; or E and F of the exponential).
+type EventArrays<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+
+fn event_arrays<'py>(
+    py: Python<'py>,
+    events: &[Event],
+    grazes: &[Graze],
+) -> PyResult<EventArrays<'py>> {
+    let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
+    let ev: Vec<f64> = events
+        .iter()
+        .flat_map(|e| [e.time, e.index as f64, e.from as f64, e.to as f64])
+        .collect();
+    let gr: Vec<f64> = grazes
+        .iter()
+        .flat_map(|g| [g.time, g.index as f64, g.margin])
+        .collect();
+    Ok((
+        Array2::from_shape_vec((events.len(), 4), ev)
+            .map_err(shape_err)?
+            .into_pyarray(py),
+        Array2::from_shape_vec((grazes.len(), 3), gr)
+            .map_err(shape_err)?
+            .into_pyarray(py),
+    ))
+}
+
+type BatchOutput<'py> = (
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<i8>>,
+    Vec<EventArrays<'py>>,
+);
+
+/// Simulate many chains in parallel with the GIL released, into one states array
+/// `(B, n, 2N-1)` and one modes array `(B, n, N-1)`. `params` has one packed row
+/// `[J.., f.., k.., d.., theta..]` per chain; `u` one row shared by all chains or one
+/// row per chain; `x0` one row per chain. Returns the two arrays and, per chain, its
+/// events `(E, 4)` and grazes `(G, 3)`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn simulate_chain_batch<'py>(
@@ -76,7 +123,7 @@ fn simulate_chain_batch<'py>(
     u: PyReadonlyArray2<'py, f64>,
     x0: PyReadonlyArray2<'py, f64>,
     workers: usize,
-) -> PyResult<Vec<RawOutput<'py>>> {
+) -> PyResult<BatchOutput<'py>> {
     let law = Law::from_code(law).map_err(value_error)?;
     let rows: Vec<ChainParams> = params
         .as_array()
@@ -85,20 +132,30 @@ fn simulate_chain_batch<'py>(
         .map(|r| ChainParams::from_packed(n_inertias, &r.to_vec()))
         .collect::<Result<_, _>>()
         .map_err(value_error)?;
-    if u.as_array().nrows() != rows.len() || x0.as_array().nrows() != rows.len() {
-        return Err(PyValueError::new_err("u and x0 must have one row per parameter row"));
-    }
+    let (b, n) = (rows.len(), u.as_array().ncols());
+    let (s, m) = (2 * n_inertias - 1, n_inertias - 1);
+    let states = PyArray3::<f64>::zeros(py, [b, n, s], false);
+    let modes = PyArray3::<i8>::zeros(py, [b, n, m], false);
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);
-    let outs = py
-        .detach(|| chain::simulate_chain_batch(&rows, law, t0, ts, u, x0, workers))
+    // SAFETY: both arrays were created above and are not shared with Python code yet.
+    let (st, md) = unsafe { (states.as_slice_mut()?, modes.as_slice_mut()?) };
+    let runs = py
+        .detach(|| chain::simulate_chain_batch_into(&rows, law, t0, ts, n, u, x0, st, md, workers))
         .map_err(value_error)?;
-    outs.into_iter().map(|o| to_numpy(py, o, 2 * n_inertias - 1, n_inertias - 1)).collect()
+    let events = runs
+        .iter()
+        .map(|(e, g)| event_arrays(py, e, g))
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((states, modes, events))
 }
 
 fn mat3(a: &PyReadonlyArray2<'_, f64>) -> PyResult<[[f64; 3]; 3]> {
     let a = a.as_array();
     if a.shape() != [3, 3] {
-        return Err(PyValueError::new_err(format!("expected a 3x3 matrix, got shape {:?}", a.shape())));
+        return Err(PyValueError::new_err(format!(
+            "expected a 3x3 matrix, got shape {:?}",
+            a.shape()
+        )));
     }
     Ok(std::array::from_fn(|i| std::array::from_fn(|j| a[[i, j]])))
 }
@@ -134,7 +191,7 @@ fn expm_and_integral3<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
     tau: f64,
-) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+) -> PyResult<EventArrays<'py>> {
     let (e, f) = expm_and_integral(&mat3(&a)?, tau);
     let conv = |m: [[f64; 3]; 3]| Array2::from_shape_fn((3, 3), |(i, j)| m[i][j]).into_pyarray(py);
     Ok((conv(e), conv(f)))

@@ -1,0 +1,225 @@
+"""Speed and accuracy of the drive simulator against its peers, measured in one run.
+
+Workload: paper A's experiment (Section 5): the two-mass drive, torque 0.157 N m for
+40 s then 0 for 40 s, sampled at 1 ms (80 001 samples), from rest, paper law.
+
+Peers, all measured here, in this process, on this machine:
+
+* ``scipy reference``: :func:`backlashkit.verify.reference_simulate`, scipy's DOP853 at
+  rtol 1e-10, restarted at every located contact change (the accuracy reference);
+* ``python-control``: ``input_output_response`` of a ``NonlinearIOSystem`` with the same
+  right-hand side (no event location; python-control interpolates the input linearly);
+* ``numpy reference``: the plain-NumPy twin of the compiled kernel;
+* ``bare loop``: the hand-written recurrence ``x <- E x + fb u + fc`` with no event
+  checks (the latency bound of any sequential simulation of this drive).
+
+Each timing is the median of ``--repeats`` runs. Usage::
+
+    python benchmarks/bench_simulate.py [--repeats 7] [--quick] [--json FILE]
+
+``--quick`` skips the slow peers' repeats (one run each) for a fast look.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+
+import backlashkit as bk
+from backlashkit import _core
+
+PAPER = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
+THETA = 3.49e-2
+
+
+def median_time(fn, repeats: int) -> tuple[float, object]:
+    times, out = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def paper_rhs(drive: bk.TwoMassDrive):
+    jm, jl, k, fm, fl, fs, th = (
+        drive.J_M,
+        drive.J_L,
+        drive.k_sh,
+        drive.f_M,
+        drive.f_L,
+        drive.f_sh,
+        drive.theta,
+    )
+
+    def rhs(t, x, u, params=None):
+        wm, wl, phi = x
+        if phi >= th:
+            c = k * (phi - th) + fs * (wm - wl)
+        elif phi <= -th:
+            c = k * (phi + th) + fs * (wm - wl)
+        else:
+            c = 0.0
+        u0 = float(np.atleast_1d(u)[0])
+        return np.array([(u0 - fm * wm - c) / jm, (c - fl * wl) / jl, wm - wl])
+
+    return rhs
+
+
+def bare_loop_args(drive: bk.TwoMassDrive, ts: float):
+    from scipy.linalg import expm
+
+    jm, jl, k, fm, fl, fs = (drive.J_M, drive.J_L, drive.k_sh, drive.f_M, drive.f_L, drive.f_sh)
+    a = np.array(
+        [[-(fm + fs) / jm, fs / jm, -k / jm], [fs / jl, -(fl + fs) / jl, k / jl], [1.0, -1.0, 0.0]]
+    )
+    big = np.zeros((6, 6))
+    big[:3, :3], big[:3, 3:] = a * ts, np.eye(3) * ts
+    m = expm(big)
+    return m[:3, :3].copy(), m[:3, 3:] @ np.array([1 / jm, 0.0, 0.0]), np.zeros(3)
+
+
+def first_call_latency(repeats: int) -> tuple[float, float]:
+    """Wall time of a fresh interpreter that imports backlashkit and simulates 1 s, and of
+    one that only starts (so the difference is what a CLI user waits for)."""
+    code = (
+        "import numpy as np, backlashkit as bk; d = bk.TwoMassDrive(J_M=4.88e-3, J_L=6.8e-2,"
+        " k_sh=78, f_M=5e-3, f_L=5e-3, f_sh=1.575e-2, theta=0.0349);"
+        " t = np.arange(1001) * 1e-3; d.simulate(t, np.full(t.size, 0.157))"
+    )
+    run = lambda c: subprocess.run([sys.executable, "-c", c], check=True)  # noqa: E731
+    sim, _ = median_time(lambda: run(code), repeats)
+    bare, _ = median_time(lambda: run("import numpy"), repeats)
+    return sim, bare
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json", metavar="FILE")
+    args = ap.parse_args(argv)
+    slow_repeats = 1 if args.quick else 3
+
+    drive = bk.TwoMassDrive(**PAPER, theta=THETA)
+    ts = 1e-3
+    t = np.arange(80001) * ts
+    u = np.where(t < 40.0, 0.157, 0.0)
+    chain = drive.to_chain()
+    kargs = [np.asarray(v) for v in (chain.J, chain.f, chain.k, chain.d, chain.theta)]
+    x0 = np.zeros(3)
+    rows = {}
+
+    print("measuring backlashkit ...", file=sys.stderr)
+    rows["backlashkit simulate()"], ours = median_time(lambda: drive.simulate(t, u), args.repeats)
+    rows["compiled kernel alone"], _ = median_time(
+        lambda: _core.simulate_chain(*kargs, 0, 0.0, ts, u, x0), args.repeats
+    )
+    e, fb, fc = bare_loop_args(drive, ts)
+    rows["bare loop (latency bound)"], _ = median_time(
+        lambda: _core.bare_recurrence(e, fb, fc, u, x0), args.repeats
+    )
+    print("measuring the scipy event-located reference ...", file=sys.stderr)
+    from backlashkit.verify import reference_simulate
+
+    rows["scipy reference (DOP853 1e-10)"], ref = median_time(
+        lambda: reference_simulate(drive, t, u, method="DOP853", rtol=1e-10), slow_repeats
+    )
+    print("measuring the NumPy reference kernel ...", file=sys.stderr)
+    rows["numpy reference kernel"], npref = median_time(
+        lambda: bk.simulate_drive(drive, t, u, backend="numpy"), slow_repeats
+    )
+    print("measuring python-control ...", file=sys.stderr)
+    import control as ct
+
+    sys_ = ct.nlsys(paper_rhs(drive), None, states=3, inputs=1, outputs=3, name="drive")
+    rows["python-control input_output_response"], ctl = median_time(
+        lambda: ct.input_output_response(
+            sys_, t, u, X0=x0, solve_ivp_method="RK45", solve_ivp_kwargs=dict(rtol=1e-8, atol=1e-10)
+        ),
+        slow_repeats,
+    )
+
+    speed_ref = ref.states[:, :2]
+    scale = np.abs(speed_ref).max()
+    err = {
+        "backlashkit simulate()": np.abs(ours.states[:, :2] - speed_ref).max() / scale,
+        "numpy reference kernel": np.abs(npref.states[:, :2] - speed_ref).max() / scale,
+        "python-control input_output_response": np.abs(
+            np.asarray(ctl.states).T[:, :2] - speed_ref
+        ).max()
+        / scale,
+    }
+    ev_ours = np.array([ev.time for ev in ours.events])
+    ev_ref = np.array([ev.time for ev in ref.events])
+    event_err = (
+        float(np.abs(ev_ours - ev_ref).max()) if ev_ours.size == ev_ref.size else float("nan")
+    )
+
+    print("measuring a batch of 1000 runs (theta grid) on 1 and 2 workers ...", file=sys.stderr)
+    drives = [drive.with_theta(th) for th in np.linspace(0.5, 5.0, 1000) * np.pi / 180]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", bk.SensitivityWarning)
+        b1, _ = median_time(
+            lambda: bk.simulate_batch(drives, t, u, workers=1), max(1, slow_repeats)
+        )
+        b2, _ = median_time(
+            lambda: bk.simulate_batch(drives, t, u, workers=2), max(1, slow_repeats)
+        )
+    print("measuring first-call latency (fresh interpreters) ...", file=sys.stderr)
+    fc_sim, fc_base = first_call_latency(3)
+
+    base = rows["backlashkit simulate()"]
+    print(
+        f"\nPaper A experiment, 80 s at 1 ms (80 001 samples); medians of {args.repeats} runs "
+        f"(slow peers: {slow_repeats}); {os.cpu_count()} cores\n"
+    )
+    print(f"{'simulator':42s} {'time [ms]':>11s} {'vs backlashkit':>15s} {'max speed err':>14s}")
+    for name, sec in rows.items():
+        e_ = err.get(name)
+        e_s = f"{e_:.1e}" if e_ is not None else ("(reference)" if "scipy" in name else "")
+        print(f"{name:42s} {sec * 1e3:11.3f} {sec / base:14.2f}x {e_s:>14s}")
+    kernel, bare = rows["compiled kernel alone"], rows["bare loop (latency bound)"]
+    print(
+        f"\nscipy reference / backlashkit: {rows['scipy reference (DOP853 1e-10)'] / base:.0f}x "
+        "(target >= 500x)"
+    )
+    print(
+        f"kernel / bare loop: {kernel / bare:.2f}x; simulate() / bare loop: {base / bare:.2f}x "
+        "(target <= 2x)"
+    )
+    print(f"max |event time - reference|: {event_err:.1e} s over {ev_ours.size} contact changes")
+    print(
+        f"batch of 1000: 1 worker {b1:.3f} s, 2 workers {b2:.3f} s, speed-up {b1 / b2:.2f}x "
+        "(target >= 1.7x)"
+    )
+    print(
+        f"first call (fresh interpreter, import + 1 s simulation): {fc_sim * 1e3:.0f} ms; "
+        f"interpreter + numpy alone: {fc_base * 1e3:.0f} ms"
+    )
+    if args.json:
+        with open(args.json, "x") as fh:
+            json.dump(
+                {
+                    "times_s": rows,
+                    "rel_speed_error": err,
+                    "event_time_error_s": event_err,
+                    "batch_1000_s": {"1": b1, "2": b2},
+                    "first_call_s": {"backlashkit": fc_sim, "baseline": fc_base},
+                },
+                fh,
+                indent=2,
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,219 @@
+"""Reproduction of paper B's example (Tao & Kokotović 1995, Section IV, Figs. 5-6).
+
+``G(s) = 1/((s-1.5)(s+1))``, ``Lambda = (s+2)^2``, ``W_m = 1/((s+2)(s+3))``, true
+backlash ``m = 0.7, c_r = 1.3, c_l = -0.5``, ``Gamma = 5 I``,
+``theta_b(0) = (1.51, 0.2, -0.55)``, ``r = 10 sin(1.3 t)``, 60 s, four variants: the
+exact adaptive inverse (Fig. 5), the filtered inverse with ``alpha = 6`` (Fig. 6), the
+fixed controller alone and the adaptive gain only (the two comparisons of the text).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..nonlinearities import (
+    Backlash,
+    ExactInverse,
+    GainOnlyInverse,
+    NoInverse,
+    SmoothFilterInverse,
+)
+from .adaptive import AdaptiveLaw
+from .closed_loop import ClosedLoopResponse, SumOfSines, simulate_closed_loop
+
+__all__ = ["PAPER", "add_arguments", "run_cli", "run_tao1995"]
+
+#: The paper's numbers (Section IV).
+PAPER: dict[str, Any] = {
+    "plant": ([1.0], [1.0, -0.5, -1.5]),
+    "reference_model": [1.0, 5.0, 6.0],
+    "filter": [1.0, 4.0, 4.0],
+    "backlash": (0.7, 1.3, -0.5),
+    "theta_b_star": (0.91, 0.7, -0.35),
+    "gamma": 5.0,
+    "theta_b0": (1.51, 0.2, -0.55),
+    "reference": ([10.0], [1.3]),
+    "duration": 60.0,
+    "controller": (-32.25, -5.5, -78.375, -76.375, 1.0),
+}
+
+VARIANTS = {
+    "exact": ExactInverse(),
+    "smooth-filter": SmoothFilterInverse(alpha=6.0),
+    "none": NoInverse(),
+    "gain-only": GainOnlyInverse(),
+}
+
+
+def run_tao1995(
+    *, ts: float = 0.01, step: float | None = None, backend: str = "rust"
+) -> dict[str, ClosedLoopResponse]:
+    """Run the four variants of paper B's example.
+
+    Parameters
+    ----------
+    ts : float
+        Trace sample time in s.
+    step : float, optional
+        Largest integration step in s (default ``min(ts, 1e-3)``).
+    backend : {"rust", "numpy"}
+        Kernel.
+
+    Returns
+    -------
+    dict of str to ClosedLoopResponse
+        Keyed ``exact``, ``smooth-filter``, ``none``, ``gain-only``.
+    """
+    b = Backlash(*PAPER["backlash"])
+    law = AdaptiveLaw(gamma=PAPER["gamma"], theta_b0=PAPER["theta_b0"], m0=0.02)
+    ref = SumOfSines(*PAPER["reference"])
+    return {
+        name: simulate_closed_loop(
+            PAPER["plant"],
+            b,
+            reference=ref,
+            duration=PAPER["duration"],
+            ts=ts,
+            step=step,
+            inverse=inv,
+            adaptation=law,
+            reference_model=PAPER["reference_model"],
+            filter=PAPER["filter"],
+            backend=backend,
+        )
+        for name, inv in VARIANTS.items()
+    }
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of ``backlashkit reproduce tao1995``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The parser of the ``tao1995`` target.
+
+    Returns
+    -------
+    None
+    """
+    parser.add_argument(
+        "--json", metavar="FILE", help="write the JSON summary to FILE ('-': stdout)"
+    )
+    parser.add_argument("--report", metavar="DIR", help="write figures and traces into DIR")
+    parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
+
+
+def _checks(runs: dict[str, ClosedLoopResponse]) -> list[tuple[str, str, bool]]:
+    ex, sm = runs["exact"], runs["smooth-filter"]
+    star = PAPER["theta_b_star"]
+    rel = max(abs(a - b) / abs(b) for a, b in zip(ex.theta_b[-1], star, strict=True))
+    return [
+        (
+            "exact: RMS e (last 20 s) <= 1e-3",
+            f"{ex.rms_error_last():.3e}",
+            ex.rms_error_last() <= 1e-3,
+        ),
+        ("exact: theta_b within 1% of (0.91, 0.7, -0.35)", f"{100 * rel:.3f} %", rel <= 0.01),
+        (
+            "smooth-filter (alpha=6): RMS e <= 2e-2",
+            f"{sm.rms_error_last():.3e}",
+            sm.rms_error_last() <= 2e-2,
+        ),
+        (
+            "fixed controller: RMS e >= 0.5",
+            f"{runs['none'].rms_error_last():.3g}",
+            runs["none"].rms_error_last() >= 0.5,
+        ),
+        (
+            "gain only: RMS e >= 0.5",
+            f"{runs['gain-only'].rms_error_last():.3g}",
+            runs["gain-only"].rms_error_last() >= 0.5,
+        ),
+    ]
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run ``backlashkit reproduce tao1995``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``json``, ``report``, ``force``.
+
+    Returns
+    -------
+    int
+        0 when every bar of the reproduction is met, 1 otherwise.
+    """
+    force = bool(getattr(args, "force", False))
+    json_path = getattr(args, "json", None)
+    report = getattr(args, "report", None)
+    if json_path not in (None, "-") and Path(json_path).exists() and not force:
+        raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
+    rep = None
+    if report is not None:
+        rep = Path(report)
+        if rep.exists() and not rep.is_dir():
+            raise InputError(f"--report {rep} exists and is not a directory")
+        if rep.exists() and any(rep.iterdir()) and not force:
+            raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
+    runs = run_tao1995()
+    doc = {
+        "controller": runs["exact"].summary()["controller"],
+        "variants": {k: r.summary() for k, r in runs.items()},
+        "paper": {
+            "theta_b_star": list(PAPER["theta_b_star"]),
+            "controller": list(PAPER["controller"]),
+        },
+    }
+    checks = _checks(runs)
+    doc["checks"] = [{"bar": b, "value": v, "met": bool(m)} for b, v, m in checks]
+    if json_path == "-":
+        json.dump(doc, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        if json_path is not None:
+            Path(json_path).write_text(json.dumps(doc, indent=2) + "\n")
+        for b, v, m in checks:
+            print(f"{'MET ' if m else 'MISS'}  {b}: {v}")
+    if rep is not None:
+        _write_report(rep, runs, checks)
+    return 0 if all(m for _, _, m in checks) else 1
+
+
+def _write_report(rep: Path, runs: dict[str, ClosedLoopResponse], checks) -> None:
+    from matplotlib.figure import Figure
+
+    from .._cli_control import write_trace
+
+    rep.mkdir(parents=True, exist_ok=True)
+    runs["exact"].plot().savefig(rep / "fig5_exact_inverse.png", dpi=110)
+    runs["smooth-filter"].plot().savefig(rep / "fig6_smooth_inverse_alpha6.png", dpi=110)
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    axs = fig.subplots(2, 1, sharex=True)
+    for name, r in runs.items():
+        axs[0].plot(r.t, r.e, label=name, lw=0.8)
+    axs[0].set_ylabel("e = y - y_m")
+    axs[0].set_yscale("symlog", linthresh=1e-4)
+    axs[0].legend(loc="upper right")
+    for name, r in runs.items():
+        axs[1].plot(r.t, r.v, label=name, lw=0.8)
+    axs[1].set_ylabel("v")
+    axs[1].set_xlabel("t [s]")
+    fig.savefig(rep / "comparison.png", dpi=110)
+    for name, r in runs.items():
+        write_trace(rep / f"trace_{name}.csv", r)
+    lines = [
+        "# Tao & Kokotovic (1995), Section IV - reproduction",
+        "",
+        "| bar | value | met |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {b} | {v} | {'yes' if m else 'NO'} |" for b, v, m in checks]
+    (rep / "report.md").write_text("\n".join(lines) + "\n")

@@ -1,0 +1,81 @@
+"""``backlashkit control`` and the ``reproduce tao1995`` runner."""
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from backlashkit.cli import main
+from backlashkit.control import tao1995
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tao1995.toml"
+COLUMNS = "t,r,y,y_m,e,u_d,v,u,mc_r_hat,m_hat,mc_l_hat"
+
+
+def test_control_json_trace_plot(tmp_path, capsys):
+    trace, plot = tmp_path / "tr.csv", tmp_path / "f.png"
+    assert (
+        main(["control", str(EXAMPLE), "--json", "--trace", str(trace), "--plot", str(plot)]) == 0
+    )
+    doc = json.loads(capsys.readouterr().out)
+    # Paper B, Section IV: theta_1 = (-32.25, -5.5), theta_2 = (-78.375, -76.375), theta_3 = 1
+    assert doc["controller"]["theta_1"] == [-32.25, -5.5]
+    assert doc["controller"]["theta_2"] == [-78.375, -76.375]
+    assert doc["controller"]["theta_3"] == 1.0
+    assert doc["rms_error_last"] <= 1e-3
+    np.testing.assert_allclose(doc["theta_b_final"], [0.91, 0.7, -0.35], rtol=0.01)
+    assert trace.read_text().splitlines()[0] == COLUMNS
+    data = np.loadtxt(trace, delimiter=",", skiprows=1)
+    assert data.shape == (6001, 11)
+    np.testing.assert_allclose(np.diff(data[:, 0]), 0.01, atol=1e-9)
+    assert plot.stat().st_size > 1000
+    # no overwrite without --force
+    assert main(["control", str(EXAMPLE), "--trace", str(trace)]) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert main(["control", str(EXAMPLE), "--inverse", "gain-only", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rms_error_last"] >= 0.5
+
+
+@pytest.mark.parametrize(
+    "edit, needle",
+    [
+        (("m = 0.7", "m = -0.7"), "[backlash] m must be > 0"),
+        (("den = [1.0, 5.0, 6.0]", "den = [1.0, 5.0]"), "A2"),
+        (("num = [1.0]", "num = [1.0, -3.0]"), "A1"),
+        (("gamma = 5.0", 'gamma = "big"'), "[adaptation] gamma must be a number"),
+        (("duration = 60.0", "duration = 0.0"), "[simulation] duration must be > 0"),
+        (("frequency = [1.3]  # rad/s", "frequency = [1.3, 2.0]"), "same length"),
+        (("c_l = -0.5", "c_l = 0.5"), "[backlash] c_l must be <= 0"),
+        (("ts = 0.01", "tss = 0.01"), "unknown key"),
+        (('kind = "exact"', 'kind = "magic"'), "[inverse] inverse must be one of"),
+        (("[plant]", "[plant\n"), "not valid TOML"),
+    ],
+)
+def test_bad_scenarios_one_line_errors(tmp_path, capsys, edit, needle):
+    text = EXAMPLE.read_text()
+    assert edit[0] in text
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(edit[0], edit[1], 1))
+    assert main(["control", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("backlashkit: error:")
+    assert needle in err
+
+
+def test_reproduce_runner(tmp_path, capsys):
+    p = argparse.ArgumentParser()
+    tao1995.add_arguments(p)
+    out = tmp_path / "r.json"
+    assert (
+        tao1995.run_cli(p.parse_args(["--json", str(out), "--report", str(tmp_path / "rep")])) == 0
+    )
+    doc = json.loads(out.read_text())
+    assert set(doc["variants"]) == {"exact", "smooth-filter", "none", "gain-only"}
+    for v in doc["variants"].values():
+        assert {"controller", "theta_b_final", "rms_error_last", "max_abs_error_last"} <= set(v)
+    assert doc["variants"]["smooth-filter"]["rms_error_last"] <= 2e-2
+    assert (tmp_path / "rep" / "fig5_exact_inverse.png").exists()
+    with pytest.raises(Exception, match="already exists"):
+        tao1995.run_cli(p.parse_args(["--json", str(out)]))

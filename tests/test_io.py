@@ -1,0 +1,275 @@
+"""Drive TOML files and CSV records (backlashkit.io)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from backlashkit import InputError, TwoMassDrive
+from backlashkit.io import (
+    DRIVE_KEYS,
+    read_csv_columns,
+    read_drive_toml,
+    read_torque_csv,
+    read_uncertainty_toml,
+    write_csv,
+)
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+PAPER = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2,
+             theta=3.49e-2)
+
+
+def toml_text(values: dict | None = None, *, drop=(), extra: str = "") -> str:
+    values = dict(PAPER if values is None else values)
+    lines = ["[drive]"]
+    for key, value in values.items():
+        if key not in drop:
+            lines.append(f"{key} = {value}")
+    return "\n".join(lines) + "\n" + extra
+
+
+def write(tmp_path: Path, text: str, name: str = "drive.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+# --- drive TOML ----------------------------------------------------------------------
+
+
+def test_paper_example_file():
+    drive = read_drive_toml(EXAMPLES / "paper_drive.toml")
+    assert drive == TwoMassDrive(**PAPER)
+    assert drive.theta == pytest.approx(np.deg2rad(2.0), rel=1e-3)  # half-width, 2 degrees
+
+
+def test_integers_are_accepted(tmp_path):
+    drive = read_drive_toml(write(tmp_path, toml_text({**PAPER, "k_sh": 78, "theta": 0})))
+    assert drive.k_sh == 78.0 and isinstance(drive.k_sh, float) and drive.theta == 0.0
+
+
+def test_theta_may_be_left_out_for_identification(tmp_path):
+    path = write(tmp_path, toml_text(drop=("theta",)))
+    assert read_drive_toml(path, require_theta=False).theta is None
+    with pytest.raises(InputError, match=r"missing key\(s\) theta .*half-width"):
+        read_drive_toml(path)
+    # a given theta is still used
+    assert read_drive_toml(write(tmp_path, toml_text(), "b.toml"), require_theta=False).theta == (
+        3.49e-2
+    )
+
+
+def test_uncertainty_table_is_accepted_and_read(tmp_path):
+    path = write(tmp_path, toml_text(extra="[uncertainty]\nJ_L = 0.1\nk_sh = 0.2\n"))
+    assert read_drive_toml(path) == TwoMassDrive(**PAPER)
+    assert read_uncertainty_toml(path) == {"J_L": 0.1, "k_sh": 0.2}
+    assert read_uncertainty_toml(write(tmp_path, toml_text(), "b.toml")) == {}
+
+
+@pytest.mark.parametrize(
+    ("extra", "culprit"),
+    [
+        ("[uncertainty]\nJ_X = 0.1\n", r"unknown key\(s\) J_X in \[uncertainty\]"),
+        ("[uncertainty]\nJ_L = -0.1\n", "J_L must be >= 0"),
+        ("[uncertainty]\nJ_L = 'ten'\n", "J_L must be a number"),
+    ],
+)
+def test_bad_uncertainty_table(tmp_path, extra, culprit):
+    with pytest.raises(InputError, match=culprit):
+        read_uncertainty_toml(write(tmp_path, toml_text(extra=extra)))
+
+
+BAD_TOML = {
+    "missing key": (toml_text(drop=("k_sh",)), r"missing key\(s\) k_sh in \[drive\]"),
+    "missing keys": (toml_text(drop=("J_M", "f_L")), r"missing key\(s\) J_M, f_L"),
+    "extra key": (toml_text(extra="").replace("[drive]", "[drive]\nJ_m = 1.0"),
+                  r"unknown key\(s\) J_m in \[drive\]; allowed keys: J_M, J_L, k_sh"),
+    "total gap key": (toml_text({**PAPER, "b": 0.07}), r"unknown key\(s\) b"),
+    "unknown table": (toml_text(extra="[drvie]\nx = 1\n"), r"unknown top-level key\(s\) drvie"),
+    "no drive table": ("[motor]\nJ = 1.0\n", "motor"),
+    "empty file": ("", r"no \[drive\] table"),
+    "drive not a table": ("drive = 3\n", "drive must be a table"),
+    "zero J_M": (toml_text({**PAPER, "J_M": 0.0}), r"J_M must be > 0, got 0\.0"),
+    "negative J_L": (toml_text({**PAPER, "J_L": -1.0}), r"J_L must be > 0, got -1\.0"),
+    "zero k_sh": (toml_text({**PAPER, "k_sh": 0}), "k_sh must be > 0"),
+    "negative k_sh": (toml_text({**PAPER, "k_sh": -78}), "k_sh must be > 0"),
+    "negative theta": (toml_text({**PAPER, "theta": -0.01}), r"theta must be >= 0, got -0\.01"),
+    "negative f_sh": (toml_text({**PAPER, "f_sh": -1e-3}), "f_sh must be >= 0"),
+    "string value": (toml_text({**PAPER, "J_M": '"4.88e-3"'}), r"J_M must be a number.*str"),
+    "bool value": (toml_text({**PAPER, "f_M": "true"}), r"f_M must be a number.*bool"),
+    "array value": (toml_text({**PAPER, "theta": "[0.1, 0.2]"}), "theta must be a number"),
+    "nan value": (toml_text({**PAPER, "J_L": "nan"}), "J_L must be finite"),
+    "inf value": (toml_text({**PAPER, "k_sh": "inf"}), "k_sh must be finite"),
+    "does not parse": (toml_text().replace("k_sh = 78.0", "k_sh 78.0"),
+                       r"not valid TOML: .*line 4"),
+    "duplicate key": (toml_text() + "J_M = 1.0\n", r"not valid TOML: .*line 9"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_TOML), ids=list(BAD_TOML))
+def test_bad_drive_file(tmp_path, case):
+    text, culprit = BAD_TOML[case]
+    path = write(tmp_path, text)
+    with pytest.raises(InputError, match=culprit) as info:
+        read_drive_toml(path)
+    msg = str(info.value)
+    assert msg.startswith(str(path)) and "\n" not in msg
+
+
+def test_non_utf8_toml(tmp_path):
+    path = tmp_path / "drive.toml"
+    path.write_bytes(b"[drive]\nJ_M = 1.0 # \xff\n")
+    with pytest.raises(InputError, match="not a UTF-8 text file"):
+        read_drive_toml(path)
+
+
+def test_missing_toml_file_is_a_file_not_found(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        read_drive_toml(tmp_path / "nope.toml")
+
+
+def test_drive_keys_match_the_model():
+    assert set(DRIVE_KEYS) == set(TwoMassDrive.__dataclass_fields__)
+
+
+# --- CSV reading ---------------------------------------------------------------------
+
+
+def csv_file(tmp_path: Path, text: str, name: str = "torque.csv") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_example_torque_file():
+    t, u = read_torque_csv(EXAMPLES / "torque_example.csv")
+    assert t.size == u.size >= 100 and t[0] == 0.0
+    np.testing.assert_allclose(np.diff(t), t[1] - t[0], rtol=1e-6)
+
+
+def test_columns_are_found_by_name_and_extras_ignored(tmp_path):
+    path = csv_file(
+        tmp_path,
+        "\ufeff# a comment\nw_motor, torque ,t\n1,0.5,0.0\n\n2,0.25,0.001\n3,-1e-3,0.002\n",
+    )
+    t, u = read_torque_csv(path)
+    np.testing.assert_array_equal(t, [0.0, 0.001, 0.002])
+    np.testing.assert_array_equal(u, [0.5, 0.25, -1e-3])
+
+
+BAD_CSV = {
+    "missing column": ("t,tau\n0,1\n0.1,1\n", r"no column 'torque'.*expected columns 't,torque'"),
+    "missing t": ("time,torque\n0,1\n0.1,1\n", "no column 't'"),
+    "semicolons": ("t;torque\n0;1\n0.1;1\n", "separated by commas"),
+    "empty": ("", "the file is empty"),
+    "header only": ("t,torque\n", r"too few samples: 0"),
+    "one sample": ("t,torque\n0,1\n", r"too few samples: 1 data line"),
+    "non numeric": ("t,torque\n0,1\n0.1,abc\n0.2,1\n", r"line 3, column 'torque': 'abc' is not a"),
+    "empty cell": ("t,torque\n0,1\n,1\n", r"line 3, column 't': '' is not a number"),
+    "nan": ("t,torque\n0,1\n0.1,nan\n0.2,1\n", r"line 3, column 'torque': value 'nan' is not"),
+    "inf": ("t,torque\n0,1\n0.1,1\n0.2,-inf\n", r"line 4, column 'torque': value '-inf'"),
+    "nan time": ("t,torque\n0,1\nNaN,1\n", r"line 3, column 't'.*not finite"),
+    "non monotonic": ("t,torque\n0,1\n0.2,1\n0.1,1\n", r"strictly increasing; line 4 has t = 0\.1"),
+    "repeated time": ("t,torque\n0,1\n0,1\n", "strictly increasing"),
+    "non uniform": ("t,torque\n0,1\n0.1,1\n0.25,1\n0.3,1\n", r"uniformly sampled; .* line 3"),
+    "ragged row": ("t,torque\n0,1\n0.1,1,5\n", r"line 3 has 3 field\(s\) but the header has 2"),
+    "duplicate column": ("t,torque,t\n0,1,0\n0.1,1,0.1\n", "column 't' appears twice"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_CSV), ids=list(BAD_CSV))
+def test_bad_torque_file(tmp_path, case):
+    text, culprit = BAD_CSV[case]
+    path = csv_file(tmp_path, text)
+    with pytest.raises(InputError, match=culprit) as info:
+        read_torque_csv(path)
+    msg = str(info.value)
+    assert msg.startswith(str(path)) and "\n" not in msg
+
+
+def test_non_utf8_csv(tmp_path):
+    path = tmp_path / "x.csv"
+    path.write_bytes(b"t,torque\n0,\xff\n")
+    with pytest.raises(InputError, match="not a UTF-8"):
+        read_torque_csv(path)
+
+
+def test_read_csv_columns_min_samples(tmp_path):
+    path = csv_file(tmp_path, "a,b\n1,2\n")
+    assert read_csv_columns(path, ["b"], min_samples=1) == {"b": np.array([2.0])}
+
+
+# --- CSV writing ---------------------------------------------------------------------
+
+
+def test_round_trip_is_exact(tmp_path):
+    rng = np.random.default_rng(0)
+    t = np.arange(1000) * 1e-3
+    cols = {
+        "t": t,
+        "torque": rng.normal(size=1000),
+        "w": rng.normal(size=1000) * 10.0 ** rng.integers(-300, 300, 1000),
+    }
+    cols["w"][:3] = [0.1, 1 / 3, 5e-324]
+    path = tmp_path / "out.csv"
+    write_csv(path, cols)
+    back = read_csv_columns(path, list(cols))
+    for key, values in cols.items():
+        assert np.array_equal(back[key], values), key
+    assert path.read_text().splitlines()[0] == "t,torque,w"
+
+
+@given(arrays(np.float64, st.integers(2, 30), elements=st.floats(allow_nan=False,
+                                                                  allow_infinity=False)))
+@settings(max_examples=40, deadline=None)
+def test_round_trip_property(tmp_path_factory, values):
+    path = tmp_path_factory.mktemp("rt") / "x.csv"
+    write_csv(path, {"x": values, "y": -values})
+    back = read_csv_columns(path, ["x", "y"])
+    assert np.array_equal(back["x"], values) and np.array_equal(back["y"], -values)
+
+
+def test_write_refuses_to_overwrite_unless_forced(tmp_path):
+    path = tmp_path / "out.csv"
+    path.write_text("keep me\n")
+    with pytest.raises(InputError, match=r"already exists; pass --force"):
+        write_csv(path, {"a": [1.0]})
+    assert path.read_text() == "keep me\n"
+    write_csv(path, {"a": [1.0, 2.5]}, force=True)
+    assert path.read_text() == "a\n1.0\n2.5\n"
+
+
+@pytest.mark.parametrize(
+    ("columns", "culprit"),
+    [
+        ({}, "at least one column"),
+        ({"a": [1.0], "b": [1.0, 2.0]}, "same length"),
+        ({"a,b": [1.0]}, "column names"),
+        ({"": [1.0]}, "column names"),
+        ({"a": [[1.0]]}, "1-D"),
+        ({"a": ["x"]}, "real numbers"),
+    ],
+)
+def test_write_rejects_bad_columns(tmp_path, columns, culprit):
+    with pytest.raises(InputError, match=culprit):
+        write_csv(tmp_path / "o.csv", columns)
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_write_into_missing_directory(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        write_csv(tmp_path / "nope" / "o.csv", {"a": [1.0]})
+
+
+def test_nan_is_written_and_read_back_as_an_error(tmp_path):
+    path = tmp_path / "o.csv"
+    write_csv(path, {"t": [0.0, 1.0], "torque": [1.0, math.nan]})
+    with pytest.raises(InputError, match="not finite"):
+        read_torque_csv(path)
