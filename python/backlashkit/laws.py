@@ -24,6 +24,11 @@ class ShaftLaw(str, enum.Enum):
         re-engage when the spring-damper torque becomes positive again.
 
     The two laws are identical when the shaft damping ``d`` (``f_sh``) is zero.
+
+    Parameters
+    ----------
+    value : {"paper", "no-pull"}
+        The law's name (``ShaftLaw("no-pull")``); :meth:`parse` also accepts members.
     """
 
     PAPER = "paper"
@@ -31,7 +36,18 @@ class ShaftLaw(str, enum.Enum):
 
     @classmethod
     def parse(cls, law: ShaftLaw | str) -> ShaftLaw:
-        """Return the :class:`ShaftLaw` named by ``law`` (an instance or its value)."""
+        """The :class:`ShaftLaw` named by ``law``.
+
+        Parameters
+        ----------
+        law : ShaftLaw or str
+            A member, or its value (``"paper"``, ``"no-pull"``).
+
+        Returns
+        -------
+        ShaftLaw
+            The member.
+        """
         if isinstance(law, cls):
             return law
         try:

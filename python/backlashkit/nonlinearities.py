@@ -259,7 +259,14 @@ class SmoothFilterInverse(InverseKind):
     def __post_init__(self) -> None:
         object.__setattr__(self, "alpha", _v.positive("alpha", self.alpha))
 
-    def params(self) -> tuple[float, float]:  # noqa: D102 - documented in the base class
+    def params(self) -> tuple[float, float]:
+        """Kernel parameters of the filter.
+
+        Returns
+        -------
+        tuple of float
+            ``(alpha, 0.0)``.
+        """
         return (self.alpha, 0.0)
 
 
@@ -292,7 +299,14 @@ class SmoothRampInverse(InverseKind):
         object.__setattr__(self, "beta_r", _v.positive("beta_r", self.beta_r))
         object.__setattr__(self, "beta_l", _v.positive("beta_l", self.beta_l))
 
-    def params(self) -> tuple[float, float]:  # noqa: D102 - documented in the base class
+    def params(self) -> tuple[float, float]:
+        """Kernel parameters of the ramps.
+
+        Returns
+        -------
+        tuple of float
+            ``(beta_r, beta_l)``.
+        """
         return (self.beta_r, self.beta_l)
 
 

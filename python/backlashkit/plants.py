@@ -103,7 +103,13 @@ class DriveChain:
         return 2 * len(self.J) - 1
 
     def to_chain(self) -> DriveChain:
-        """Return ``self`` (for symmetry with :meth:`TwoMassDrive.to_chain`)."""
+        """The chain itself (for symmetry with :meth:`TwoMassDrive.to_chain`).
+
+        Returns
+        -------
+        DriveChain
+            ``self``.
+        """
         return self
 
     def steady_state(self, torque: float) -> np.ndarray:
@@ -150,9 +156,23 @@ class DriveChain:
         law: ShaftLaw | str = "paper",
         initial_state: Sequence[float] | np.ndarray | None = None,
     ) -> DriveResponse:
-        """Simulate the chain under a zero-order-hold motor torque.
+        """Simulate the drive under a zero-order-hold motor torque.
 
-        See :func:`backlashkit.simulate.simulate_drive` for the full description.
+        Parameters
+        ----------
+        t : array_like
+            Uniform, strictly increasing time grid in s.
+        torque : array_like
+            Motor torque in N m, one sample per entry of ``t`` (held over the sample).
+        law : {"paper", "no-pull"} or ShaftLaw, optional
+            Contact law of the shafts, default ``"paper"``.
+        initial_state : array_like, optional
+            State at ``t[0]``; default rest with every twist 0.
+
+        Returns
+        -------
+        DriveResponse
+            See :func:`backlashkit.simulate.simulate_drive`, which this calls.
         """
         from .simulate import simulate_drive
 
@@ -219,7 +239,18 @@ class TwoMassDrive:
         return 3
 
     def with_theta(self, theta: float) -> TwoMassDrive:
-        """Return a copy with the backlash half-width ``theta`` (rad)."""
+        """A copy of the drive with another backlash.
+
+        Parameters
+        ----------
+        theta : float
+            Backlash half-width in rad, >= 0.
+
+        Returns
+        -------
+        TwoMassDrive
+            The same linear parameters with ``theta``.
+        """
         return replace(self, theta=theta)
 
     def _require_theta(self) -> float:
@@ -231,7 +262,14 @@ class TwoMassDrive:
         return self.theta
 
     def to_chain(self) -> DriveChain:
-        """The equivalent :class:`DriveChain` with ``N = 2``."""
+        """The equivalent two-inertia chain.
+
+        Returns
+        -------
+        DriveChain
+            ``J = (J_M, J_L)``, ``f = (f_M, f_L)``, ``k = (k_sh,)``, ``d = (f_sh,)``,
+            ``theta = (theta,)``.
+        """
         return DriveChain(
             J=(self.J_M, self.J_L),
             f=(self.f_M, self.f_L),
@@ -241,9 +279,18 @@ class TwoMassDrive:
         )
 
     def steady_state(self, torque: float) -> np.ndarray:
-        """State ``[w_M, w_L, phi_d]`` reached under a constant motor torque (N m).
+        """State reached under a constant motor torque (see :meth:`DriveChain.steady_state`).
 
-        See :meth:`DriveChain.steady_state`.
+        Parameters
+        ----------
+        torque : float
+            Constant motor torque in N m.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``[w_M, w_L, phi_d]``: both speeds ``torque / (f_M + f_L)``, the shaft
+            twisted by ``theta + f_L w / k_sh`` (mirrored for a negative torque).
         """
         return self.to_chain().steady_state(torque)
 
@@ -257,7 +304,21 @@ class TwoMassDrive:
     ) -> DriveResponse:
         """Simulate the drive under a zero-order-hold motor torque.
 
-        See :func:`backlashkit.simulate.simulate_drive` for the full description.
+        Parameters
+        ----------
+        t : array_like
+            Uniform, strictly increasing time grid in s.
+        torque : array_like
+            Motor torque in N m, one sample per entry of ``t`` (held over the sample).
+        law : {"paper", "no-pull"} or ShaftLaw, optional
+            Contact law of the shafts, default ``"paper"``.
+        initial_state : array_like, optional
+            State at ``t[0]``; default rest with every twist 0.
+
+        Returns
+        -------
+        DriveResponse
+            See :func:`backlashkit.simulate.simulate_drive`, which this calls.
         """
         from .simulate import simulate_drive
 

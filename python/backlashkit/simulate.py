@@ -47,7 +47,7 @@ _FLANK = {POSITIVE: "positive", NEGATIVE: "negative"}
 class ContactEvent:
     """A change of contact of one shaft.
 
-    Attributes
+    Parameters
     ----------
     time : float
         Instant of the change in s, located inside the sample (not on the grid).
@@ -69,7 +69,7 @@ class ContactEvent:
 class NearGrazing:
     """A pass of a shaft's twist close to a contact boundary with little speed.
 
-    Attributes
+    Parameters
     ----------
     time : float
         Instant of the closest approach in s.
@@ -90,7 +90,7 @@ class NearGrazing:
 class DriveResponse:
     """Result of a drive simulation, sampled on the input's time grid.
 
-    Attributes
+    Parameters
     ----------
     t : numpy.ndarray
         Time in s, shape ``(n,)``.
@@ -181,15 +181,26 @@ class DriveResponse:
     def to_pandas(self) -> pandas.DataFrame:
         """The response as a :class:`pandas.DataFrame` indexed by ``t``.
 
-        Columns: ``torque``, ``w_1 .. w_N``, ``phi_1 .. phi_{N-1}`` and, for a two-mass
-        drive, the aliases ``w_motor``, ``w_load``, ``phi_d``, ``shaft_torque``.
+        Returns
+        -------
+        pandas.DataFrame
+            The columns of :meth:`to_columns` but ``t``, indexed by ``t`` (requires
+            pandas).
         """
         import pandas as pd
 
         return pd.DataFrame(self.to_columns()).set_index("t")
 
     def to_columns(self) -> dict[str, np.ndarray]:
-        """The response as a dict of named 1-D columns (``t`` first)."""
+        """The response as named 1-D columns.
+
+        Returns
+        -------
+        dict of str to numpy.ndarray
+            ``t``, ``torque`` and, for a two-mass drive, ``w_motor``, ``w_load``,
+            ``phi_d``, ``shaft_torque``; for a longer chain ``w_1 .. w_N``,
+            ``phi_1 .. phi_{N-1}`` and ``shaft_torque_1 .. shaft_torque_{N-1}``.
+        """
         cols: dict[str, np.ndarray] = {"t": self.t, "torque": self.torque}
         if self.n_inertias == 2:
             cols.update(

@@ -105,12 +105,7 @@ class DiscreteAdaptiveController:
         self.reset()
 
     def reset(self) -> None:
-        """Return to the initial state (filters at rest, ``theta_b = theta_b0``).
-
-        Returns
-        -------
-        None
-        """
+        """Return to the initial state (filters at rest, ``theta_b = theta_b0``)."""
         n, q, nh = self._al.shape[0], self._amd.shape[0], self._ahd.shape[0]
         self._x1 = np.zeros(n)
         self._x2 = np.zeros(n)
