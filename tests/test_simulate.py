@@ -262,3 +262,25 @@ def test_stiff_drive_uses_substeps_and_stays_exact():
     np.testing.assert_allclose(
         coarse.states, fine.states[::50], rtol=0, atol=1e-8 * np.abs(fine.states).max()
     )
+
+
+@pytest.mark.parametrize("law", ["paper", "no-pull"])
+@pytest.mark.parametrize("poke", [1e-7, 1e-9, 1e-11])
+@pytest.mark.parametrize("backend", ["rust", "numpy"])
+def test_tiny_poke_is_one_short_contact_and_flagged(law, poke, backend):
+    # Regression: a twist poking past the flank by 1e-7..1e-11 theta used to switch back
+    # and forth at the contact instant until the chatter guard gave up.
+    jm, w0, theta = 0.01, 1.0, 0.02
+    a = jm * w0 / 0.0255
+    drive = bk.DriveChain(J=[jm, 1.0], f=[0.0, 0.0], k=[100.0], d=[0.5], theta=[theta])
+    t = np.arange(50) * 1e-3
+    x0 = [w0, 0.0, theta - w0**2 * jm / (2 * a) + poke * theta]
+    with pytest.warns(bk.SensitivityWarning):
+        r = simulate_drive(
+            drive, t, np.full(t.size, -a), law=law, initial_state=x0, backend=backend
+        )
+    made, lost = r.events
+    assert (made.kind, lost.kind) == ("contact_made", "contact_lost")
+    assert 0 < lost.time - made.time < 1e-4
+    (g,) = r.near_grazing
+    assert abs(g.time - 0.0255) < 1e-6 and g.margin == pytest.approx(poke, rel=0.01)

@@ -162,6 +162,35 @@ def _bisect(pred, lo, hi):
     return hi
 
 
+def _crossing_in(polys, lo, end):
+    """Twin of ``hybrid::crossing_in``: the guard's crossing in ``[lo, end]``."""
+
+    def value(s):
+        return min(_poly(p, s) for p in polys)
+
+    if value(lo) < 0:
+        return _bisect(lambda s: value(s) <= 0, lo, end)
+    p = min(polys, key=lambda q: _poly(q, lo))
+    if _poly_deriv(p, lo) >= 0:
+        return lo
+    bottom = _bisect(lambda s: _poly_deriv(p, s) <= 0, lo, end) if _poly_deriv(p, end) > 0 else end
+    if value(bottom) < 0:
+        return _bisect(lambda s: value(s) <= 0, bottom, end)
+    return lo
+
+
+def _shallow_peak(polys, s):
+    """Twin of ``hybrid::shallow_peak``."""
+    best = None
+    for p in polys:
+        if _poly_deriv(p, s) > 0 and _poly_deriv(p, 1.0) < 0:
+            at = _bisect(lambda x, p=p: _poly_deriv(p, x) > 0, s, 1.0)
+            v = _poly(p, at)
+            if best is None or v < best[1]:
+                best = (at, v)
+    return best if best is not None and best[1] < GRAZE_RTOL else None
+
+
 def _find_crossing(md, v, t_start, rem, grazes):
     best = None
     close = []
@@ -190,7 +219,7 @@ def _find_crossing(md, v, t_start, rem, grazes):
                         crossing_before = (
                             se if crossing_before is None else min(crossing_before, se)
                         )
-                    elif ve > -GRAZE_RTOL:
+                    if -GRAZE_RTOL < ve <= EVENT_RTOL:  # a near miss
                         close.append((se, (t_start + se * rem, shaft, ve)))
             if crossing_before is not None:
                 end = crossing_before
@@ -199,13 +228,16 @@ def _find_crossing(md, v, t_start, rem, grazes):
             else:
                 end = None
             if end is not None:
-                s = lo if value(lo) >= 0 else _bisect(lambda s: value(s) <= 0, lo, end)
+                s = _crossing_in(polys, lo, end)
+                peak = _shallow_peak(polys, s)
+                if peak is not None:  # barely over the boundary: as sensitive as a near miss
+                    close.append((s, (t_start + peak[0] * rem, shaft, peak[1])))
                 if best is None or s < best[0]:
                     best = (s, gi)
                 break
             lo = hi
     limit = math.inf if best is None else best[0]
-    grazes.extend(g for s, g in close if s < limit)
+    grazes.extend(g for s, g in close if s <= limit)
     return best
 
 

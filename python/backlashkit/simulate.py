@@ -76,9 +76,11 @@ class NearGrazing:
     shaft : int
         Index of the shaft.
     margin : float
-        Signed distance of the closest approach, in the units of the switching
-        function (rad for the twist; N m for the no-pull torque condition): negative
-        when the boundary was missed, positive when it was crossed.
+        Signed distance of the closest approach relative to the boundary's scale (the
+        half-width ``theta`` for the twist; ``k theta`` for the no-pull torque
+        condition; 1e-6 rad when ``theta = 0``): negative when the boundary was missed,
+        positive when it was barely crossed. Passes with ``|margin| < 1e-6`` are
+        reported.
     """
 
     time: float

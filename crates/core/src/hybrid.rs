@@ -74,7 +74,9 @@ pub struct Event {
     pub to: i8,
 }
 
-/// A close pass of a guard function to its boundary (see [`GRAZE_RTOL`]).
+/// A close pass of a guard function to its boundary (see [`GRAZE_RTOL`]): `margin` is
+/// the guard's value at its extremum relative to the guard's scale (the half-width for
+/// a twist), negative when the boundary was missed, positive when barely crossed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Graze {
     pub time: f64,
@@ -142,6 +144,8 @@ struct FastGuards<const S: usize, const W: usize> {
     hc: [f64; W],
     /// Lanes of each guard (bit i = lane i); unused entries hold a bit no lane sets.
     lanes: [u32; W],
+    /// Whether the input enters some slope (`hb != 0`).
+    input_enters: bool,
 }
 
 /// A lane mask bit that no lane sets (W <= 28), so an unused guard never fires.
@@ -160,6 +164,7 @@ impl<const S: usize, const W: usize> FastGuards<S, W> {
             hb: [0.0; W],
             hc: [0.0; W],
             lanes: [NEVER; W],
+            input_enters: funcs.iter().any(|f| f.hb != 0.0),
         };
         for (i, f) in funcs.iter().enumerate() {
             (fg.h[i], fg.d[i], fg.ha[i], fg.hb[i], fg.hc[i]) = (f.h, f.d, f.ha, f.hb, f.hc);
@@ -460,24 +465,58 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             let m = BLOCK.min(n - 1 - kb);
             let uu = &u[kb..kb + m];
             let mut xx = *x;
-            for c in 0..S {
-                cols[c][0] = xx[c];
-            }
-            for (j, (uk, dst)) in uu
+            let (mut lo, mut hi) = (xx, xx);
+            for (uk, dst) in uu
                 .iter()
                 .zip(states[(kb + 1) * S..(kb + m + 1) * S].chunks_exact_mut(S))
-                .enumerate()
             {
                 xx = flow(&md.e, &md.fb, &md.fc, &xx, *uk);
                 dst.copy_from_slice(&xx);
                 for c in 0..S {
-                    cols[c][j + 1] = xx[c];
+                    lo[c] = if xx[c] < lo[c] { xx[c] } else { lo[c] };
+                    hi[c] = if xx[c] > hi[c] { xx[c] } else { hi[c] };
+                }
+            }
+            // First filter, O(S) per guard function: interval bounds over the block's
+            // state box on the function and its slope. A function whose largest value
+            // plus largest slope times h stays short of the boundary cannot cross or
+            // peak near it in any sample of the block.
+            let umax = if fg.input_enters {
+                uu.iter()
+                    .fold(0.0f64, |a, v| if v.abs() > a { v.abs() } else { a })
+            } else {
+                0.0
+            };
+            let mut suspect = 0u32;
+            for i in 0..nf {
+                let (mut gub, mut qmid, mut qrad) = (fg.d[i], fg.hc[i], fg.hb[i].abs() * umax);
+                for c in 0..S {
+                    let (a, b) = (fg.h[i][c], fg.ha[i][c]);
+                    gub += if a > 0.0 { a * hi[c] } else { a * lo[c] };
+                    qmid += b * 0.5 * (lo[c] + hi[c]);
+                    qrad += b.abs() * 0.5 * (hi[c] - lo[c]);
+                }
+                if gub + (qmid.abs() + qrad) * h >= -GRAZE_RTOL {
+                    suspect |= 1 << i;
+                }
+            }
+            if suspect == 0 {
+                *k = kb + m;
+                *x = xx;
+                continue;
+            }
+            for (j, row) in states[kb * S..(kb + m + 1) * S].chunks_exact(S).enumerate() {
+                for c in 0..S {
+                    cols[c][j] = row[c];
                 }
             }
             let mut flag = [0u64; BLOCK];
             // Lanes that may fire in this block (the others provably stay clear).
             let mut active = 0u32;
             for i in 0..nf {
+                if suspect & (1 << i) == 0 {
+                    continue;
+                }
                 gv[..=m].fill(fg.d[i]);
                 qv[..=m].fill(fg.hc[i]);
                 for c in 0..S {
@@ -734,19 +773,19 @@ fn find_crossing<const S: usize, const W: usize>(
             let mut crossing_before: Option<f64> = None;
             for p in &polys {
                 if poly_deriv(p, lo) > 0.0 && poly_deriv(p, hi) < 0.0 {
-                    let se = bisect(|s| poly_deriv(p, s) > 0.0, lo, hi);
+                    let se = illinois(|s| -poly_deriv(p, s), lo, hi);
                     let ve = value(se);
                     if ve > EVENT_RTOL {
                         crossing_before = Some(crossing_before.map_or(se, |c: f64| c.min(se)));
-                    } else if ve > -GRAZE_RTOL {
-                        close.push((
-                            se,
-                            Graze {
-                                time: t_start + se * rem,
-                                index: g.index,
-                                margin: ve,
-                            },
-                        ));
+                    }
+                    // A near miss: the extremum stays within GRAZE_RTOL of the boundary.
+                    if ve <= EVENT_RTOL && ve > -GRAZE_RTOL {
+                        let graze = Graze {
+                            time: t_start + se * rem,
+                            index: g.index,
+                            margin: ve,
+                        };
+                        close.push((se, graze));
                     }
                 }
             }
@@ -756,11 +795,17 @@ fn find_crossing<const S: usize, const W: usize>(
                 None => None,
             };
             if let Some(end) = end {
-                let s = if value(lo) >= 0.0 {
-                    lo
-                } else {
-                    bisect(|s| value(s) <= 0.0, lo, end)
-                };
+                let s = crossing_in(&polys, lo, end);
+                if let Some((at, peak)) = shallow_peak(&polys, s) {
+                    // A crossing that barely gets over the boundary: as sensitive as a
+                    // near miss (the same peak a hair lower would be no contact at all).
+                    let graze = Graze {
+                        time: t_start + at * rem,
+                        index: g.index,
+                        margin: peak,
+                    };
+                    close.push((s, graze));
+                }
                 if best.is_none_or(|b| s < b.0) {
                     best = Some((s, gi));
                 }
@@ -773,10 +818,104 @@ fn find_crossing<const S: usize, const W: usize>(
     grazes.extend(
         close
             .into_iter()
-            .filter(|(s, _)| *s < limit)
+            .filter(|(s, _)| *s <= limit)
             .map(|(_, g)| g),
     );
     best
+}
+
+/// The crossing of a guard (the min of the polynomials `polys`) in `[lo, end]`, where
+/// the guard is positive at `end`. When the guard is not negative at `lo` (a segment
+/// that starts on its boundary, e.g. right after the opposite switch), the direction
+/// decides: moving outwards it fires at `lo`; moving inwards it fires where it comes
+/// back after its dip (a short contact), or at `lo` if it never dips below zero.
+///
+/// Also returns the dip `(s, depth)` when one was found: the deepest point of a short
+/// contact (its penetration, relative to the guard's scale).
+fn crossing_in(polys: &[[f64; TAYLOR_TERMS + 1]], lo: f64, end: f64) -> f64 {
+    let value = |s: f64| {
+        polys
+            .iter()
+            .map(|p| poly(p, s))
+            .fold(f64::INFINITY, f64::min)
+    };
+    if value(lo) < 0.0 {
+        return illinois(value, lo, end);
+    }
+    // The function that is smallest at `lo` decides the direction.
+    let p = polys
+        .iter()
+        .min_by(|a, b| poly(a, lo).total_cmp(&poly(b, lo)))
+        .expect("a guard has at least one function");
+    if poly_deriv(p, lo) >= 0.0 {
+        return lo;
+    }
+    let bottom = if poly_deriv(p, end) > 0.0 {
+        illinois(|s| poly_deriv(p, s), lo, end)
+    } else {
+        end
+    };
+    if value(bottom) < 0.0 {
+        illinois(value, bottom, end)
+    } else {
+        lo
+    }
+}
+
+/// After a guard crossed at `s`: the peak `(s_peak, value)` its functions would reach
+/// under the mode it leaves, when that peak lies inside the step and stays below
+/// [`GRAZE_RTOL`] (a near-tangential approach).
+fn shallow_peak(polys: &[[f64; TAYLOR_TERMS + 1]], s: f64) -> Option<(f64, f64)> {
+    let mut best: Option<(f64, f64)> = None;
+    for p in polys {
+        if poly_deriv(p, s) > 0.0 && poly_deriv(p, 1.0) < 0.0 {
+            let at = illinois(|x| -poly_deriv(p, x), s, 1.0);
+            let v = poly(p, at);
+            if best.is_none_or(|b| v < b.1) {
+                best = Some((at, v));
+            }
+        }
+    }
+    best.filter(|b| b.1 < GRAZE_RTOL)
+}
+
+/// Root of `f` on `[lo, hi]` with `f(lo) <= 0 < f(hi)` by the Illinois variant of
+/// regula falsi (superlinear), safeguarded by bisection; returns the right end of the
+/// final bracket, a point where `f > 0`, within a few ulps of the root.
+fn illinois(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+    let (mut flo, mut fhi) = (f(lo), f(hi));
+    if !(flo <= 0.0 && fhi > 0.0) {
+        return bisect(|s| f(s) <= 0.0, lo, hi);
+    }
+    let mut side = 0i8;
+    for _ in 0..100 {
+        let mut s = lo - flo * (hi - lo) / (fhi - flo);
+        if !(s > lo && s < hi) {
+            s = 0.5 * (lo + hi);
+        }
+        if s <= lo || s >= hi {
+            break;
+        }
+        let fs = f(s);
+        if fs > 0.0 {
+            hi = s;
+            fhi = fs;
+            if side == 1 {
+                flo *= 0.5;
+            }
+            side = 1;
+        } else {
+            lo = s;
+            flo = fs;
+            if side == -1 {
+                fhi *= 0.5;
+            }
+            side = -1;
+        }
+    }
+    // Converged to adjacent floats; if the iteration budget ran out instead, finish the
+    // bracket by bisection.
+    bisect(|s| f(s) <= 0.0, lo, hi)
 }
 
 /// Boundary between `pred == true` (left) and `pred == false` (right) on `[lo, hi]`;
