@@ -284,3 +284,25 @@ def test_tiny_poke_is_one_short_contact_and_flagged(law, poke, backend):
     assert 0 < lost.time - made.time < 1e-4
     (g,) = r.near_grazing
     assert abs(g.time - 0.0255) < 1e-6 and g.margin == pytest.approx(poke, rel=0.01)
+
+
+def test_assess_sensitivity_separates_well_and_ill_conditioned_runs():
+    # The paper experiment is well conditioned (two grids agree to rounding); a three-mass
+    # drive rattling through ~190 impacts in 3 s amplifies rounding to 1e-4 and beyond.
+    drive = bk.TwoMassDrive(**PAPER, theta=THETA)
+    t = np.arange(20001) * 1e-3
+    calm = bk.assess_sensitivity(drive, t, np.where(t < 10.0, 0.157, 0.0))
+    assert not calm.sensitive and calm.same_events and calm.speed_rel_diff < 1e-9
+    chain = bk.DriveChain(
+        J=[4.88e-3, 1e-2, 6.8e-2],
+        f=[0.5e-2, 0.0, 0.5e-2],
+        k=[78.0, 150.0],
+        d=[1.575e-2, 3e-2],
+        theta=[3.49e-2, 1e-2],
+    )
+    t = np.arange(3001) * 1e-3
+    u = 0.4 * np.repeat([1.0, -0.8, 0.3, 0.0, -1.0, 0.6, -0.2, 0.9], 376)[: t.size]
+    rattle = bk.assess_sensitivity(chain, t, u)
+    assert rattle.sensitive and rattle.speed_rel_diff > 1e-6
+    with pytest.raises(bk.InputError, match="refine must be an integer >= 2"):
+        bk.assess_sensitivity(drive, t, np.zeros(t.size), refine=1)

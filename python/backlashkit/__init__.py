@@ -27,7 +27,15 @@ from .nonlinearities import (
     SmoothRampInverse,
 )
 from .plants import DriveChain, TwoMassDrive
-from .simulate import ContactEvent, DriveResponse, NearGrazing, simulate_batch, simulate_drive
+from .simulate import (
+    ContactEvent,
+    DriveResponse,
+    NearGrazing,
+    Sensitivity,
+    assess_sensitivity,
+    simulate_batch,
+    simulate_drive,
+)
 
 __version__ = "0.1.0"
 
@@ -50,10 +58,12 @@ __all__ = [
     "DriveResponse",
     "InputError",
     "NearGrazing",
+    "Sensitivity",
     "SensitivityWarning",
     "ShaftLaw",
     "TwoMassDrive",
     "__version__",
+    "assess_sensitivity",
     "simulate_batch",
     "simulate_drive",
 ]

@@ -1,0 +1,988 @@
+"""Independent reference simulator for verifying the compiled drive kernel.
+
+The compiled kernel (:func:`backlashkit.simulate.simulate_drive`) advances the
+piecewise-affine drive with matrix exponentials and locates contact changes from Taylor
+expansions of the flow. This module shares none of that: it integrates the ODE with an
+adaptive Runge-Kutta solver of :mod:`scipy.integrate` (default ``DOP853``), locates every
+contact change by root finding on the solver's dense output, and restarts the
+integration exactly there and at every change of the zero-order-hold input.
+
+It drives scipy's solver objects step by step (the machinery :func:`scipy.integrate.
+solve_ivp` runs on) rather than calling ``solve_ivp(events=...)``, because
+``solve_ivp`` only compares the sign of an event function at the two ends of each step:
+a twist that pokes past a flank and comes back inside one step would be missed. Here
+every step is scanned at interior points together with the exact time derivative of
+each switching function, so a short excursion is caught (and a near miss is recorded
+as a graze).
+
+Public functions
+----------------
+reference_simulate
+    Event-located reference run of a :class:`~backlashkit.TwoMassDrive` or
+    :class:`~backlashkit.DriveChain` under a zero-order-hold torque.
+check_conditioning
+    Runs two different tight references and says whether they agree; a case where they
+    do not is ill-conditioned (near-grazing) and says nothing about a simulator.
+compare_to_reference
+    Speed error and contact-event timing of a simulator response against a reference.
+naive_simulate
+    The same ODE integrated *without* locating the contact changes (the switching is
+    buried in the right-hand side), for demonstrating why event location matters.
+
+Conventions as in :mod:`backlashkit.plants`: SI units, state
+``[w_1 .. w_N, phi_1 .. phi_{N-1}]``, ``theta`` the half-width of each dead zone, the
+input torque acting on inertia 1 and held on ``[t[i], t[i+1])``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy import integrate, optimize
+
+from .errors import InputError
+from .laws import ShaftLaw
+
+if TYPE_CHECKING:
+    from .plants import DriveChain, TwoMassDrive
+
+__all__ = [
+    "AccuracyReport",
+    "ConditioningReport",
+    "ReferenceEvent",
+    "ReferenceGraze",
+    "ReferenceResult",
+    "check_conditioning",
+    "compare_to_reference",
+    "naive_simulate",
+    "reference_simulate",
+]
+
+_SOLVERS: dict[str, type[integrate.OdeSolver]] = {
+    "DOP853": integrate.DOP853,
+    "RK45": integrate.RK45,
+    "RK23": integrate.RK23,
+    "Radau": integrate.Radau,
+    "BDF": integrate.BDF,
+    "LSODA": integrate.LSODA,
+}
+
+#: Interior points at which every solver step is scanned for switching-function roots.
+_SCAN_POINTS = 8
+#: A local extremum of a switching function closer than this (relative to the twist
+#: scale of the shaft) to zero is recorded as a graze.
+_GRAZE_RTOL = 1e-6
+#: A switching function within this fraction of the twist scale of zero is on its
+#: boundary (a located event leaves it within a few ulp of zero, whatever the solver
+#: tolerance); the direction of motion then decides.
+_ON_BOUNDARY_RTOL = 1e-10
+#: Highest Lie derivative used to decide the direction of motion on a boundary.
+_MAX_LIE_ORDER = 4
+#: Zero-length restarts in a row after which the run is declared chattering.
+_MAX_ZERO_LENGTH_RESTARTS = 64
+
+_FLANK = {1: "positive", -1: "negative"}
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class ReferenceEvent:
+    """A contact change located by the reference.
+
+    Attributes
+    ----------
+    time : float
+        Instant of the change in s.
+    shaft : int
+        Index of the shaft (0-based).
+    kind : {"contact_made", "contact_lost"}
+        Whether the flanks met or separated.
+    flank : {"positive", "negative"}
+        The flank met or left (``"positive"`` is ``phi = +theta``).
+    """
+
+    time: float
+    shaft: int
+    kind: str
+    flank: str
+
+
+@dataclass(frozen=True)
+class ReferenceGraze:
+    """A local extremum of a switching function that came close to zero.
+
+    Attributes
+    ----------
+    time : float
+        Instant of the extremum in s.
+    shaft : int
+        Index of the shaft.
+    margin : float
+        Value of the switching function at the extremum, in rad (torques are divided by
+        the shaft stiffness): negative when the boundary was missed by that much.
+    """
+
+    time: float
+    shaft: int
+    margin: float
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceResult:
+    """Result of :func:`reference_simulate`, sampled on the input grid.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        Time grid in s, shape ``(n,)``.
+    torque : numpy.ndarray
+        Motor torque in N m, shape ``(n,)`` (zero-order hold).
+    states : numpy.ndarray
+        States ``[w_1 .. w_N, phi_1 .. phi_{N-1}]`` at ``t``, shape ``(n, 2N - 1)``.
+    modes : numpy.ndarray
+        Contact mode of each shaft at ``t`` (0 gap, +1 positive flank, -1 negative
+        flank), ``int8``, shape ``(n, N - 1)``. At ``t[0]`` the mode is the
+        classification of the initial state, before any contact change at ``t[0]``.
+    events : tuple of ReferenceEvent
+        Every contact change, in time order.
+    event_states : numpy.ndarray
+        State at each event, shape ``(len(events), 2N - 1)``.
+    grazes : tuple of ReferenceGraze
+        Near misses and near-tangent passes seen by the reference.
+    law : ShaftLaw
+        Contact law used.
+    method : str
+        scipy solver used.
+    rtol : float
+        Relative tolerance of the solver.
+    atol : numpy.ndarray
+        Absolute tolerance per state component.
+    n_steps : int
+        Accepted solver steps.
+    n_restarts : int
+        Solver (re)starts: one per input segment and per located contact change.
+    nfev : int
+        Right-hand-side evaluations.
+    n_inertias : int
+        Number of inertias ``N``.
+    """
+
+    t: np.ndarray
+    torque: np.ndarray
+    states: np.ndarray
+    modes: np.ndarray
+    events: tuple[ReferenceEvent, ...]
+    event_states: np.ndarray
+    grazes: tuple[ReferenceGraze, ...]
+    law: ShaftLaw
+    method: str
+    rtol: float
+    atol: np.ndarray
+    n_steps: int
+    n_restarts: int
+    nfev: int
+    n_inertias: int
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """Speeds of all inertias in rad/s, shape ``(n, N)``."""
+        return self.states[:, : self.n_inertias]
+
+    @property
+    def twists(self) -> np.ndarray:
+        """Twists of all shafts in rad, shape ``(n, N - 1)``."""
+        return self.states[:, self.n_inertias :]
+
+    @property
+    def w_motor(self) -> np.ndarray:
+        """Motor speed (inertia 1) in rad/s."""
+        return self.states[:, 0]
+
+    @property
+    def w_load(self) -> np.ndarray:
+        """Load speed (last inertia) in rad/s."""
+        return self.states[:, self.n_inertias - 1]
+
+    @property
+    def phi_d(self) -> np.ndarray:
+        """Twist of the first shaft in rad."""
+        return self.states[:, self.n_inertias]
+
+    @property
+    def event_times(self) -> np.ndarray:
+        """Times of the contact changes in s."""
+        return np.array([e.time for e in self.events], dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class ConditioningReport:
+    """Outcome of :func:`check_conditioning`.
+
+    Attributes
+    ----------
+    well_conditioned : bool
+        True when the two references agree within the tolerances.
+    same_event_sequence : bool
+        Same number of contact changes with the same shaft, kind and flank in order.
+    max_event_time_diff : float
+        Largest difference of matching event times in s (``inf`` when the sequences
+        differ, 0 when there are no events).
+    max_speed_rel_diff : float
+        ``max |w_a - w_b| / max |w_b|`` over the grid and all inertias.
+    reasons : tuple of str
+        Why the references were judged to disagree (empty when they agree).
+    reference : ReferenceResult
+        The tighter of the two runs (the one to compare simulators with).
+    check : ReferenceResult
+        The other run.
+    """
+
+    well_conditioned: bool
+    same_event_sequence: bool
+    max_event_time_diff: float
+    max_speed_rel_diff: float
+    reasons: tuple[str, ...]
+    reference: ReferenceResult
+    check: ReferenceResult
+
+
+@dataclass(frozen=True)
+class AccuracyReport:
+    """Outcome of :func:`compare_to_reference`.
+
+    Attributes
+    ----------
+    max_speed_error : float
+        ``max |w - w_ref|`` over the grid and all inertias, rad/s.
+    speed_scale : float
+        ``max |w_ref|`` over the grid and all inertias, rad/s.
+    speed_error_ratio : float
+        ``max_speed_error / speed_scale``.
+    same_event_sequence : bool
+        Same contact changes (shaft, kind, flank) in the same order.
+    max_event_time_diff : float
+        Largest difference of matched event times in s (``inf`` when the sequences
+        differ, 0 without events).
+    n_events : int
+        Number of events of the reference.
+    """
+
+    max_speed_error: float
+    speed_scale: float
+    speed_error_ratio: float
+    same_event_sequence: bool
+    max_event_time_diff: float
+    n_events: int
+
+    def passes(self, speed_rtol: float = 1e-7, event_tol: float = 1e-6) -> bool:
+        """Whether the speed error ratio and the event times are within the bars."""
+        return (
+            self.same_event_sequence
+            and self.speed_error_ratio <= speed_rtol
+            and self.max_event_time_diff <= event_tol
+        )
+
+
+# --------------------------------------------------------------------------- model
+
+
+@dataclass
+class _Model:
+    """The chain's parameters, its right-hand side per contact configuration and the
+    switching functions of each configuration."""
+
+    J: np.ndarray
+    f: np.ndarray
+    k: np.ndarray
+    d: np.ndarray
+    theta: np.ndarray
+    law: ShaftLaw
+    twist_scale: np.ndarray
+    _fields: dict = field(default_factory=dict)
+    _guards: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.J.size
+
+    @property
+    def s(self) -> int:
+        return 2 * self.J.size - 1
+
+    def rhs_direct(self, modes: np.ndarray, u: float, x: np.ndarray) -> np.ndarray:
+        """Time derivative of the state, written from the physics (eq. 2 per shaft).
+
+        ``modes`` fixes the contact configuration: the shaft torque is the
+        spring-damper torque on a closed flank and zero in the gap. (Under the no-pull
+        law the configuration is only ever closed while that torque pushes, so the
+        clamp is enforced by the switching, not here.)
+        """
+        n = self.n
+        w, phi = x[:n], x[n:]
+        dphi = w[:-1] - w[1:]
+        torque = np.where(modes == 0, 0.0, self.k * (phi - modes * self.theta) + self.d * dphi)
+        load = -self.f * w
+        load[0] += u
+        load[:-1] -= torque
+        load[1:] += torque
+        return np.concatenate([load / self.J, dphi])
+
+    def field(self, modes: tuple[int, ...], u: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, c)`` with ``dx/dt = A x + c`` in the configuration ``modes``.
+
+        Obtained by probing :meth:`rhs_direct` (affine in ``x`` for fixed modes) at the
+        origin and the unit vectors, so the fast path is the physics formula itself.
+        """
+        key = (modes, u)
+        hit = self._fields.get(key)
+        if hit is None:
+            m = np.asarray(modes, dtype=float)
+            c = self.rhs_direct(m, u, np.zeros(self.s))
+            a = np.empty((self.s, self.s))
+            for i in range(self.s):
+                e = np.zeros(self.s)
+                e[i] = 1.0
+                a[:, i] = self.rhs_direct(m, u, e) - c
+            hit = (a, c)
+            self._fields[key] = hit
+        return hit
+
+    def guards(self, modes: tuple[int, ...]) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """Switching functions of the configuration ``modes``.
+
+        Each guard is ``(shaft, target, H, h0)``: the shaft switches to mode ``target``
+        when ``q(x) = min_r (H[r] @ x + h0[r])`` crosses from ``<= 0`` to ``> 0``. All
+        ``q`` are in rad (torques are divided by the stiffness).
+        """
+        hit = self._guards.get(modes)
+        if hit is not None:
+            return hit
+        n, s = self.n, self.s
+        out = []
+        for j, m in enumerate(modes):
+            ph = np.zeros(s)
+            ph[n + j] = 1.0
+            rate = np.zeros(s)  # d/k * dphi_j/dt
+            rate[j], rate[j + 1] = self.d[j] / self.k[j], -self.d[j] / self.k[j]
+            th = self.theta[j]
+            if self.law is ShaftLaw.PAPER:
+                if m == 0:
+                    out.append((j, 1, ph[None, :], np.array([-th])))  # phi - theta
+                    out.append((j, -1, -ph[None, :], np.array([-th])))  # -(phi + theta)
+                elif m == 1:
+                    out.append((j, 0, -ph[None, :], np.array([th])))
+                else:
+                    out.append((j, 0, ph[None, :], np.array([th])))
+            else:
+                if m == 0:
+                    # enter the positive flank when phi >= theta AND k(phi-theta)+d dphi >= 0
+                    out.append((j, 1, np.stack([ph, ph + rate]), np.array([-th, -th])))
+                    out.append((j, -1, np.stack([-ph, -ph - rate]), np.array([-th, -th])))
+                elif m == 1:
+                    # leave when the spring-damper torque would pull
+                    out.append((j, 0, -(ph + rate)[None, :], np.array([th])))
+                else:
+                    out.append((j, 0, (ph + rate)[None, :], np.array([th])))
+        self._guards[modes] = out
+        return out
+
+    def classify(self, x: np.ndarray) -> tuple[int, ...]:
+        """Contact configuration of a state, strictly (a state exactly on a flank is in
+        the gap; :func:`_settle` then decides from the direction of motion)."""
+        n = self.n
+        out = []
+        for j in range(n - 1):
+            phi, th = x[n + j], self.theta[j]
+            sd = self.k[j] * phi + self.d[j] * (x[j] - x[j + 1])
+            if phi > th and (self.law is ShaftLaw.PAPER or sd - self.k[j] * th > 0):
+                out.append(1)
+            elif phi < -th and (self.law is ShaftLaw.PAPER or sd + self.k[j] * th < 0):
+                out.append(-1)
+            else:
+                out.append(0)
+        return tuple(out)
+
+
+def _chain_of(drive: DriveChain | TwoMassDrive) -> DriveChain:
+    to_chain = getattr(drive, "to_chain", None)
+    if to_chain is None:
+        raise InputError(
+            f"drive must be a TwoMassDrive or a DriveChain, got {type(drive).__name__}"
+        )
+    return to_chain()
+
+
+def _prepare(drive, t, torque, law, initial_state):
+    chain = _chain_of(drive)
+    t_arr = np.asarray(t, dtype=float)
+    u = np.asarray(torque, dtype=float)
+    if t_arr.ndim != 1 or t_arr.size < 2:
+        raise InputError("t must be a 1-D grid with at least 2 samples")
+    if not np.all(np.diff(t_arr) > 0):
+        raise InputError("t must be strictly increasing")
+    if u.shape != t_arr.shape:
+        raise InputError(f"torque must have one sample per time step ({t_arr.size}), got {u.size}")
+    if not (np.all(np.isfinite(t_arr)) and np.all(np.isfinite(u))):
+        raise InputError("t and torque must be finite")
+    n = len(chain.J)
+    s = 2 * n - 1
+    x0 = np.zeros(s) if initial_state is None else np.asarray(initial_state, dtype=float).ravel()
+    if x0.size != s or not np.all(np.isfinite(x0)):
+        raise InputError(f"initial_state must have {s} finite entries")
+    law_ = ShaftLaw.parse(law)
+
+    J, f = np.asarray(chain.J, float), np.asarray(chain.f, float)
+    k, d, theta = (np.asarray(a, float) for a in (chain.k, chain.d, chain.theta))
+    u_max = float(np.max(np.abs(u[:-1]))) if u.size > 1 else 0.0
+    duration = float(t_arr[-1] - t_arr[0])
+    twist_scale = np.maximum.reduce(
+        [theta, np.abs(x0[n:]), np.full(n - 1, u_max) / k, np.full(n - 1, 1e-12)]
+    )
+    model = _Model(J, f, k, d, theta, law_, twist_scale)
+
+    # Speed scale: initial speeds, the terminal speed u/sum(f) or, if friction is
+    # too weak to reach it within the record, the speed gained in the record.
+    gain = duration / J.sum()
+    if f.sum() > 0:
+        gain = min(gain, 1.0 / f.sum())
+    w_scale = max(float(np.max(np.abs(x0[:n]))), u_max * gain, 1e-12)
+    scale = np.concatenate([np.full(n, w_scale), twist_scale])
+    return model, t_arr, u, x0, law_, scale
+
+
+# --------------------------------------------------------------------------- engine
+
+
+def _lie_sign(h: np.ndarray, value: float, a: np.ndarray, c: np.ndarray, x: np.ndarray,
+              eps: float, rate: float) -> int:
+    """Sign of the motion of ``h @ x + h0`` (current value ``value``) at ``x`` under
+    ``dx/dt = A x + c``: the sign of the first Lie derivative that is not negligible
+    (0 when the function is stationary to the order examined)."""
+    del value
+    v = a @ x + c
+    for order in range(1, _MAX_LIE_ORDER + 1):
+        g = float(h @ v)
+        if abs(g) > eps * rate**order:
+            return 1 if g > 0 else -1
+        v = a @ v
+    return 0
+
+
+def _settle(model: _Model, t: float, x: np.ndarray, modes: tuple[int, ...], u: float,
+            events: list[ReferenceEvent], event_states: list[np.ndarray],
+            eps_rel: float) -> tuple[int, ...]:
+    """Apply every contact change that takes place at ``t`` itself.
+
+    A switching function that is already positive, or is on zero (within ``eps_rel``
+    of the twist scale) and increasing under the current dynamics, fires at once. This
+    covers the initial state, flank-to-flank switches of a shaft without backlash and
+    tangencies; repeated until the configuration is consistent.
+    """
+    for _ in range(4 * model.n + 4):
+        a, c = model.field(modes, u)
+        rate = max(float(np.max(np.abs(np.linalg.eigvals(a)))), 1.0)
+        fired = None
+        for shaft, target, hmat, h0 in model.guards(modes):
+            eps = eps_rel * model.twist_scale[shaft]
+            vals = hmat @ x + h0
+            if vals.min() > eps:
+                fired = (shaft, target)
+            elif vals.min() >= -eps:
+                signs = [
+                    _lie_sign(hmat[r], vals[r], a, c, x, eps, rate)
+                    for r in range(vals.size)
+                    if vals[r] <= eps
+                ]
+                if signs and all(sg > 0 for sg in signs):
+                    fired = (shaft, target)
+            if fired is not None:
+                break
+        if fired is None:
+            return modes
+        shaft, target = fired
+        modes = _switch(modes, shaft, target, t, events, x, event_states)
+    raise RuntimeError(f"contact configuration does not settle at t = {t!r} s (chatter)")
+
+
+def _switch(modes, shaft, target, t, events, x, event_states) -> tuple[int, ...]:
+    src = modes[shaft]
+    event_states.append(np.array(x, dtype=float))
+    if src == 0:
+        events.append(ReferenceEvent(float(t), int(shaft), "contact_made", _FLANK[target]))
+    else:
+        events.append(ReferenceEvent(float(t), int(shaft), "contact_lost", _FLANK[src]))
+        if target != 0:  # not produced by the guards, kept for completeness
+            events.append(ReferenceEvent(float(t), int(shaft), "contact_made", _FLANK[target]))
+            event_states.append(np.array(x, dtype=float))
+    out = list(modes)
+    out[shaft] = target
+    return tuple(out)
+
+
+def _guard_fn(dense, hmat, h0):
+    def q(tt: float) -> float:
+        return float(np.min(hmat @ dense(tt) + h0))
+
+    return q
+
+
+def _guard_rate_fn(dense, hmat, h0, a, c):
+    def dq(tt: float) -> float:
+        x = dense(tt)
+        vals = hmat @ x + h0
+        r = int(np.argmin(vals))
+        return float(hmat[r] @ (a @ x + c))
+
+    return dq
+
+
+def _root(fun, lo: float, hi: float) -> float:
+    """First-found root of ``fun`` on ``[lo, hi]`` with ``fun(lo) <= 0 < fun(hi)``:
+    the returned point has ``fun > 0`` or is within a few ulp of the crossing."""
+    flo, fhi = fun(lo), fun(hi)
+    if flo > 0:
+        return lo
+    if fhi <= 0:
+        return hi
+    r = optimize.brentq(fun, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=400)
+    return float(r)
+
+
+def _scan_step(model, modes, guards, a, c, dense, t_old, t_new, first_step, grazes, eps_rel):
+    """Earliest crossing of a switching function inside ``(t_old, t_new]``.
+
+    Returns ``(time, shaft, target)`` or ``None``. Records grazes in ``grazes``.
+    """
+    taus = np.linspace(t_old, t_new, _SCAN_POINTS + 1)
+    xs = dense(taus)  # (s, M+1)
+    dxs = a @ xs + c[:, None]
+    best = None
+    for shaft, target, hmat, h0 in guards:
+        scale = model.twist_scale[shaft]
+        vals = hmat @ xs + h0[:, None]
+        arg = np.argmin(vals, axis=0)
+        q = vals[arg, np.arange(taus.size)]
+        dq = (hmat @ dxs)[arg, np.arange(taus.size)]
+        eps = eps_rel * scale
+        # On zero right after a restart (the switch that caused it, or a tangency that
+        # _settle judged not to enter): the crossing sought is a later one.
+        on_zero = first_step and abs(q[0]) <= eps
+        if on_zero:
+            q = q.copy()
+            q[0] = 0.0
+        dt = taus[1] - taus[0]
+        bound = np.maximum(q[:-1], q[1:]) + dt * np.maximum(np.abs(dq[:-1]), np.abs(dq[1:]))
+        cross = q[1:] > 0
+        turn = (dq[:-1] > 0) & (dq[1:] < 0) & (bound > -_GRAZE_RTOL * scale)
+        if not (cross.any() or turn.any()):
+            continue
+        qf = _guard_fn(dense, hmat, h0)
+        dqf = _guard_rate_fn(dense, hmat, h0, a, c)
+        for i in range(_SCAN_POINTS):
+            lo, hi = taus[i], taus[i + 1]
+            if best is not None and lo >= best[0]:
+                break
+            hit = None
+            if i == 0 and on_zero and cross[0]:
+                # q leaves zero downwards (or stays), dips, then crosses: find the dip
+                # (minimum) first, then the crossing after it; without a dip below
+                # zero, fire where q clears eps
+                a_ = lo
+                if dq[0] <= 0 < dq[1]:
+                    a_ = optimize.brentq(dqf, lo, hi, xtol=1e-300)
+                if a_ > lo and qf(a_) < 0:
+                    hit = _root(qf, a_, hi)
+                else:
+                    hit = _root(lambda s, qf=qf, eps=eps: qf(s) - eps, lo, hi)
+            elif q[i] > 0:
+                # cannot happen after _settle; fire at once rather than lose the event
+                hit = lo
+            elif cross[i]:
+                hit = _root(qf, lo, hi)
+            elif turn[i]:
+                tm = optimize.brentq(dqf, lo, hi, xtol=1e-300)
+                qm = qf(tm)
+                if qm > 0:
+                    hit = _root(qf, lo, tm)
+                if abs(qm) < _GRAZE_RTOL * scale:
+                    grazes.append(ReferenceGraze(float(tm), int(shaft), float(qm)))
+            if hit is not None:
+                if best is None or hit < best[0]:
+                    best = (hit, shaft, target)
+                break
+    return best
+
+
+def reference_simulate(
+    drive: DriveChain | TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    law: ShaftLaw | str = "paper",
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    method: str = "DOP853",
+    rtol: float = 1e-10,
+    atol: float | Sequence[float] | np.ndarray | None = None,
+    max_step: float = np.inf,
+) -> ReferenceResult:
+    """Reference simulation by adaptive ODE integration with located contact changes.
+
+    Inside one contact configuration the drive is integrated with a scipy Runge-Kutta
+    (or implicit) solver; every solver step is scanned for the zero crossings of the
+    switching functions of the current configuration, the first one is located by
+    Brent's method on the solver's dense output, and the integration restarts from
+    there in the new configuration. The integration also restarts at every change of
+    the zero-order-hold torque (consecutive equal samples form one segment). States on
+    the grid come from the dense output.
+
+    Switching functions, per shaft ``j`` (``theta = theta_j``):
+
+    * ``"paper"``: contact on the positive flank iff ``phi_j >= theta``, on the
+      negative one iff ``phi_j <= -theta``.
+    * ``"no-pull"``: from the gap, the positive flank closes when both
+      ``phi_j - theta >= 0`` and ``k_j (phi_j - theta) + d_j dphi_j/dt >= 0``; it opens
+      when the spring-damper torque ``k_j (phi_j - theta) + d_j dphi_j/dt`` falls below
+      zero (mirrored for the negative flank).
+
+    A state exactly on a boundary is resolved from the direction of motion (successive
+    Lie derivatives of the switching function), so a restart never re-detects the
+    change that caused it.
+
+    Parameters
+    ----------
+    drive : TwoMassDrive or DriveChain
+        The drive (``theta`` set), ``N`` inertias.
+    t : array_like
+        Strictly increasing time grid in s, at least 2 samples (need not be uniform).
+    torque : array_like
+        Motor torque in N m, one sample per entry of ``t``, held on ``[t[i], t[i+1])``.
+    law : {"paper", "no-pull"} or ShaftLaw, optional
+        Contact law; default ``"paper"``.
+    initial_state : array_like, optional
+        State ``[w_1 .. w_N, phi_1 .. phi_{N-1}]`` at ``t[0]``; default rest, twists 0.
+    method : {"DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA"}, optional
+        scipy solver; default ``"DOP853"``.
+    rtol : float, optional
+        Relative tolerance; default 1e-10.
+    atol : float or array_like, optional
+        Absolute tolerance (scalar or per component). Default ``rtol`` times a scale per
+        component: for speeds the largest of the initial speeds and the speed the
+        torque can reach in the record, for twists the largest of ``theta_j``, the
+        initial twist and ``max|torque| / k_j``.
+    max_step : float, optional
+        Largest solver step in s; default unbounded (the interior scan of each step
+        keeps long steps safe).
+
+    Returns
+    -------
+    ReferenceResult
+        States and modes on ``t``, contact events, grazes and solver statistics.
+
+    Raises
+    ------
+    InputError
+        Invalid drive, grid, torque, law or initial state.
+    RuntimeError
+        The solver failed or the contact configuration chatters.
+    """
+    model, t_arr, u, x0, law_, scale = _prepare(drive, t, torque, law, initial_state)
+    if method not in _SOLVERS:
+        raise InputError(f"method must be one of {sorted(_SOLVERS)}, got {method!r}")
+    solver_cls = _SOLVERS[method]
+    atol_arr = rtol * scale if atol is None else np.broadcast_to(
+        np.asarray(atol, float), scale.shape).copy()
+    eps_rel = _ON_BOUNDARY_RTOL
+
+    n_grid = t_arr.size
+    states = np.empty((n_grid, model.s))
+    modes_out = np.empty((n_grid, model.n - 1), dtype=np.int8)
+    events: list[ReferenceEvent] = []
+    event_states: list[np.ndarray] = []
+    grazes: list[ReferenceGraze] = []
+
+    x = x0.copy()
+    modes = model.classify(x)
+    states[0] = x
+    modes_out[0] = modes
+    filled = 1  # grid points [0, filled) are done
+    n_steps = n_restarts = nfev = 0
+
+    # Constant-torque segments: u[i] is held on [t[i], t[i+1]); the last sample unused.
+    change = np.flatnonzero(np.diff(u[:-1]) != 0) + 1
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change, [n_grid - 1]])
+
+    t_cur = float(t_arr[0])
+    for i0, i1 in zip(starts, ends, strict=True):
+        ui = float(u[i0])
+        t_end = float(t_arr[i1])
+        modes = _settle(model, t_cur, x, modes, ui, events, event_states, eps_rel)
+        zero_len = 0
+        while t_cur < t_end:
+            a, c = model.field(modes, ui)
+            guards = model.guards(modes)
+
+            def fun(_t, y, a=a, c=c):
+                return a @ y + c
+
+            kwargs = dict(rtol=rtol, atol=atol_arr, max_step=max_step)
+            if method in ("Radau", "BDF", "LSODA"):
+                kwargs["jac"] = a
+            solver = solver_cls(fun, t_cur, x, t_end, **kwargs)
+            n_restarts += 1
+            hit = None
+            first = True
+            while solver.status == "running":
+                msg = solver.step()
+                if solver.status == "failed":
+                    raise RuntimeError(f"{method} failed at t = {solver.t!r} s: {msg}")
+                n_steps += 1
+                t_old, t_new = float(solver.t_old), float(solver.t)
+                dense = solver.dense_output()
+                hit = _scan_step(model, modes, guards, a, c, dense, t_old, t_new, first,
+                                 grazes, eps_rel)
+                first = False
+                t_stop = hit[0] if hit is not None else t_new
+                # grid points in [t_old, t_stop) (t_end itself belongs to what follows)
+                stop = int(np.searchsorted(t_arr, t_stop, side="left"))
+                stop = min(stop, i1)
+                if stop > filled:
+                    pts = t_arr[filled:stop]
+                    states[filled:stop] = dense(pts).T
+                    modes_out[filled:stop] = modes
+                    filled = stop
+                if hit is not None:
+                    break
+            nfev += int(solver.nfev)
+            if hit is None:
+                x = np.asarray(solver.y, dtype=float).copy()
+                t_cur = t_end
+                break
+            te, shaft, target = hit
+            x = np.asarray(dense(te), dtype=float).copy()
+            zero_len = zero_len + 1 if te <= t_cur else 0
+            if zero_len > _MAX_ZERO_LENGTH_RESTARTS:
+                raise RuntimeError(f"contact chatter at t = {te!r} s")
+            t_cur = te
+            modes = _switch(modes, shaft, target, te, events, x, event_states)
+            modes = _settle(model, t_cur, x, modes, ui, events, event_states, eps_rel)
+        # grid points at the end of the segment up to (not including) t_end are filled;
+        # t_end is filled by the next segment's first step or below.
+    states[-1] = x
+    modes_out[-1] = modes
+    if filled < n_grid - 1:  # pragma: no cover - defensive
+        raise RuntimeError("internal error: grid not filled")
+    return ReferenceResult(
+        t=t_arr,
+        torque=u,
+        states=states,
+        modes=modes_out,
+        events=tuple(events),
+        event_states=np.array(event_states, dtype=float).reshape(-1, model.s),
+        grazes=tuple(grazes),
+        law=law_,
+        method=method,
+        rtol=float(rtol),
+        atol=atol_arr,
+        n_steps=n_steps,
+        n_restarts=n_restarts,
+        nfev=nfev,
+        n_inertias=model.n,
+    )
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _event_key(e) -> tuple[int, str, str]:
+    return (int(e.shaft), str(e.kind), str(e.flank))
+
+
+def _event_diff(events_a, events_b) -> tuple[bool, float]:
+    same = [_event_key(e) for e in events_a] == [_event_key(e) for e in events_b]
+    if not same:
+        return False, math.inf
+    if not events_a:
+        return True, 0.0
+    ta = np.array([e.time for e in events_a])
+    tb = np.array([e.time for e in events_b])
+    return True, float(np.max(np.abs(ta - tb)))
+
+
+def compare_to_reference(response, reference: ReferenceResult) -> AccuracyReport:
+    """Speed error and event timing of a simulator response against a reference.
+
+    Parameters
+    ----------
+    response : DriveResponse or ReferenceResult
+        Anything with ``states`` (same grid as the reference) and ``events`` whose
+        items have ``time``, ``shaft``, ``kind`` and ``flank``.
+    reference : ReferenceResult
+        The reference run.
+
+    Returns
+    -------
+    AccuracyReport
+        Maximum speed error (absolute and relative to ``max |w_ref|``) and event
+        matching (one-to-one, in order).
+    """
+    n = reference.n_inertias
+    w = np.asarray(response.states)[:, :n]
+    w_ref = reference.speeds
+    if w.shape != w_ref.shape:
+        raise InputError(f"response has speeds of shape {w.shape}, reference {w_ref.shape}")
+    err = float(np.max(np.abs(w - w_ref)))
+    scale = float(np.max(np.abs(w_ref)))
+    same, dt = _event_diff(tuple(response.events), reference.events)
+    return AccuracyReport(
+        max_speed_error=err,
+        speed_scale=scale,
+        speed_error_ratio=err / scale if scale > 0 else (0.0 if err == 0 else math.inf),
+        same_event_sequence=same,
+        max_event_time_diff=dt,
+        n_events=len(reference.events),
+    )
+
+
+def check_conditioning(
+    drive: DriveChain | TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    law: ShaftLaw | str = "paper",
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    runs: Sequence[tuple[str, float]] = (("DOP853", 1e-12), ("DOP853", 1e-13)),
+    event_tol: float = 1e-7,
+    speed_rtol: float = 1e-8,
+) -> ConditioningReport:
+    """Judge whether a case is well-conditioned by running two different references.
+
+    Two tight references that differ in tolerance (or method) must agree on a
+    well-conditioned case. Near a grazing contact a perturbation of the order of the
+    solver error decides whether an impact happens, and the two runs part ways; such a
+    case says nothing about a simulator and must be excluded from accuracy comparisons
+    (not compared with a looser tolerance).
+
+    Parameters
+    ----------
+    drive, t, torque, law, initial_state
+        As for :func:`reference_simulate`.
+    runs : sequence of two (method, rtol) pairs, optional
+        The two references; default DOP853 at ``rtol = 1e-12`` and at ``1e-13``. The
+        last one is returned as :attr:`ConditioningReport.reference`.
+    event_tol : float, optional
+        Largest allowed difference of matching event times, s; default 1e-7.
+    speed_rtol : float, optional
+        Largest allowed ``max |w_a - w_b| / max |w_b|``; default 1e-8.
+
+    Returns
+    -------
+    ConditioningReport
+        Agreement flag, the differences and both runs.
+    """
+    if len(runs) != 2:
+        raise InputError("runs must name exactly two (method, rtol) references")
+    (m_a, r_a), (m_b, r_b) = runs
+    kw = dict(law=law, initial_state=initial_state)
+    check = reference_simulate(drive, t, torque, method=m_a, rtol=r_a, **kw)
+    ref = reference_simulate(drive, t, torque, method=m_b, rtol=r_b, **kw)
+    same, dt = _event_diff(check.events, ref.events)
+    scale = float(np.max(np.abs(ref.speeds)))
+    dw = float(np.max(np.abs(check.speeds - ref.speeds)))
+    rel = dw / scale if scale > 0 else (0.0 if dw == 0 else math.inf)
+    reasons = []
+    if not same:
+        reasons.append(
+            f"event sequences differ ({len(check.events)} vs {len(ref.events)} events)"
+        )
+    elif dt > event_tol:
+        reasons.append(f"event times differ by {dt:.3g} s > {event_tol:.3g} s")
+    if rel > speed_rtol:
+        reasons.append(f"speeds differ by {rel:.3g} (relative) > {speed_rtol:.3g}")
+    return ConditioningReport(
+        well_conditioned=not reasons,
+        same_event_sequence=same,
+        max_event_time_diff=dt,
+        max_speed_rel_diff=rel,
+        reasons=tuple(reasons),
+        reference=ref,
+        check=check,
+    )
+
+
+def naive_simulate(
+    drive: DriveChain | TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    law: ShaftLaw | str = "paper",
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    method: str = "RK45",
+    rtol: float = 1e-8,
+    atol: float | None = None,
+) -> np.ndarray:
+    """The drive integrated by :func:`scipy.integrate.solve_ivp` WITHOUT event location.
+
+    The contact law is evaluated inside the right-hand side from the state (as a
+    generic ODE user would write it), so the solver steps over the switches; it only
+    restarts at changes of the input torque. The switches cut the order of the method
+    to one, which is what the event-located :func:`reference_simulate` avoids.
+
+    Parameters
+    ----------
+    drive, t, torque, law, initial_state
+        As for :func:`reference_simulate`.
+    method : str, optional
+        ``solve_ivp`` method; default ``"RK45"``.
+    rtol : float, optional
+        Relative tolerance; default 1e-8.
+    atol : float, optional
+        Absolute tolerance; default ``rtol`` times the component scales of
+        :func:`reference_simulate`.
+
+    Returns
+    -------
+    numpy.ndarray
+        States on ``t``, shape ``(n, 2N - 1)``.
+    """
+    model, t_arr, u, x0, law_, scale = _prepare(drive, t, torque, law, initial_state)
+    n = model.n
+    k, d, theta = model.k, model.d, model.theta
+
+    def fun(_t, x, ui):
+        w, phi = x[:n], x[n:]
+        dphi = w[:-1] - w[1:]
+        pos = k * (phi - theta) + d * dphi
+        neg = k * (phi + theta) + d * dphi
+        if law_ is ShaftLaw.PAPER:
+            torq = np.where(phi >= theta, pos, np.where(phi <= -theta, neg, 0.0))
+        else:
+            torq = np.where(phi >= theta, np.maximum(pos, 0.0),
+                            np.where(phi <= -theta, np.minimum(neg, 0.0), 0.0))
+        load = -model.f * w
+        load[0] += ui
+        load[:-1] -= torq
+        load[1:] += torq
+        return np.concatenate([load / model.J, dphi])
+
+    out = np.empty((t_arr.size, model.s))
+    out[0] = x0
+    x = x0
+    change = np.flatnonzero(np.diff(u[:-1]) != 0) + 1
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change, [t_arr.size - 1]])
+    tol = rtol * scale if atol is None else atol
+    for i0, i1 in zip(starts, ends, strict=True):
+        sol = integrate.solve_ivp(fun, (t_arr[i0], t_arr[i1]), x, method=method, rtol=rtol,
+                                  atol=tol, t_eval=t_arr[i0 : i1 + 1], args=(float(u[i0]),))
+        if sol.status != 0:
+            raise RuntimeError(sol.message)
+        out[i0 : i1 + 1] = sol.y.T
+        x = sol.y[:, -1]
+    return out
