@@ -539,7 +539,9 @@ def assess_sensitivity(
     if not same:
         event_diff = float("inf")
     elif key:
-        event_diff = max(abs(a.time - b.time) for a, b in zip(coarse.events, fine.events, strict=True))
+        event_diff = max(
+            abs(a.time - b.time) for a, b in zip(coarse.events, fine.events, strict=True)
+        )
     else:
         event_diff = 0.0
     sensitive = not same or speed_diff > speed_rtol or event_diff > event_atol
