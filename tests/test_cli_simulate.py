@@ -202,7 +202,7 @@ def test_near_grazing_is_a_one_line_note(tmp_path, capsys, monkeypatch):
     def grazing(self, t, torque, **kwargs):
         r = original(self, t, torque, **kwargs)
         warnings.warn("grazing", bk.SensitivityWarning, stacklevel=1)
-        return dataclasses.replace(r, near_grazing=(bk.NearGrazing(0.25, 0, -1e-9),))
+        return dataclasses.replace(r, graze_array=np.array([[0.25, 0.0, -1e-9]]))
 
     monkeypatch.setattr(bk.TwoMassDrive, "simulate", grazing)
     out = tmp_path / "r.csv"

@@ -16,6 +16,7 @@ from .control import (
     simulate_closed_loop,
 )
 from .errors import InputError, SensitivityWarning
+from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
 from .nonlinearities import (
@@ -47,6 +48,8 @@ __all__ = [
     "GainOnlyInverse",
     "LinearPlantWithBacklash",
     "NoInverse",
+    "Record",
+    "RegressionIdentifier",
     "SmoothFilterInverse",
     "SmoothRampInverse",
     "SumOfSines",
@@ -62,6 +65,7 @@ __all__ = [
     "SensitivityWarning",
     "ShaftLaw",
     "TwoMassDrive",
+    "TwoStepIdentifier",
     "__version__",
     "assess_sensitivity",
     "simulate_batch",

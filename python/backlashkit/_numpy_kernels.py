@@ -17,7 +17,7 @@ from scipy.linalg import expm
 from .errors import InputError
 
 TAYLOR_TERMS = 18
-SCAN_POINTS = 16
+SCAN_POINTS = 8
 MAX_RHO_H = 0.5
 MAX_EVENTS_PER_STEP = 64
 EVENT_RTOL = 1e-12

@@ -54,6 +54,11 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, *, ndim: int =
         raise InputError(f"{name} must be an array of real numbers") from None
     if arr.ndim != ndim:
         raise InputError(f"{name} must be {ndim}-dimensional, got shape {arr.shape}")
+    # A finite sum proves every sample finite (NaN and inf propagate); only a
+    # non-finite sum needs the element-wise look, which may still find none (overflow).
+    with np.errstate(over="ignore", invalid="ignore"):
+        if math.isfinite(arr.sum()):
+            return arr
     bad = ~np.isfinite(arr)
     if bad.any():
         first = np.argwhere(bad)[0]
@@ -73,13 +78,16 @@ def time_grid(
     if arr.size < min_samples:
         raise InputError(f"{name} must have at least {min_samples} samples, got {arr.size}")
     dt = np.diff(arr)
+    ts = (arr[-1] - arr[0]) / (arr.size - 1)
+    lo, hi = dt.min(), dt.max()
+    if lo > 0 and hi - ts <= UNIFORM_RTOL * ts and ts - lo <= UNIFORM_RTOL * ts:
+        return arr, float(ts)
     if not (dt > 0).all():
         i = int(np.argmax(~(dt > 0)))
         raise InputError(
             f"{name} must be strictly increasing; {name}[{i + 1}] = {float(arr[i + 1])!r} "
             f"follows {name}[{i}] = {float(arr[i])!r}"
         )
-    ts = (arr[-1] - arr[0]) / (arr.size - 1)
     dev = np.abs(dt - ts)
     if dev.max() > UNIFORM_RTOL * ts:
         i = int(np.argmax(dev))

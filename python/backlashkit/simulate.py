@@ -17,6 +17,7 @@ pass in :attr:`DriveResponse.near_grazing` and warns with
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -112,10 +113,12 @@ class DriveResponse:
     modes : numpy.ndarray
         Contact mode of each shaft at ``t`` (0 gap, +1 positive flank, -1 negative
         flank), ``int8``, shape ``(n, N - 1)``.
-    events : tuple of ContactEvent
-        Every contact change, in time order.
-    near_grazing : tuple of NearGrazing
-        Passes close to grazing, where the trajectory is ill-conditioned.
+    event_array : numpy.ndarray
+        Contact changes as rows ``[time, shaft, mode before, mode after]``, shape
+        ``(E, 4)``; :attr:`events` gives them as :class:`ContactEvent` objects.
+    graze_array : numpy.ndarray
+        Near-grazing passes as rows ``[time, shaft, margin]``, shape ``(G, 3)``;
+        :attr:`near_grazing` gives them as :class:`NearGrazing` objects.
     law : ShaftLaw
         The shaft law used.
     drive : DriveChain
@@ -126,10 +129,29 @@ class DriveResponse:
     torque: np.ndarray
     states: np.ndarray
     modes: np.ndarray
-    events: tuple[ContactEvent, ...]
-    near_grazing: tuple[NearGrazing, ...]
+    event_array: np.ndarray
+    graze_array: np.ndarray
     law: ShaftLaw
     drive: DriveChain
+
+    # Built on first access: most runs never look at their events one by one.
+    @functools.cached_property
+    def events(self) -> tuple[ContactEvent, ...]:
+        """Every contact change, in time order (from :attr:`event_array`)."""
+        return tuple(
+            ContactEvent(
+                time=time,
+                shaft=int(shaft),
+                kind="contact_made" if src == GAP else "contact_lost",
+                flank=_FLANK[int(dst)] if src == GAP else _FLANK[int(src)],
+            )
+            for time, shaft, src, dst in self.event_array.tolist()
+        )
+
+    @functools.cached_property
+    def near_grazing(self) -> tuple[NearGrazing, ...]:
+        """Passes close to grazing, where the trajectory is ill-conditioned."""
+        return tuple(NearGrazing(a, int(b), c) for a, b, c in self.graze_array.tolist())
 
     @property
     def n_inertias(self) -> int:
@@ -282,21 +304,11 @@ def _kernel(backend: Backend):
 
 def _response(chain, t, torque, law, raw) -> DriveResponse:
     states, modes, ev, gr = raw
-    events = tuple(
-        ContactEvent(
-            time=float(time),
-            shaft=int(shaft),
-            kind="contact_made" if int(src) == GAP else "contact_lost",
-            flank=_FLANK[int(dst)] if int(src) == GAP else _FLANK[int(src)],
-        )
-        for time, shaft, src, dst in ev
-    )
-    grazes = tuple(NearGrazing(float(a), int(b), float(c)) for a, b, c in gr)
-    if grazes:
-        first = grazes[0]
+    if len(gr):
+        time, shaft, margin = gr[0]
         warnings.warn(
-            f"the simulation passed within {abs(first.margin):.3g} of a grazing contact "
-            f"(shaft {first.shaft}, t = {first.time:.6g} s; {len(grazes)} such pass(es)): "
+            f"the simulation passed within {abs(margin):.3g} (relative) of a grazing "
+            f"contact (shaft {int(shaft)}, t = {time:.6g} s; {len(gr)} such pass(es)): "
             "what happens after it is sensitive to tiny changes of the inputs and "
             "parameters; see response.near_grazing",
             SensitivityWarning,
@@ -307,8 +319,8 @@ def _response(chain, t, torque, law, raw) -> DriveResponse:
         torque=torque,
         states=states,
         modes=modes,
-        events=events,
-        near_grazing=grazes,
+        event_array=ev,
+        graze_array=gr,
         law=law,
         drive=chain,
     )

@@ -22,8 +22,10 @@ use crate::Error;
 /// Terms of the Taylor expansion of the flow used to locate events: with
 /// `rho(A) h <= 1/2` the remainder is below `0.5^19 / 19! ~ 1.6e-23` of the state scale.
 const TAYLOR_TERMS: usize = 18;
-/// Sub-intervals scanned for a crossing or an extremum when locating events.
-const SCAN_POINTS: usize = 16;
+/// Sub-intervals scanned for a crossing or an extremum when locating events. With
+/// `rho(A) h <= 1/2` every mode turns by at most 1/16 rad over one of them, too little
+/// for a guard function to have two extrema there.
+const SCAN_POINTS: usize = 8;
 /// Largest `rho(A) h` for which the Taylor expansion is used.
 const MAX_RHO_H: f64 = 0.5;
 /// Most mode changes allowed inside one internal step (guards against Zeno chatter).
@@ -638,7 +640,7 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
 }
 
 /// Samples per block of the optimistic fast path.
-const BLOCK: usize = 64;
+const BLOCK: usize = 32;
 
 /// Whether some guard has all its lanes set in `positive`.
 #[inline(always)]
