@@ -97,8 +97,44 @@ class NearGrazing:
     margin: float
 
 
+class StateColumns:
+    """Named views of a ``states`` array ``[w_1 .. w_N, phi_1 .. phi_{N-1}]``.
+
+    Mixed into result classes that have ``states`` (shape ``(n, 2N - 1)``) and
+    ``n_inertias``.
+    """
+
+    states: np.ndarray
+    n_inertias: int
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """Speeds of all inertias in rad/s, shape ``(n, N)``."""
+        return self.states[:, : self.n_inertias]
+
+    @property
+    def twists(self) -> np.ndarray:
+        """Twists ``phi_j`` of all shafts in rad, shape ``(n, N - 1)``."""
+        return self.states[:, self.n_inertias :]
+
+    @property
+    def w_motor(self) -> np.ndarray:
+        """Motor speed (inertia 1) in rad/s."""
+        return self.states[:, 0]
+
+    @property
+    def w_load(self) -> np.ndarray:
+        """Load speed (last inertia) in rad/s."""
+        return self.states[:, self.n_inertias - 1]
+
+    @property
+    def phi_d(self) -> np.ndarray:
+        """Twist of the first shaft (``phi_M - phi_L`` for a two-mass drive) in rad."""
+        return self.states[:, self.n_inertias]
+
+
 @dataclass(frozen=True, eq=False)
-class DriveResponse:
+class DriveResponse(StateColumns):
     """Result of a drive simulation, sampled on the input's time grid.
 
     Parameters
@@ -157,31 +193,6 @@ class DriveResponse:
     def n_inertias(self) -> int:
         """Number of inertias ``N``."""
         return self.drive.n_inertias
-
-    @property
-    def speeds(self) -> np.ndarray:
-        """Speeds of all inertias in rad/s, shape ``(n, N)``."""
-        return self.states[:, : self.n_inertias]
-
-    @property
-    def twists(self) -> np.ndarray:
-        """Twists ``phi_j`` of all shafts in rad, shape ``(n, N - 1)``."""
-        return self.states[:, self.n_inertias :]
-
-    @property
-    def w_motor(self) -> np.ndarray:
-        """Motor speed (inertia 1) in rad/s."""
-        return self.states[:, 0]
-
-    @property
-    def w_load(self) -> np.ndarray:
-        """Load speed (last inertia) in rad/s."""
-        return self.states[:, self.n_inertias - 1]
-
-    @property
-    def phi_d(self) -> np.ndarray:
-        """Twist of the first shaft (``phi_M - phi_L`` for a two-mass drive) in rad."""
-        return self.states[:, self.n_inertias]
 
     @property
     def shaft_torques(self) -> np.ndarray:

@@ -46,6 +46,7 @@ from scipy import integrate, optimize
 
 from .errors import InputError
 from .laws import ShaftLaw
+from .simulate import StateColumns
 
 if TYPE_CHECKING:
     from .plants import DriveChain, TwoMassDrive
@@ -134,7 +135,7 @@ class ReferenceGraze:
 
 
 @dataclass(frozen=True, eq=False)
-class ReferenceResult:
+class ReferenceResult(StateColumns):
     """Result of :func:`reference_simulate`, sampled on the input grid.
 
     Attributes
@@ -188,31 +189,6 @@ class ReferenceResult:
     n_restarts: int
     nfev: int
     n_inertias: int
-
-    @property
-    def speeds(self) -> np.ndarray:
-        """Speeds of all inertias in rad/s, shape ``(n, N)``."""
-        return self.states[:, : self.n_inertias]
-
-    @property
-    def twists(self) -> np.ndarray:
-        """Twists of all shafts in rad, shape ``(n, N - 1)``."""
-        return self.states[:, self.n_inertias :]
-
-    @property
-    def w_motor(self) -> np.ndarray:
-        """Motor speed (inertia 1) in rad/s."""
-        return self.states[:, 0]
-
-    @property
-    def w_load(self) -> np.ndarray:
-        """Load speed (last inertia) in rad/s."""
-        return self.states[:, self.n_inertias - 1]
-
-    @property
-    def phi_d(self) -> np.ndarray:
-        """Twist of the first shaft in rad."""
-        return self.states[:, self.n_inertias]
 
     @property
     def event_times(self) -> np.ndarray:
