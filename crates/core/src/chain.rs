@@ -290,7 +290,7 @@ fn run_sized<const S: usize, const W: usize>(
             "input and initial state must be finite".into(),
         ));
     }
-    Engine::<S, W, _>::new(&model, ts)?.run_into(t0, ts, u, &x0, states, modes)
+    Engine::<S, W, _>::new(&model, ts)?.run_into(t0, u, &x0, states, modes)
 }
 
 /// As [`simulate_chain`], writing states (`u.len() x (2N - 1)`) and modes

@@ -5,14 +5,19 @@
 //! of affine functions `g(x) = h.x + d` and fires when all of them become positive.
 //!
 //! The engine advances the state sample by sample with the exact flow of the current
-//! mode, `x <- E x + F (b u + c)`, `E = exp(A h)`, `F = int_0^h exp(A s) ds`. After each
-//! sample it checks the guards cheaply (sign at the end of the sample, and whether a
-//! guard function reached an extremum towards its boundary inside the sample). Only
-//! when a check fires does it look closely: it expands the flow as a Taylor polynomial
-//! in time (valid because the internal step `h` keeps `rho(A) h <= 1/2`), scans it for
-//! the earliest crossing, bisects the crossing to ~1e-17 of the step, switches mode
-//! there and finishes the step in the new mode. The switching instants are therefore
-//! located inside the sample, not rounded to the grid.
+//! mode, `x <- E x + F (b u + c)`, `E = exp(A h)`, `F = int_0^h exp(A s) ds`, and checks
+//! every sample cheaply: the sign of each guard function at the sample's end, and
+//! whether one reached an extremum towards its boundary inside the sample (slopes of
+//! opposite signs at the two ends, peak bounded by the tangent lines). To keep those
+//! checks off the state's dependency chain it runs the flow over a block of samples
+//! first, then proves whole blocks clear with interval bounds, testing sample by
+//! sample only where a bound fails, and rolls back to the first suspect sample.
+//!
+//! Only there does it look closely: it expands the flow as a Taylor polynomial in
+//! time (valid because the internal step `h` keeps `rho(A) h <= 1/2`), scans it for the
+//! earliest crossing, locates it by regula falsi (Illinois) to a few ulps of the step,
+//! switches mode there and finishes the step in the new mode. The switching instants
+//! are therefore located inside the sample, not rounded to the grid.
 
 use crate::linalg::{
     dot, expm_and_integral, matvec, spectral_radius_estimate, vecmat, Mat, Vector,
@@ -191,6 +196,7 @@ fn encode(modes: &[i8]) -> usize {
 /// check (at least the largest number of guard functions of any mode).
 pub struct Engine<'m, const S: usize, const W: usize, M: HybridModel<S>> {
     model: &'m M,
+    ts: f64,
     h: f64,
     substeps: usize,
     cache: Vec<Option<Box<ModeData<S, W>>>>,
@@ -221,6 +227,7 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         let n_modes = 3usize.pow(model.n_switches() as u32);
         Ok(Engine {
             model,
+            ts,
             h: ts / substeps as f64,
             substeps,
             cache: vec![None; n_modes],
@@ -280,19 +287,13 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         }
     }
 
-    /// Simulate from `x0` at `t0` with ZOH input `u` (one value per sample); the
+    /// Simulate from `x0` at `t0` with ZOH input `u` (one value per sample time); the
     /// trajectory has `u.len()` samples, the last input value is not used.
-    pub fn run(
-        &mut self,
-        t0: f64,
-        ts: f64,
-        u: &[f64],
-        x0: &Vector<S>,
-    ) -> Result<Trajectory, Error> {
+    pub fn run(&mut self, t0: f64, u: &[f64], x0: &Vector<S>) -> Result<Trajectory, Error> {
         let (n, ns) = (u.len(), self.model.n_switches());
         let mut states = vec![0.0; n * S];
         let mut modes = vec![0; n * ns];
-        let (events, grazes) = self.run_into(t0, ts, u, x0, &mut states, &mut modes)?;
+        let (events, grazes) = self.run_into(t0, u, x0, &mut states, &mut modes)?;
         Ok(Trajectory {
             states,
             modes,
@@ -306,14 +307,12 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
     pub fn run_into(
         &mut self,
         t0: f64,
-        ts: f64,
         u: &[f64],
         x0: &Vector<S>,
         states: &mut [f64],
         modes_out: &mut [i8],
     ) -> Result<(Vec<Event>, Vec<Graze>), Error> {
-        let n = u.len();
-        let ns = self.model.n_switches();
+        let (n, ns, ts) = (u.len(), self.model.n_switches(), self.ts);
         if states.len() != n * S || modes_out.len() != n * ns {
             return Err(Error::InvalidArgument(
                 "output buffers do not match the input length".into(),
