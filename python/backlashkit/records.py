@@ -1,0 +1,579 @@
+"""Read measured step-down experiments into :class:`~backlashkit.identify.Record` objects.
+
+:func:`read_records` reads CSV text files (any of ``,``, ``;`` or tab as separator,
+decimal point or decimal comma), MATLAB ``.mat`` files (v4/v5/v7 through
+:func:`scipy.io.loadmat`; v7.3, which is HDF5, through the optional ``h5py``) and
+NumPy ``.npz`` archives, and returns one :class:`~backlashkit.identify.Record` per
+experiment found in the file.
+
+Conventions
+-----------
+* **Columns.** Our names are ``t`` (s), ``torque`` (N m), ``w_motor`` and ``w_load``
+  (rad/s, or rpm with ``speed_unit="rpm"``). ``columns`` maps any of them to the
+  file's own names; names not mapped are looked up under our names.
+* **Time.** Either a time column (default) or ``sample_time`` (the first sample at
+  ``t = 0``), never both. The time must be finite and strictly increasing. Steps that
+  differ from uniform by no more than the storage precision (1e-6 of the step, or a
+  few float32 ulps for single-precision arrays) are snapped onto the exact uniform
+  grid; anything else (jitter, a gap of missing samples) is an error unless
+  ``resample="linear"``.
+* **Missing values.** An empty CSV cell or ``nan`` is a missing sample: an error
+  unless ``resample="linear"``, which bridges it by linear interpolation between the
+  neighbouring valid samples (a channel missing its first or last sample is always
+  an error: crop the record).
+* **Resampling** (``resample="linear"``, only on request) puts every channel on the
+  uniform grid ``t_0 + k Ts`` with ``Ts`` the median step of the file's time: speeds
+  by linear interpolation, the torque as a zero-order hold (the value of the latest
+  sample at or before each grid instant), so a torque step stays a step.
+* **Several records per file.** CSV: one record per file. ``.npz`` and ``.mat``:
+  either variables with our (or mapped) names, one record; or the same names with a
+  suffix ``_1``, ``_2``, ... (``w_motor_1``, ``w_load_1``, ``torque_1``, ...), one
+  record per suffix in numerical order, the time being either suffixed too or one
+  shared unsuffixed variable; or (``.mat`` only) struct variables, scalar or struct
+  arrays, whose fields carry the names, one record per element (struct variables in
+  name order). Each array must be a vector (MATLAB row or column vectors are
+  flattened). Record names are the path, with ``:_1`` or ``:var(1)`` (1-based) added
+  when the file holds several.
+
+Every problem raises :class:`~backlashkit.errors.InputError` with a one-line message
+naming the file, where (line, variable, sample) and what to do.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import re
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+from .identify import Record
+
+__all__ = ["FIELDS", "read_records"]
+
+PathLike = str | os.PathLike[str]
+
+#: Our names of a record's channels, in order.
+FIELDS = ("t", "torque", "w_motor", "w_load")
+#: Accepted speed units and their factor to rad/s.
+SPEED_UNITS = {"rad/s": 1.0, "rpm": 2.0 * math.pi / 60.0}
+DELIMITERS = (",", ";", "\t")
+#: Relative tolerance on the time steps for a grid to count as uniform.
+UNIFORM_RTOL = 1e-6
+_SUFFIX = re.compile(r"^(.*)_(\d+)$")
+
+# (name of the record, raw channels (t may be absent), label of sample i, time precision)
+_Raw = tuple[str, dict[str, np.ndarray], Callable[[int], str], float]
+
+
+def read_records(
+    path: PathLike,
+    *,
+    columns: Mapping[str, str] | None = None,
+    sample_time: float | None = None,
+    delimiter: str | None = None,
+    decimal: str | None = None,
+    speed_unit: str = "rad/s",
+    resample: str | None = None,
+) -> list[Record]:
+    """Read the step-down experiments held in a measured file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.csv`` (or ``.txt``/``.tsv``/``.dat``: any other suffix is read as CSV
+        text), ``.mat`` or ``.npz`` file.
+    columns : mapping of str to str, optional
+        Our names (``t``, ``torque``, ``w_motor``, ``w_load``) to the file's names of
+        those columns or variables; unmapped ones keep our names.
+    sample_time : float, optional
+        Sample time in s, > 0, when the file has no time column (the first sample is
+        at ``t = 0``). Give it or a time column, not both.
+    delimiter : {",", ";", "\\t"}, optional
+        CSV separator; default detected from the header line (``;`` if it holds one,
+        else a tab if it holds one, else ``,``).
+    decimal : {".", ","}, optional
+        CSV decimal mark; default ``,`` if the separator is not ``,`` and a data
+        cell holds a comma, else ``.``.
+    speed_unit : {"rad/s", "rpm"}, optional
+        Unit of the speeds in the file; rpm are converted to rad/s (default rad/s).
+    resample : {None, "linear"}, optional
+        ``"linear"`` resamples onto a uniform grid at the median time step (speeds
+        linearly, torque as a zero-order hold) and bridges missing samples; default
+        None: non-uniform time, gaps and missing values are errors.
+
+    Returns
+    -------
+    list of Record
+        One record per experiment in the file (module docstring), in SI units.
+
+    Raises
+    ------
+    InputError
+        If an option is invalid, the file cannot be read, lacks a channel, or holds
+        a value, time step or missing sample it cannot use; the one-line message
+        names the file, the place and what to do.
+    FileNotFoundError
+        If the file does not exist.
+    """
+    name = str(path)
+    mapping = _check_columns(columns)
+    if sample_time is not None:
+        try:
+            st = float(sample_time)
+        except (TypeError, ValueError):
+            st = math.nan
+        if isinstance(sample_time, bool) or not math.isfinite(st) or not st > 0:
+            raise InputError(f"sample_time must be a finite number > 0 (s), got {sample_time!r}")
+        if columns is not None and "t" in columns:
+            raise InputError(
+                f"give either sample_time (got {sample_time!r}) or a time column "
+                f"(columns['t'] = {columns['t']!r}), not both"
+            )
+        sample_time = st
+    if delimiter is not None and delimiter not in DELIMITERS:
+        raise InputError(f"delimiter must be ',', ';' or a tab ('\\t'), got {delimiter!r}")
+    if decimal is not None and decimal not in (".", ","):
+        raise InputError(f"decimal must be '.' or ',', got {decimal!r}")
+    if decimal == "," and delimiter == ",":
+        raise InputError("decimal ',' needs another delimiter (';' or a tab), got delimiter ','")
+    if speed_unit not in SPEED_UNITS:
+        raise InputError(f"speed_unit must be 'rad/s' or 'rpm', got {speed_unit!r}")
+    if resample not in (None, "linear"):
+        raise InputError(f"resample must be None or 'linear', got {resample!r}")
+    if not Path(path).is_file():
+        if Path(path).is_dir():
+            raise InputError(f"{name}: is a directory; give a .csv, .mat or .npz file")
+        raise FileNotFoundError(f"{name}: no such file")
+    suffix = Path(path).suffix.lower()
+    need = [f for f in FIELDS if not (f == "t" and sample_time is not None)]
+    if suffix == ".npz":
+        raws = _from_npz(name, mapping, need)
+    elif suffix == ".mat":
+        raws = _from_mat(name, mapping, need)
+    else:
+        raws = [_from_csv(name, mapping, need, delimiter, decimal)]
+    if sample_time is not None:
+        file_t = mapping["t"]
+        for _, cols, _, _ in raws:
+            if "t" in cols:
+                raise InputError(
+                    f"{name}: the file has a time column {file_t!r} and sample_time = "
+                    f"{sample_time!r} was given; drop sample_time (or the column)"
+                )
+    return [
+        _build(rec_name, cols, label, precision, sample_time, SPEED_UNITS[speed_unit], resample,
+               mapping)
+        for rec_name, cols, label, precision in raws
+    ]
+
+
+def _check_columns(columns: Mapping[str, str] | None) -> dict[str, str]:
+    out = {f: f for f in FIELDS}
+    if columns is None:
+        return out
+    if not isinstance(columns, Mapping):
+        raise InputError(
+            f"columns must be a mapping of our names {', '.join(FIELDS)} to the file's names, "
+            f"got {type(columns).__name__}"
+        )
+    for key, value in columns.items():
+        if key not in FIELDS:
+            raise InputError(
+                f"columns: unknown key {key!r}; allowed keys: {', '.join(FIELDS)}"
+            )
+        if not isinstance(value, str) or not value.strip():
+            raise InputError(f"columns[{key!r}] must be a non-empty string, got {value!r}")
+        out[key] = value.strip()
+    return out
+
+
+# --- CSV -------------------------------------------------------------------------
+
+
+def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, decimal) -> _Raw:
+    try:
+        with open(name, encoding="utf-8-sig", newline="") as fh:
+            text = fh.read()
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"{name}: not a UTF-8 text file ({exc.reason} at byte {exc.start}); save it as "
+            "UTF-8 CSV"
+        ) from None
+    lines = [
+        (k + 1, line)
+        for k, line in enumerate(text.splitlines())
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise InputError(f"{name}: the file is empty; expected a header line naming the columns")
+    header_no, header_text = lines[0]
+    if delimiter is None:
+        delimiter = next((d for d in (";", "\t") if d in header_text), ",")
+    try:
+        reader = csv.reader(io.StringIO("\n".join(line for _, line in lines)),
+                            delimiter=delimiter)
+        rows = list(reader)
+    except csv.Error as exc:
+        raise InputError(f"{name}: not a valid CSV file: {exc}") from None
+    if len(rows) != len(lines):  # quoted line breaks: not a table of numbers
+        raise InputError(f"{name}: a quoted field spans several lines; remove the line breaks")
+    header = [c.strip() for c in rows[0]]
+    data, numbers = rows[1:], [n for n, _ in lines[1:]]
+    if decimal is None:
+        decimal = "," if delimiter != "," and any("," in c for row in data for c in row) else "."
+    if decimal == "," and delimiter == ",":
+        raise InputError(f"{name}: decimal ',' needs another delimiter (';' or a tab)")
+    if all(_is_number(c, decimal) for c in header):
+        raise InputError(
+            f"{name}: line {header_no} holds numbers, not column names; add a header line "
+            f"naming the columns (e.g. {delimiter.join(mapping[f] for f in need)!r})"
+        )
+    for col in header:
+        if header.count(col) > 1:
+            raise InputError(f"{name}: line {header_no}: column {col!r} appears twice")
+    missing = [mapping[f] for f in need if mapping[f] not in header]
+    if missing:
+        sep = {"\t": "tab", ",": "','", ";": "';'"}[delimiter]
+        raise InputError(
+            f"{name}: no column {', '.join(map(repr, missing))} in the header (line "
+            f"{header_no}, separator {sep}: {header!r}); map the file's names with "
+            "columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}"
+            + (" or pass sample_time= if there is no time column" if "t" in need else "")
+        )
+    if "t" not in need and mapping["t"] in header:
+        need = ["t", *need]  # read it so that the conflict with sample_time is reported
+    width = len(header)
+    for r, row in enumerate(data):
+        if len(row) != width:
+            raise InputError(
+                f"{name}: line {numbers[r]} has {len(row)} field(s) but the header has {width}; "
+                f"check the separator (delimiter={delimiter!r}) and the decimal mark"
+            )
+    cols = {}
+    for f in need:
+        j = header.index(mapping[f])
+        cols[f] = _parse_cells(name, mapping[f], [row[j] for row in data], numbers, decimal)
+    return name, cols, lambda i: f"line {numbers[i]}", 0.0
+
+
+_MISSING = {"", "nan", "na", "n/a", "null"}
+
+
+def _is_number(cell: str, decimal: str) -> bool:
+    try:
+        float(cell.strip().replace(decimal, ".") if decimal == "," else cell.strip())
+    except ValueError:
+        return False
+    return True
+
+
+def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
+    out = np.empty(len(cells))
+    for r, raw in enumerate(cells):
+        cell = raw.strip()
+        if cell.lower() in _MISSING:
+            out[r] = np.nan
+            continue
+        if decimal == ",":
+            cell = cell.replace(",", ".")
+        try:
+            out[r] = float(cell)
+        except ValueError:
+            hint = (
+                "; for decimal commas pass decimal=',' with delimiter ';' or a tab"
+                if "," in raw and decimal == "."
+                else ""
+            )
+            raise InputError(
+                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number{hint}"
+            ) from None
+        if math.isinf(out[r]):
+            raise InputError(
+                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is infinite; fix the file"
+            )
+    return out
+
+
+# --- NPZ and MAT -----------------------------------------------------------------
+
+
+def _vector(name: str, var: str, value: Any) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.number) or arr.dtype == bool
+    ) or np.iscomplexobj(arr):
+        raise InputError(f"{name}: variable {var!r} must hold real numbers, got {arr.dtype}")
+    if arr.ndim != 1:
+        if sum(s > 1 for s in arr.shape) > 1:
+            raise InputError(
+                f"{name}: variable {var!r} must be a vector, got shape {arr.shape}; store one "
+                "vector per channel (or suffix _1, _2, ... per experiment)"
+            )
+        arr = arr.reshape(-1)
+    return arr
+
+
+def _precision(arr: np.ndarray) -> float:
+    if arr.dtype == np.float32:
+        return 4.0 * float(np.finfo(np.float32).eps) * float(np.max(np.abs(arr), initial=0.0))
+    return 0.0
+
+
+def _sample_label(var: str) -> Callable[[int], str]:
+    return lambda i: f"sample {i} (0-based) of {var!r}"
+
+
+def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, str],
+                    need: list[str], what: str) -> list[_Raw]:
+    """Records from a flat set of named arrays (plain or suffixed names)."""
+    want = {mapping[f]: f for f in FIELDS}
+    if all(mapping[f] in variables for f in need):
+        present = [f for f in FIELDS if mapping[f] in variables]
+        cols = {f: _vector(name, mapping[f], variables[mapping[f]]) for f in present}
+        prec = _precision(cols["t"]) if "t" in cols else 0.0
+        var_t = mapping["t"]
+        return [(name, {f: c.astype(float) for f, c in cols.items()}, _sample_label(var_t),
+                 prec)]
+    groups: dict[int, dict[str, str]] = {}
+    for var in variables:
+        m = _SUFFIX.match(var)
+        if m and m.group(1) in want:
+            groups.setdefault(int(m.group(2)), {})[want[m.group(1)]] = var
+    if not groups:
+        missing = [mapping[f] for f in need if mapping[f] not in variables]
+        raise InputError(
+            f"{name}: no {what} {', '.join(map(repr, missing))} (found: "
+            f"{', '.join(map(repr, sorted(variables))) or 'none'}); name them "
+            f"{', '.join(mapping[f] for f in need)} (or with suffixes _1, _2, ...), or map "
+            "them with columns={...}"
+            + (" (or pass sample_time= if there is no time)" if "t" in need else "")
+        )
+    out = []
+    for k in sorted(groups):
+        g = groups[k]
+        if "t" not in g and mapping["t"] in variables:
+            g["t"] = mapping["t"]
+        missing = [f"{mapping[f]}_{k}" for f in need if f not in g]
+        if missing:
+            raise InputError(
+                f"{name}: experiment _{k} has no {what} {', '.join(map(repr, missing))}; every "
+                f"suffix needs {', '.join(mapping[f] for f in need if f != 't')} (and a time "
+                f"{mapping['t']}_{k} or a shared {mapping['t']})"
+            )
+        cols = {f: _vector(name, g[f], variables[g[f]]) for f in g}
+        prec = _precision(cols["t"]) if "t" in cols else 0.0
+        out.append((f"{name}:_{k}", {f: c.astype(float) for f, c in cols.items()},
+                    _sample_label(g.get("t", f"w_motor_{k}")), prec))
+    return out
+
+
+def _from_npz(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
+    try:
+        with np.load(name, allow_pickle=False) as npz:
+            variables = {k: npz[k] for k in npz.files}
+    except ValueError as exc:
+        raise InputError(
+            f"{name}: cannot read the .npz archive ({exc}); save plain numeric arrays with "
+            "numpy.savez"
+        ) from None
+    except (OSError, EOFError) as exc:
+        raise InputError(f"{name}: not a NumPy .npz archive ({exc})") from None
+    return _from_variables(name, variables, mapping, need, "array")
+
+
+def _is_mat73(name: str) -> bool:
+    with open(name, "rb") as fh:
+        head = fh.read(520)
+    return b"MATLAB 7.3" in head[:128] or head[512:520] == b"\x89HDF\r\n\x1a\n" or (
+        head[:8] == b"\x89HDF\r\n\x1a\n"
+    )
+
+
+def _from_mat(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
+    if _is_mat73(name):
+        return _from_mat73(name, mapping, need)
+    from scipy import io as sio
+
+    try:
+        raw = sio.loadmat(name, squeeze_me=False, struct_as_record=True)
+    except NotImplementedError:  # v7.3 not recognised by the header check
+        return _from_mat73(name, mapping, need)
+    except Exception as exc:  # scipy raises many types for a corrupt file
+        raise InputError(
+            f"{name}: not a readable MATLAB .mat file ({type(exc).__name__}: {exc}); save it "
+            "with MATLAB's save (-v7 or -v7.3)"
+        ) from None
+    variables = {k: v for k, v in raw.items() if not k.startswith("__")}
+    flat = {k: v for k, v in variables.items() if v.dtype.names is None}
+    structs = {k: v for k, v in variables.items() if v.dtype.names is not None}
+    fieldset = {mapping[f] for f in need}
+    usable = {k: v for k, v in structs.items() if fieldset <= set(v.dtype.names)}
+    if usable and not all(mapping[f] in flat for f in need):
+        out = []
+        for var in sorted(usable):
+            arr = usable[var].reshape(-1, order="F")
+            for i, elem in enumerate(arr):
+                fields = {fn: elem[fn] for fn in arr.dtype.names}
+                rec_name = f"{name}:{var}({i + 1})" if arr.size > 1 or len(usable) > 1 else name
+                recs = _from_variables(rec_name, fields, mapping, need, f"field of {var!r}")
+                out.extend(recs)
+        return out
+    return _from_variables(name, flat, mapping, need, "variable")
+
+
+def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
+    try:
+        import h5py
+    except ImportError:
+        raise InputError(
+            f"{name}: a MATLAB v7.3 (HDF5) file needs the optional package h5py; install it "
+            "(pip install h5py) or save the file with save(..., '-v7')"
+        ) from None
+    try:
+        fh = h5py.File(name, "r")
+    except OSError as exc:
+        raise InputError(f"{name}: not a readable MATLAB v7.3 (HDF5) file ({exc})") from None
+    with fh:
+        flat: dict[str, np.ndarray] = {}
+        structs: dict[str, list[dict[str, np.ndarray]]] = {}
+        for key, obj in fh.items():
+            if key.startswith("#"):
+                continue  # MATLAB's #refs# group
+            if isinstance(obj, h5py.Dataset):
+                if obj.dtype.kind in "iuf":
+                    flat[key] = obj[()]
+            elif isinstance(obj, h5py.Group):
+                elems = _h5_struct(fh, obj)
+                if elems:
+                    structs[key] = elems
+    fieldset = {mapping[f] for f in need}
+    usable = {k: e for k, e in structs.items() if all(fieldset <= set(x) for x in e)}
+    if usable and not all(mapping[f] in flat for f in need):
+        out = []
+        for var in sorted(usable):
+            elems = usable[var]
+            for i, fields in enumerate(elems):
+                rec_name = f"{name}:{var}({i + 1})" if len(elems) > 1 or len(usable) > 1 else name
+                out.extend(_from_variables(rec_name, fields, mapping, need, f"field of {var!r}"))
+        return out
+    return _from_variables(name, flat, mapping, need, "variable")
+
+
+def _h5_struct(fh, group) -> list[dict[str, np.ndarray]]:
+    """Elements of a v7.3 struct: fields are datasets (scalar) or references (array)."""
+    import h5py
+
+    fields = {k: d for k, d in group.items() if isinstance(d, h5py.Dataset)}
+    if not fields:
+        return []
+    if all(d.dtype.kind in "iuf" for d in fields.values()):
+        return [{k: d[()] for k, d in fields.items()}]
+    if all(d.dtype == h5py.ref_dtype for d in fields.values()):
+        refs = {k: np.asarray(d[()]).reshape(-1, order="F") for k, d in fields.items()}
+        n = {r.size for r in refs.values()}
+        if len(n) != 1:
+            return []
+        return [{k: fh[r[i]][()] for k, r in refs.items()} for i in range(n.pop())]
+    return []
+
+
+# --- checks, snapping and resampling ----------------------------------------------
+
+
+def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample,
+           mapping) -> Record:
+    n = {f: c.size for f, c in cols.items()}
+    if len(set(n.values())) != 1:
+        sizes = ", ".join(f"{mapping[f]}: {k}" for f, k in n.items())
+        raise InputError(
+            f"{rec_name}: the channels have different lengths ({sizes}); give every channel "
+            "one value per sample"
+        )
+    size = next(iter(n.values()))
+    if size < 3:
+        raise InputError(f"{rec_name}: too few samples ({size}); at least 3 are needed")
+    if sample_time is not None:
+        t = np.arange(size) * sample_time
+    else:
+        t = cols["t"]
+        bad = ~np.isfinite(t)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(
+                f"{rec_name}: {label(i)}: the time {mapping['t']!r} is missing or not finite "
+                f"({t[i]}); a sample without a time cannot be placed: remove that row"
+            )
+    dt = np.diff(t)
+    if not (dt > 0).all():
+        i = int(np.argmax(~(dt > 0)))
+        raise InputError(
+            f"{rec_name}: {label(i + 1)}: the time {mapping['t']!r} = {float(t[i + 1])!r} does "
+            f"not increase (previous {float(t[i])!r}); sort the samples and remove duplicates"
+        )
+    data = {f: cols[f] for f in ("torque", "w_motor", "w_load")}
+    for f, x in data.items():
+        if np.isinf(x).any():
+            i = int(np.argmax(np.isinf(x)))
+            raise InputError(
+                f"{rec_name}: {label(i)}: {mapping[f]!r} is infinite; fix the file"
+            )
+        miss = np.isnan(x)
+        if not miss.any():
+            continue
+        i = int(np.argmax(miss))
+        if resample is None:
+            raise InputError(
+                f"{rec_name}: {label(i)}: {mapping[f]!r} is missing (empty or NaN; "
+                f"{int(miss.sum())} missing in all); fill the samples, crop the record, or pass "
+                "resample='linear' to bridge them by linear interpolation"
+            )
+        if miss[0] or miss[-1]:
+            j = 0 if miss[0] else size - 1
+            raise InputError(
+                f"{rec_name}: {label(j)}: {mapping[f]!r} is missing at the "
+                f"{'start' if j == 0 else 'end'} of the record, where it cannot be "
+                "interpolated; crop the record to the samples where every channel is known"
+            )
+    ts = float(np.median(dt))
+    tol = max(UNIFORM_RTOL * ts, precision)
+    dev = np.abs(dt - ts)
+    uniform = float(dev.max()) <= tol
+    if uniform:
+        t_new = t[0] + np.arange(size) * ((t[-1] - t[0]) / (size - 1))
+    elif resample is None:
+        i = int(np.argmax(dev > tol))  # the first offending step
+        kind = "a gap" if dt[i] > 1.5 * ts else "a non-uniform step"
+        raise InputError(
+            f"{rec_name}: {kind} in the time {mapping['t']!r} between {label(i)} and "
+            f"{label(i + 1)}: {float(dt[i]):.6g} s against the median step {ts:.6g} s; pass "
+            "resample='linear' to resample onto a uniform grid, or fix the file"
+        )
+    else:
+        m = int(math.floor((t[-1] - t[0]) / ts + 1e-9)) + 1
+        t_new = t[0] + np.arange(m) * ts
+    if uniform and resample is None:
+        out = data
+    else:
+        out = {}
+        for f, x in data.items():
+            ok = ~np.isnan(x)
+            if f == "torque":  # zero-order hold: the latest valid sample at or before
+                tv, xv = t[ok], x[ok]
+                k = np.searchsorted(tv, t_new + 1e-9 * ts, side="right") - 1
+                out[f] = xv[np.clip(k, 0, xv.size - 1)]
+            else:
+                out[f] = np.interp(t_new, t[ok], x[ok])
+    return Record(
+        t_new,
+        out["torque"],
+        out["w_motor"] * speed_factor,
+        out["w_load"] * speed_factor,
+        name=rec_name,
+    )
