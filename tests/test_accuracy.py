@@ -124,6 +124,11 @@ def log_uniform(lo: float, hi: float):
     return st.floats(np.log10(lo), np.log10(hi)).map(lambda e: float(10.0**e))
 
 
+#: Fractions in [-1, 1] on a grid of 0.01: an initial state drawn from raw floats can be
+#: a subnormal 1e-300, where neither simulator nor reference has any precision left.
+GRID = st.integers(-100, 100).map(lambda i: i / 100)
+
+
 @st.composite
 def drive_cases(draw, n_inertias: int):
     """A chain with resonances of 5 .. 300 rad/s, damping ratios 0 .. 0.3, backlash
@@ -153,8 +158,8 @@ def drive_cases(draw, n_inertias: int):
     if draw(st.booleans()):
         x0 = np.concatenate(
             [
-                [draw(st.floats(-1.0, 1.0)) * 0.1 * amp / J.sum() for _ in range(n)],
-                [draw(st.floats(-1.5, 1.5)) * th for th in theta],
+                [draw(GRID) * 0.1 * amp / J.sum() for _ in range(n)],
+                [1.5 * draw(GRID) * th for th in theta],
             ]
         )
     return chain, t, u, x0

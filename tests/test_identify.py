@@ -292,7 +292,8 @@ def experiment_csv(tmp_path_factory):
 
 
 def test_cli_two_step_json(experiment_csv, capsys, clean):
-    code, out, err = cli(["identify", str(experiment_csv), "--drive", DRIVE_TOML, "--json"],
+    code, out, err = cli(["identify", str(experiment_csv), "--drive", DRIVE_TOML, "--json",
+                          "--method", "two-step"],
                          capsys)
     assert code == 0, err
     doc = json.loads(out)
@@ -376,7 +377,7 @@ def test_cli_final_records(experiment_csv, tmp_path, capsys):
                  "--out", str(step2)]) == 0
     capsys.readouterr()
     code, out, err = cli(["identify", str(experiment_csv), "--final", str(step2), "--drive",
-                          DRIVE_TOML, "--json"], capsys)
+                          DRIVE_TOML, "--json", "--method", "two-step"], capsys)
     assert code == 0, err
     doc = json.loads(out)
     assert doc["final_records"] == [str(step2)]

@@ -17,6 +17,7 @@ from .control import (
 )
 from .errors import InputError, SensitivityWarning
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
+from .identify_joint import CramerRaoBound, JointIdentifier, cramer_rao_bound
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
 from .nonlinearities import (
@@ -57,9 +58,11 @@ __all__ = [
     "design_mrc",
     "simulate_closed_loop",
     "ContactEvent",
+    "CramerRaoBound",
     "DriveChain",
     "DriveResponse",
     "InputError",
+    "JointIdentifier",
     "NearGrazing",
     "Sensitivity",
     "SensitivityWarning",
@@ -68,6 +71,7 @@ __all__ = [
     "TwoStepIdentifier",
     "__version__",
     "assess_sensitivity",
+    "cramer_rao_bound",
     "simulate_batch",
     "simulate_drive",
 ]

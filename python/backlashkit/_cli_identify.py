@@ -2,9 +2,12 @@
 
 Reads one or more experiment files (CSV, columns ``t,torque,w_motor,w_load`` in SI, as
 written by ``backlashkit simulate --experiment step-down``) and a prior drive file
-(``[drive]`` with the linear parameters; a ``theta`` in it is ignored), and runs paper
-A's two-step method (default) or its regression baseline. See
-:mod:`backlashkit.identify` for the method and its documented choices.
+(``[drive]`` with the linear parameters; a ``theta`` in it is ignored; an optional
+``[uncertainty]`` table gives relative standard deviations for the joint method), and
+runs paper A's two-step method (default), its regression baseline, or the joint
+maximum-likelihood fit of theta and the linear parameters with its standard error. See
+:mod:`backlashkit.identify` and :mod:`backlashkit.identify_joint` for the methods and
+their documented choices.
 """
 
 from __future__ import annotations
@@ -15,26 +18,36 @@ import math
 import sys
 from typing import Any
 
-from .identify import Record, RegressionIdentifier, TwoStepIdentifier
-from .io import read_drive_toml
+from .identify import Record, RegressionIdentifier, TwoStepIdentifier, find_step_down
+from .io import read_drive_toml, read_uncertainty_toml
+from .report_identify import add_report_option, maybe_write_report
 
 __all__ = ["add_parser", "run"]
 
-METHODS = ("two-step", "regression")
+METHODS = ("two-step", "regression", "joint")
+#: Method used without ``--method``: ``joint`` is the most accurate and the only one
+#: with an uncertainty.
+DEFAULT_METHOD = "joint"
 
 _DESCRIPTION = """\
 Identify the backlash half-width theta (rad) of a two-mass drive from torque
 step-down experiments (paper A, Ravanbod-Shirazi & Besancon-Voda 2002).
 
-two-step (default): commutation instants t_c, t_b by eq. 9, pre-estimate eq. 6 from
+two-step: commutation instants t_c, t_b by eq. 9, pre-estimate eq. 6 from
 FIR-filtered speeds, then least squares on w_motor over [t_s, t_s + dt4] with theta
 in theta_ini (1 +- n_theta). regression: the same least squares over [0, 15 deg]
-without the pre-estimate (paper A's Table 2 baseline).
+without the pre-estimate (paper A's Table 2 baseline). joint (default): maximum likelihood over
+theta AND the linear parameters, on every record and both speeds (each weighted by its
+own noise level, estimated from the data), the prior entering as a Gaussian penalty
+with the relative std of the [uncertainty] table of PRIOR.toml (or --prior-rel-std);
+without either, the linear parameters are refined from the data alone. It reports the
+standard error std and a 95% interval ci95 of theta.
 
 Each EXP.csv holds columns t,torque,w_motor,w_load (SI) with one step-down of the
 torque from a positive level. Paper A's protocol uses a small step (a_1) for the
 pre-estimate and a larger one (a_2) for the least squares: give the latter with
---final (the positional files are then used for the pre-estimate only).
+--final (the positional files are then used for the pre-estimate only; the joint
+method fits all files together).
 """
 
 _EPILOG = """\
@@ -42,6 +55,7 @@ examples:
   backlashkit simulate examples/paper_drive.toml --experiment step-down \\
       --amplitude 0.157 --hold 40 --snr-motor 30 --snr-load 30 --seed 1 --out exp.csv
   backlashkit identify exp.csv --drive examples/paper_drive.toml --json
+  backlashkit identify exp.csv --drive examples/paper_drive.toml --method joint
 """
 
 
@@ -75,13 +89,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="prior linear parameters: [drive] with J_M, J_L, k_sh, f_M, f_L, f_sh (SI); "
         "theta, if present, is ignored",
     )
-    p.add_argument("--method", choices=METHODS, default="two-step", help="default two-step")
+    p.add_argument("--method", choices=METHODS, default=DEFAULT_METHOD,
+                   help=f"default {DEFAULT_METHOD}")
     p.add_argument(
         "--final",
         metavar="EXP.csv",
         action="append",
         help="two-step: experiment(s) for the final least squares (paper A's step 2, "
-        "a_2 = 0.6 a_max); default the positional files. May be repeated",
+        "a_2 = 0.6 a_max); default the positional files; joint: fitted with the positional "
+        "files. May be repeated",
     )
     p.add_argument(
         "--n-theta", type=float, default=0.1, help="two-step: relative search half-width "
@@ -95,7 +111,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--cutoff-load", type=float, default=20.0, help="two-step: FIR cut-off for w_load in "
         "rad/s (default 20)"
     )
+    p.add_argument(
+        "--prior-rel-std", type=float, default=None, metavar="REL",
+        help="joint: relative std of every linear parameter of the prior (overrides the "
+        "[uncertainty] table; 0 = known exactly)"
+    )
     p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
+    add_report_option(p)
     p.set_defaults(func=run)
     return p
 
@@ -124,7 +146,36 @@ def run(args: argparse.Namespace) -> int:
     records = [Record.from_csv(path) for path in args.records]
     finals = None if not args.final else [Record.from_csv(path) for path in args.final]
     per_record: list[dict[str, Any]] = []
-    if args.method == "two-step":
+    std: float | None = None
+    ci95: list[float] | None = None
+    extra: dict[str, Any] = {}
+    if args.method == "joint":
+        from .identify_joint import JointIdentifier
+
+        if args.prior_rel_std is not None:
+            rel: Any = args.prior_rel_std
+        else:
+            rel = read_uncertainty_toml(args.drive) or None
+        everything = records + (finals or [])
+        est = JointIdentifier(prior, prior_rel_std=rel).fit(everything)
+        theta_ini = None
+        rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_, strict=True)
+        for rec, fitp, how, noise in rows:
+            per_record.append(
+                {"file": rec.name, "t_s": find_step_down(rec)[1], "t_c": None, "t_b": None,
+                 "theta_ini": None, "fit_percent": [float(x) for x in fitp],
+                 "model_start": how, "noise_std": [float(x) for x in noise]}
+            )
+        bounds = [float(est.theta_max / est.n_grid), float(est.theta_max)]
+        std = est.std_
+        ci95 = [float(x) for x in est.ci95_]
+        extra = {
+            "params": est.params_,
+            "estimated": list(est.estimated_),
+            "param_std": est.param_std_,
+            "prior_rel_std": rel,
+        }
+    elif args.method == "two-step":
         est = TwoStepIdentifier(
             prior,
             n_theta=args.n_theta,
@@ -148,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
                 {"file": rec.name, "t_s": t_s, "t_c": None, "t_b": None, "theta_ini": None}
             )
         bounds = [0.0, float(RegressionIdentifier(prior).theta_max)]
+    report = maybe_write_report(args, records, est, prior, final_records=finals)
     result = {
         "command": "identify",
         "method": args.method,
@@ -155,12 +207,14 @@ def run(args: argparse.Namespace) -> int:
         "theta": _num(est.theta_),
         "theta_deg": _num(math.degrees(est.theta_)),
         "theta_ini": _num(theta_ini),
-        "std": None,
-        "ci95": None,
+        "std": _num(std),
+        "ci95": ci95,
         "search_interval": bounds,
         "cost": _num(est.cost_),
         "records": per_record,
         "final_records": [r.name for r in finals] if finals else None,
+        "report": str(report) if report else None,
+        **extra,
     }
     if args.json:
         print(json.dumps(result, allow_nan=False))
@@ -176,7 +230,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"{row['file'][-30:]:<30} {' '.join(cells)} {ini}", file=out)
     if theta_ini is not None:
         print(f"theta_ini = {theta_ini:.5g} rad ({math.degrees(theta_ini):.4g} deg)", file=out)
-    print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
-          f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this method",
-          file=out)
+    if std is None:
+        print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
+              f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
+              "method", file=out)
+    else:
+        print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
+              f"std {std:.3g} rad, 95% interval [{ci95[0]:.5g}, {ci95[1]:.5g}] rad", file=out)
+        for name in est.estimated_[1:]:
+            print(f"{name:<9} = {est.params_[name]:.5g} (std {est.param_std_[name]:.3g})",
+                  file=out)
+        for rec, (a, b), (sm, sl) in zip(records + (finals or []), est.fit_percent_,
+                                          est.noise_std_, strict=True):
+            print(f"{rec.name[-30:]:<30} fit % (w_M, w_L) = ({a:.1f}, {b:.1f}); noise std = "
+                  f"({sm:.3g}, {sl:.3g}) rad/s", file=out)
     return 0

@@ -1,0 +1,785 @@
+"""Joint maximum-likelihood identification of the backlash and the linear parameters,
+and the Cramér-Rao bound of the backlash.
+
+:class:`JointIdentifier` fits ``theta`` (backlash **half-width**, rad) together with
+the uncertain linear parameters of a :class:`~backlashkit.TwoMassDrive` to every
+record and to **both** measured speeds, by weighted nonlinear least squares; with
+white Gaussian measurement noise this is maximum likelihood (each channel weighted by
+its own noise variance, estimated from the data). A prior enters, when its
+uncertainty is given, as the Gaussian penalty
+
+    sum_p ((p - p_prior) / (rel_std_p * p_prior))^2
+
+(a maximum a posteriori estimate); without a stated uncertainty the parameters are
+refined from the data alone. :func:`cramer_rao_bound` gives the Cramér-Rao lower bound
+on the standard deviation of ``theta`` for a drive, an experiment and a noise level,
+with the linear parameters known or estimated jointly.
+
+Units are SI: s, N m, rad, rad/s.
+
+Choices (documented, configurable where it matters)
+---------------------------------------------------
+* **Parameterisation.** ``theta`` and every estimated linear parameter are optimised
+  as logarithms (positivity without bounds); a parameter whose prior value is 0 cannot
+  be estimated (it stays fixed).
+* **Which parameters.** ``prior_rel_std=None``: all six linear parameters estimated
+  without a penalty; a float: all six, each with that relative standard deviation; a
+  dict: only the listed parameters, with their relative std (0 = known exactly), the
+  others fixed at the prior (as :func:`backlashkit.io.read_uncertainty_toml` reads
+  an ``[uncertainty]`` table: "parameters not listed are taken as exact").
+* **Model start.** ``start="auto"`` simulates a record from rest (state 0, shaft
+  centred in the backlash) when it starts at rest (both measured speeds at the first
+  sample within 4 noise standard deviations of 0), otherwise from ``pre_window``
+  seconds before the torque step-down, started at the model's own steady state under
+  the torque held there (``w = a / (f_M + f_L)``, twist ``theta + f_L w / k_sh``),
+  so that the speed level measured before the step informs ``f_M + f_L``. The
+  residuals cover the simulated span (to the end of the record).
+* **Noise.** Every record and channel has its own noise level (paper A's two steps
+  differ by 30 dB on ``w_L``). It starts from a high-pass estimate (robust MAD of the
+  second difference, ``/ sqrt(6)``) and is then re-estimated from the residuals of the
+  fit (``sqrt(RSS / N)`` per record and channel), and the fit repeated
+  (``noise_iter`` times): at convergence this is the maximum of the likelihood with
+  unknown variances. ``noise=(s_M, s_L)`` fixes them instead (for every record).
+* **Local minima.** The output error of this lightly damped drive (damping ratio
+  about 0.013 for paper A's drive) is multimodal in ``theta`` and in the parameters
+  that set the ringing (a 10 % error in ``k_sh`` shifts the phase by half a period
+  within ten periods). Hence (i) a grid of ``n_grid`` values over ``(0, theta_max]``
+  with the linear parameters at the prior (simulated in parallel by
+  :func:`backlashkit.simulate_batch`), its ``n_starts`` best local minima and, when
+  it succeeds, paper A's two-step estimate
+  (:class:`~backlashkit.identify.TwoStepIdentifier`) as starts; (ii) every start
+  refined on a short horizon (``horizons[0]`` = 0.15 s after the record start and
+  after every torque jump, a few periods of the ringing); (iii) the ``n_continue``
+  best continued on growing horizons (0.4, 1, 3 s, the whole record), the lowest
+  final cost kept. Refinement: Levenberg-Marquardt on the normal equations (the
+  residual vector holds every sample, the parameters are few), central-difference
+  Jacobian with relative step ``fd_step``, the perturbed models simulated as one
+  batch; steps limited to a factor ``e^0.5`` per parameter. The cost is only
+  piecewise smooth in ``theta`` (the number of contact events changes), so the
+  difference step is kept small. Near-grazing warnings of the perturbed simulations
+  are silenced inside the fit.
+* **Uncertainty.** Gauss-Newton / Fisher information at the optimum,
+  ``cov(log p) = (J^T W J + P)^-1`` with ``P`` the prior's information; ``std_`` of
+  ``theta`` by the delta method, ``ci95_ = theta_ +- 1.96 std_``. Calibration is
+  checked by coverage on simulated data in ``tests/test_identify_joint.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from . import _validate as v
+from .errors import InputError, SensitivityWarning
+from .identify import Record, TwoStepIdentifier, _as_records, find_step_down
+from .plants import TwoMassDrive
+
+__all__ = ["CramerRaoBound", "JointIdentifier", "LINEAR_PARAMS", "cramer_rao_bound"]
+
+#: Linear parameters of a :class:`~backlashkit.TwoMassDrive`, in the fitted order.
+LINEAR_PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
+
+ArrayLike = Sequence[float] | np.ndarray
+
+
+def _drive(base: TwoMassDrive, names: Sequence[str], values: np.ndarray) -> TwoMassDrive:
+    return replace(base, **{n: float(x) for n, x in zip(names, values, strict=True)})
+
+
+def _noise_hp(y: np.ndarray) -> float:
+    """Noise std from the robust spread of the second difference (``/ sqrt(6)``)."""
+    d2 = np.diff(y, 2)
+    if d2.size < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+
+
+@dataclass
+class _Span:
+    """The part of a record the model is fitted to, and how the model starts there."""
+
+    record: Record
+    i0: int
+    t: np.ndarray
+    torque: np.ndarray
+    y_m: np.ndarray
+    y_l: np.ndarray
+    level: float | None  # torque held before the step-down (steady start) or None (rest)
+
+
+def _spans(recs: list[Record], start: str, pre_window: float, sig0) -> list[_Span]:
+    out = []
+    for k, rec in enumerate(recs):
+        s_m, s_l = sig0[k]
+        at_rest = abs(rec.w_motor[0]) <= 4 * s_m + 1e-12 and abs(rec.w_load[0]) <= 4 * s_l + 1e-12
+        mode = ("rest" if at_rest else "steady") if start == "auto" else start
+        if mode == "rest":
+            i0, level = 0, None
+        else:
+            i_s, t_s, level, _ = find_step_down(rec)
+            n_pre = int(round(pre_window / rec.ts))
+            if n_pre > i_s:
+                raise InputError(
+                    f"{rec.name}: start='steady' needs pre_window = {pre_window!r} s of held "
+                    f"torque before the step-down at t = {t_s:.6g} s; the record starts "
+                    f"{rec.t[i_s] - rec.t[0]:.6g} s before it"
+                )
+            i0 = i_s - n_pre
+        sl = slice(i0, None)
+        out.append(_Span(rec, i0, rec.t[sl], rec.torque[sl], rec.w_motor[sl], rec.w_load[sl],
+                         level))
+    return out
+
+
+def _x0(d: TwoMassDrive, level: float | None) -> np.ndarray:
+    if level is None:
+        return np.zeros(3)
+    fs = d.f_M + d.f_L
+    if not fs > 0:
+        raise InputError(
+            "start='steady' needs f_M + f_L > 0 (a finite steady state), got "
+            f"f_M = {d.f_M!r}, f_L = {d.f_L!r}"
+        )
+    w = level / fs
+    twist = d.f_L * w / d.k_sh
+    return np.array([w, w, d.theta + twist if w >= 0 else -d.theta + twist])
+
+
+def _simulate(drives: list[TwoMassDrive], span: _Span, law, workers, end: int | None = None):
+    from .simulate import simulate_batch
+
+    x0 = np.array([_x0(d, span.level) for d in drives])
+    end = span.t.size if end is None else max(end, 2)
+    return simulate_batch(drives, span.t[:end], span.torque[:end], law=law, initial_state=x0,
+                          workers=workers)
+
+
+def _rel_std(prior_rel_std, names: Sequence[str]) -> dict[str, float | None]:
+    """Parameter -> relative std (None: estimated without penalty); absent = fixed."""
+    if prior_rel_std is None:
+        return {n: None for n in names}
+    if isinstance(prior_rel_std, Mapping):
+        out: dict[str, float | None] = {}
+        for key, val in prior_rel_std.items():
+            if key == "theta":
+                continue  # theta is always estimated, without a prior
+            if key not in names:
+                raise InputError(
+                    f"prior_rel_std has unknown parameter {key!r}; allowed: {', '.join(names)}"
+                )
+            x = v.nonnegative(f"prior_rel_std[{key!r}]", val)
+            if x > 0:
+                out[key] = x
+        return out
+    x = v.nonnegative("prior_rel_std", prior_rel_std)
+    return {n: x for n in names} if x > 0 else {}
+
+
+@dataclass
+class _LMState:
+    """Levenberg-Marquardt iterate: point, residual, cost, Jacobian at the point."""
+
+    z: np.ndarray
+    r: np.ndarray
+    cost: float
+    jac: np.ndarray | None
+    mu: float = 1e-3
+    done: bool = False
+
+
+def _lm(fun, jac, z0: np.ndarray, *, max_iter: int, state: _LMState | None = None,
+        rtol: float = 1e-10, atol: float = 1e-3, max_step: float = 0.5) -> _LMState:
+    """Levenberg-Marquardt on the normal equations (Marquardt scaling).
+
+    The residual vector is long (every sample of both speeds) and the parameters few,
+    so the step is solved from ``J^T J`` (n x n) rather than by an SVD of ``J``.
+    Stops after ``max_iter`` Jacobians, or when an accepted step lowers the cost by
+    less than ``rtol`` relative or ``atol`` absolute (the cost is in chi-square units:
+    1e-3 is a parameter change of about 0.03 standard errors), or when no step lowers
+    it. An accepted step is extrapolated (doubled while the cost keeps falling); no
+    step changes a log-parameter by more than ``max_step``.
+    """
+    if state is None or state.done:
+        r0 = fun(z0)
+        state = _LMState(np.array(z0, float), r0, float(r0 @ r0), None)
+        state.done = False
+    for _ in range(max_iter):
+        if state.jac is None:
+            state.jac = jac(state.z)
+        jz = state.jac
+        g = jz.T @ state.r
+        a = jz.T @ jz
+        d = np.maximum(np.diag(a), 1e-12 * max(float(np.max(np.diag(a))), 1e-300))
+        improved = False
+        for _ in range(12):
+            try:
+                step = -np.linalg.solve(a + state.mu * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                state.mu *= 10.0
+                continue
+            big = float(np.max(np.abs(step)))
+            if big > max_step:  # at most a factor e^max_step per parameter and step
+                step *= max_step / big
+            z_new = state.z + step
+            r_new = fun(z_new)
+            c_new = float(r_new @ r_new)
+            if math.isfinite(c_new) and c_new < state.cost:
+                while True:  # extrapolate along a good step (slow valleys, e.g. f_sh)
+                    if 2.0 * float(np.max(np.abs(step))) > max_step:
+                        break
+                    step = 2.0 * step
+                    z_try = state.z + step
+                    r_try = fun(z_try)
+                    c_try = float(r_try @ r_try)
+                    if not (math.isfinite(c_try) and c_try < c_new):
+                        break
+                    z_new, r_new, c_new = z_try, r_try, c_try
+                gain = state.cost - c_new
+                state.z, state.r, state.jac = z_new, r_new, None
+                old, state.cost = state.cost, c_new
+                state.mu = max(state.mu / 5.0, 1e-12)
+                improved = True
+                if gain <= rtol * old or gain < atol:
+                    state.done = True
+                break
+            state.mu *= 8.0
+        if not improved:
+            state.done = True
+        if state.done:
+            break
+    return state
+
+
+class JointIdentifier:
+    """Joint ML / MAP identification of ``theta`` and the linear parameters.
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        Prior linear parameters (its ``theta`` is ignored).
+    prior_rel_std : None, float or dict, optional
+        Relative standard deviation of the prior per linear parameter (module
+        docstring): ``None`` (default) estimates all six without a penalty, a float
+        gives all six that uncertainty, a dict (e.g. from
+        :func:`backlashkit.io.read_uncertainty_toml`) estimates only the listed
+        parameters with a value > 0.
+    noise : tuple of float, optional
+        Noise standard deviations ``(s_M, s_L)`` in rad/s; default estimated from
+        the data (module docstring).
+    start : {"auto", "rest", "steady"}, optional
+        How the model starts on each record (module docstring); default ``"auto"``.
+    pre_window : float, optional
+        ``start="steady"``: span in s before the step-down included in the fit
+        (default 2).
+    law : {"paper", "no-pull"}, optional
+        Contact law of the model (default ``"paper"``).
+    theta_max : float, optional
+        Upper end of the initial grid in rad (default 15 deg).
+    n_grid : int, optional
+        Points of the initial grid (default 61).
+    n_starts : int, optional
+        Grid local minima refined (default 3), besides the two-step estimate.
+    two_step_start : bool, optional
+        Also start from paper A's two-step estimate when it succeeds (default True).
+    noise_iter : int, optional
+        Re-estimations of the noise levels from the residuals (default 1).
+    fd_step : float, optional
+        Relative central-difference step (default 1e-6).
+    screen_iter : int, optional
+        Levenberg-Marquardt iterations from every start on the first horizon
+        (default 10).
+    horizons : sequence of float, optional
+        Growing fit horizons in s after the start of each record and after every
+        torque jump (default ``(0.15, 0.4, 1.0, 3.0)``, then the whole record): the
+        multi-start runs on the first, the best solutions are continued on the next.
+    n_continue : int, optional
+        Solutions of the first horizon continued to the whole record, the lowest final
+        cost kept (default 2).
+    max_iter : int, optional
+        Maximum Levenberg-Marquardt iterations (Jacobians) of the final refinement
+        and of each refit after a noise re-estimation (default 40).
+    workers : int, optional
+        Threads for the simulations (default all cores).
+
+    Attributes
+    ----------
+    theta_ : float
+        Estimate of the backlash half-width in rad.
+    params_ : dict of str to float
+        The six linear parameters after refinement (fixed ones at the prior).
+    drive_ : TwoMassDrive
+        The identified drive (``params_`` with ``theta_``).
+    estimated_ : tuple of str
+        Names of the estimated parameters, ``theta`` first.
+    std_ : float
+        Standard error of ``theta_`` in rad (Gauss-Newton / Fisher information).
+    ci95_ : tuple of float
+        ``theta_ -+ 1.96 std_``.
+    param_std_ : dict of str to float
+        Standard error of every estimated parameter (``theta`` included).
+    covariance_ : numpy.ndarray
+        Covariance of the estimated parameters (natural units, order ``estimated_``).
+    noise_std_ : numpy.ndarray
+        Noise standard deviation per record and channel ``(w_M, w_L)`` in rad/s,
+        shape ``(n_records, 2)``.
+    fit_percent_ : numpy.ndarray
+        NRMSE fit ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)`` per record and channel,
+        shape ``(n_records, 2)``.
+    residuals_ : list of tuple of numpy.ndarray
+        ``(w_M - w_M_hat, w_L - w_L_hat)`` per record over the fitted span.
+    cost_ : float
+        Weighted sum of squared residuals plus the prior penalty at the optimum.
+    theta_starts_ : list of float
+        The starting values of ``theta`` refined.
+    theta_two_step_ : float or None
+        Paper A's two-step estimate when it succeeded.
+    model_start_ : list of str
+        ``"rest"`` or ``"steady"`` per record: how the model was started.
+    """
+
+    method = "joint"
+
+    def __init__(
+        self,
+        prior: TwoMassDrive,
+        *,
+        prior_rel_std: None | float | Mapping[str, float] = None,
+        noise: tuple[float, float] | None = None,
+        start: str = "auto",
+        pre_window: float = 2.0,
+        law: str = "paper",
+        theta_max: float = float(np.deg2rad(15.0)),
+        n_grid: int = 61,
+        n_starts: int = 3,
+        two_step_start: bool = True,
+        noise_iter: int = 1,
+        fd_step: float = 1e-6,
+        screen_iter: int = 10,
+        horizons: Sequence[float] = (0.15, 0.4, 1.0, 3.0),
+        n_continue: int = 2,
+        max_iter: int = 40,
+        workers: int | None = None,
+    ) -> None:
+        self.prior = prior
+        self.prior_rel_std = prior_rel_std
+        self.noise = noise
+        self.start = start
+        self.pre_window = pre_window
+        self.law = law
+        self.theta_max = theta_max
+        self.n_grid = n_grid
+        self.n_starts = n_starts
+        self.two_step_start = two_step_start
+        self.noise_iter = noise_iter
+        self.fd_step = fd_step
+        self.screen_iter = screen_iter
+        self.horizons = horizons
+        self.n_continue = n_continue
+        self.max_iter = max_iter
+        self.workers = workers
+
+    # -- validation ------------------------------------------------------------------
+    def _check(self) -> None:
+        from .identify import _check_int, _check_prior
+
+        _check_prior(self.prior)
+        if self.start not in ("auto", "rest", "steady"):
+            raise InputError(f"start must be 'auto', 'rest' or 'steady', got {self.start!r}")
+        v.positive("pre_window", self.pre_window)
+        v.positive("theta_max", self.theta_max)
+        _check_int("n_grid", self.n_grid, 2)
+        _check_int("n_starts", self.n_starts, 1)
+        _check_int("n_continue", self.n_continue, 1)
+        _check_int("noise_iter", self.noise_iter, 0)
+        _check_int("screen_iter", self.screen_iter, 1)
+        _check_int("max_iter", self.max_iter, 1)
+        step = v.positive("fd_step", self.fd_step)
+        if not step < 0.1:
+            raise InputError(f"fd_step must be < 0.1 (a relative step), got {self.fd_step!r}")
+        if self.noise is not None:
+            try:
+                s_m, s_l = self.noise
+            except (TypeError, ValueError):
+                raise InputError(
+                    f"noise must be a pair (s_M, s_L) of noise std in rad/s, got {self.noise!r}"
+                ) from None
+            v.positive("noise[0] (s_M)", s_m)
+            v.positive("noise[1] (s_L)", s_l)
+
+    # -- fit -------------------------------------------------------------------------
+    def fit(self, records) -> JointIdentifier:
+        """Identify ``theta`` and the uncertain linear parameters.
+
+        Parameters
+        ----------
+        records : Record, tuple or sequence of them
+            Experiments (each a :class:`~backlashkit.identify.Record` or a tuple
+            ``(t, torque, w_motor, w_load)``); all are fitted jointly, e.g. paper A's
+            step 1 and step 2 records together.
+
+        Returns
+        -------
+        JointIdentifier
+            ``self``, fitted.
+
+        Raises
+        ------
+        InputError
+            If a parameter is invalid or a record cannot be used (message names it).
+        """
+        self._check()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SensitivityWarning)
+            return self._fit(records)
+
+    def _fit(self, records) -> JointIdentifier:
+        prior = self.prior.with_theta(None)
+        recs = _as_records(records)
+        rel = _rel_std(self.prior_rel_std, LINEAR_PARAMS)
+        free = [n for n in LINEAR_PARAMS if n in rel and getattr(prior, n) > 0]
+        names = ("theta", *free)
+        if self.noise is not None:
+            fixed_noise = np.array(self.noise, float)
+            sig0 = [fixed_noise] * len(recs)
+        else:
+            fixed_noise = None
+            sig0 = [np.array([_noise_hp(r.w_motor), _noise_hp(r.w_load)]) for r in recs]
+        spans = _spans(recs, self.start, float(self.pre_window), sig0)
+        # one noise level per record and channel (the records may differ in SNR)
+        sigma = np.array(sig0, float).reshape(len(recs), 2)
+        scale = [max(float(np.max(np.abs(r.w_motor))), float(np.max(np.abs(r.w_load))))
+                 for r in recs]
+        sigma = np.maximum(sigma, 1e-9 * np.array(scale)[:, np.newaxis] + 1e-300)
+        p_prior = np.array([getattr(prior, n) for n in free])
+        pen = np.array([rel[n] if rel[n] is not None else np.inf for n in free])
+
+        def model(z_rows: np.ndarray, ends: list[int] | None = None) -> list[list]:
+            drives = [_drive(prior, names, np.exp(z)) for z in z_rows]
+            return [_simulate(drives, sp, self.law, self.workers,
+                              None if ends is None else ends[k])
+                    for k, sp in enumerate(spans)]
+
+        def selection(horizon: float | None) -> list[np.ndarray]:
+            """Samples within ``horizon`` s after the span start and every torque jump."""
+            out = []
+            for sp in spans:
+                if horizon is None:
+                    out.append(np.arange(sp.t.size))
+                    continue
+                u = sp.torque
+                scale = max(float(np.max(np.abs(u))), 1e-300)
+                jumps = np.r_[0, 1 + np.flatnonzero(np.abs(np.diff(u)) > 1e-9 * scale)]
+                keep = np.zeros(sp.t.size, bool)
+                width = max(2, int(round(horizon / sp.record.ts)))
+                for j in jumps:
+                    keep[j : j + width] = True
+                out.append(np.flatnonzero(keep))
+            return out
+
+        def make_residual(sels: list[np.ndarray], sig: np.ndarray):
+            sizes = [s_.size for s_ in sels]
+            ends = [int(s_[-1]) + 1 for s_ in sels]
+            n_res = 2 * sum(sizes) + len(free)
+            ys = [(sp.y_m[s_], sp.y_l[s_]) for sp, s_ in zip(spans, sels, strict=True)]
+
+            def rows(z_rows: np.ndarray) -> np.ndarray:
+                sims = model(z_rows, ends)
+                out = np.empty((len(z_rows), n_res))
+                pos = 0
+                for k, ((ym, yl), s_, res, m) in enumerate(zip(ys, sels, sims, sizes,
+                                                               strict=True)):
+                    for j, r in enumerate(res):
+                        np.subtract(ym, r.w_motor[s_], out=out[j, pos : pos + m])
+                        np.subtract(yl, r.w_load[s_], out=out[j, pos + m : pos + 2 * m])
+                    out[:, pos : pos + m] /= sig[k, 0]
+                    out[:, pos + m : pos + 2 * m] /= sig[k, 1]
+                    pos += 2 * m
+                p = np.exp(z_rows[:, 1:])
+                out[:, pos:] = (p - p_prior) / (pen * p_prior)  # 0 where no penalty
+                return out
+
+            return rows
+
+        h = float(self.fd_step)
+        n = len(names)
+
+        def lm_on(rows, z0: np.ndarray, max_iter: int) -> _LMState:
+            def fun(z: np.ndarray) -> np.ndarray:
+                try:
+                    return rows(z[np.newaxis, :])[0]
+                except ValueError:  # e.g. a step to a mode too fast for the sample time
+                    return np.full(1, np.inf)
+
+            def jac(z: np.ndarray) -> np.ndarray:
+                zz = np.repeat(z[np.newaxis, :], 2 * n, axis=0)
+                for i in range(n):
+                    zz[2 * i, i] += h
+                    zz[2 * i + 1, i] -= h
+                rr = rows(zz)
+                return ((rr[0::2] - rr[1::2]) / (2 * h)).T
+
+            st = _lm(fun, jac, z0, max_iter=max_iter)
+            if st.jac is None:
+                st.jac = jac(st.z)
+            return st
+
+        horizons = [None if x is None else float(x) for x in self.horizons]
+        if not horizons or horizons[-1] is not None:
+            horizons.append(None)
+        # 1. coarse grid in theta on the first horizon, linear parameters at the prior
+        rows0 = make_residual(selection(horizons[0]), sigma)
+        grid = np.linspace(self.theta_max / self.n_grid, self.theta_max, self.n_grid)
+        z_prior = np.log(p_prior)
+        zg = np.column_stack([np.log(grid), np.tile(z_prior, (grid.size, 1))])
+        costs = np.sum(rows0(zg) ** 2, axis=1)
+        is_min = np.r_[True, costs[1:] <= costs[:-1]] & np.r_[costs[:-1] <= costs[1:], True]
+        minima = np.flatnonzero(is_min)
+        minima = minima[np.argsort(costs[minima])][: self.n_starts]
+        starts = [float(grid[i]) for i in minima]
+        self.theta_two_step_ = None
+        if self.two_step_start:
+            try:
+                ts_est = TwoStepIdentifier(prior, workers=self.workers).fit(recs)
+                self.theta_two_step_ = float(ts_est.theta_)
+                starts.append(self.theta_two_step_)
+            except InputError:
+                pass
+        # 2. every start refined on the first horizon; the best continued on growing
+        #    horizons (the lightly damped ringing makes long windows multimodal)
+        states = [lm_on(rows0, np.concatenate([[math.log(th)], z_prior]), self.screen_iter)
+                  for th in starts]
+        states.sort(key=lambda st: st.cost)
+        sig_now = sigma
+        finals = []
+        for st in states[: self.n_continue]:
+            for hz in horizons[1:]:
+                st = lm_on(make_residual(selection(hz), sig_now), st.z, self.max_iter)
+            finals.append(st)
+        best = min(finals, key=lambda st: st.cost)
+        full = selection(None)
+        for _ in range(self.noise_iter if fixed_noise is None else 0):
+            r = best.r
+            new_sig, pos = np.empty_like(sig_now), 0
+            for k, s_ in enumerate(full):
+                m = s_.size
+                new_sig[k, 0] = sig_now[k, 0] * math.sqrt(np.mean(r[pos : pos + m] ** 2))
+                new_sig[k, 1] = sig_now[k, 1] * math.sqrt(np.mean(r[pos + m : pos + 2 * m] ** 2))
+                pos += 2 * m
+            sig_now = np.maximum(new_sig, 1e-300)
+            best = lm_on(make_residual(full, sig_now), best.z, self.max_iter)
+        z = best.z
+        sigma = sig_now
+        # uncertainty: Gauss-Newton information (the prior's rows are in the residual)
+        jz = best.jac
+        info = jz.T @ jz
+        try:
+            cov_z = np.linalg.inv(info)
+        except np.linalg.LinAlgError:
+            cov_z = np.linalg.pinv(info)
+        values = np.exp(z)
+        cov = cov_z * np.outer(values, values)  # delta method: dp = p dz
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        drive = _drive(prior, names, values)
+        sims = model(z[np.newaxis, :])
+        self.residuals_, fits = [], []
+        for sp, res in zip(spans, sims, strict=True):
+            em, el = sp.y_m - res[0].w_motor, sp.y_l - res[0].w_load
+            self.residuals_.append((em, el))
+            fits.append([
+                100.0 * (1.0 - np.linalg.norm(e) / max(np.linalg.norm(y - y.mean()), 1e-300))
+                for e, y in ((em, sp.y_m), (el, sp.y_l))
+            ])
+        self.theta_ = float(values[0])
+        self.std_ = float(std[0])
+        self.ci95_ = (self.theta_ - 1.96 * self.std_, self.theta_ + 1.96 * self.std_)
+        self.params_ = {n_: float(getattr(drive, n_)) for n_ in LINEAR_PARAMS}
+        self.drive_ = drive
+        self.estimated_ = names
+        self.param_std_ = dict(zip(names, (float(s) for s in std), strict=True))
+        self.covariance_ = cov
+        self.noise_std_ = np.asarray(sigma, float)
+        self.fit_percent_ = np.array(fits)
+        self.cost_ = float(best.cost)
+        self.theta_starts_ = starts
+        self.model_start_ = ["rest" if sp.level is None else "steady" for sp in spans]
+        return self
+
+
+# --- Cramér-Rao bound ----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CramerRaoBound:
+    """Cramér-Rao bound of an experiment.
+
+    Parameters
+    ----------
+    names : tuple of str
+        Estimated parameters, ``"theta"`` first.
+    values : numpy.ndarray
+        Their true values.
+    fisher : numpy.ndarray
+        Fisher information matrix in natural units (order ``names``), including the
+        prior's information when one was given.
+    noise_std : tuple of float
+        White-noise standard deviations ``(s_M, s_L)`` in rad/s used.
+    n_samples : int
+        Samples per channel.
+
+    Notes
+    -----
+    Fisher information of independent experiments adds: ``crb_a + crb_b`` is the bound
+    for both experiments together (same parameter names).
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    fisher: np.ndarray
+    noise_std: tuple[float, float]
+    n_samples: int
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Inverse of the Fisher matrix: the bound on the covariance."""
+        return np.linalg.inv(self.fisher)
+
+    @property
+    def std(self) -> dict[str, float]:
+        """Bound on the standard deviation of every parameter."""
+        d = np.sqrt(np.diag(self.covariance))
+        return dict(zip(self.names, (float(x) for x in d), strict=True))
+
+    @property
+    def theta_std(self) -> float:
+        """Bound on the standard deviation of ``theta`` in rad."""
+        return self.std["theta"]
+
+    def __add__(self, other: CramerRaoBound) -> CramerRaoBound:
+        if not isinstance(other, CramerRaoBound) or other.names != self.names:
+            raise InputError("only bounds over the same parameter names can be combined")
+        return CramerRaoBound(self.names, self.values, self.fisher + other.fisher,
+                              self.noise_std, self.n_samples + other.n_samples)
+
+
+def cramer_rao_bound(
+    drive: TwoMassDrive,
+    t: ArrayLike,
+    torque: ArrayLike,
+    *,
+    noise_std: tuple[float, float] | None = None,
+    snr_db: float | tuple[float, float] | None = None,
+    estimate: Sequence[str] | str = ("theta",),
+    prior_rel_std: None | float | Mapping[str, float] = None,
+    law: str = "paper",
+    initial_state: ArrayLike | None = None,
+    fd_step: float = 1e-6,
+) -> CramerRaoBound:
+    """Cramér-Rao bound of ``theta`` from both measured speeds with white noise.
+
+    ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the central-difference sensitivity of
+    speed ``c`` (motor, load) to the estimated parameters.
+
+    Parameters
+    ----------
+    drive : TwoMassDrive
+        The true drive (with ``theta``).
+    t, torque : array_like
+        Uniform time grid in s and motor torque in N m of the experiment.
+    noise_std : tuple of float, optional
+        Noise standard deviations ``(s_M, s_L)`` in rad/s.
+    snr_db : float or tuple of float, optional
+        Instead of ``noise_std``: SNR in dB of ``(w_M, w_L)`` (one value for both),
+        ``10 log10(mean(w^2) / noise_variance)`` over the record as in
+        :func:`backlashkit.signals.add_noise`.
+    estimate : sequence of str or "all", optional
+        Parameters estimated: ``("theta",)`` (default, linear parameters known) or
+        ``"all"`` (theta and the six linear parameters) or any list with ``"theta"``.
+    prior_rel_std : None, float or dict, optional
+        Relative std of a Gaussian prior on the linear parameters, added to the
+        information as ``1 / (rel_std p)^2`` (as in :class:`JointIdentifier`).
+    law : {"paper", "no-pull"}, optional
+        Contact law (default ``"paper"``).
+    initial_state : array_like, optional
+        State at ``t[0]`` (default rest), known.
+    fd_step : float, optional
+        Relative central-difference step (default 1e-6).
+
+    Returns
+    -------
+    CramerRaoBound
+        The bound (``.theta_std``, ``.fisher``, ``.names``).
+
+    Raises
+    ------
+    InputError
+        If the drive has no ``theta``, no or both noise levels are given, a name is
+        unknown, or a parameter to estimate is 0.
+    """
+    from .simulate import simulate_batch
+
+    if not isinstance(drive, TwoMassDrive):
+        raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
+    theta = drive._require_theta()
+    if (noise_std is None) == (snr_db is None):
+        raise InputError("give exactly one of noise_std=(s_M, s_L) and snr_db")
+    all_names = ("theta", *LINEAR_PARAMS)
+    if isinstance(estimate, str):
+        if estimate != "all":
+            raise InputError(f"estimate must be 'all' or a sequence of names, got {estimate!r}")
+        names = all_names
+    else:
+        names = tuple(estimate)
+        bad = [n for n in names if n not in all_names]
+        if bad or "theta" not in names or len(set(names)) != len(names):
+            raise InputError(
+                f"estimate must list distinct names among {', '.join(all_names)} including "
+                f"'theta', got {estimate!r}"
+            )
+        names = ("theta", *[n for n in LINEAR_PARAMS if n in names])
+    values = np.array([getattr(drive, n) for n in names], float)
+    zero = [n for n, x in zip(names, values, strict=True) if not x > 0]
+    if zero:
+        raise InputError(f"cannot estimate parameter(s) {zero} at value 0 (e.g. theta = {theta!r})")
+    h = v.positive("fd_step", fd_step)
+    n = len(names)
+    drives = []
+    for i in range(n):
+        for sgn in (1.0, -1.0):
+            x = values.copy()
+            x[i] *= 1.0 + sgn * h
+            drives.append(_drive(drive, names, x))
+    runs = simulate_batch([drive, *drives], t, torque, law=law, initial_state=initial_state)
+    nominal = runs[0]
+    if noise_std is not None:
+        try:
+            s_m, s_l = noise_std
+        except (TypeError, ValueError):
+            raise InputError(f"noise_std must be a pair (s_M, s_L), got {noise_std!r}") from None
+        sig = (v.positive("noise_std[0] (s_M)", s_m), v.positive("noise_std[1] (s_L)", s_l))
+    else:
+        snr = (snr_db, snr_db) if np.ndim(snr_db) == 0 else tuple(snr_db)
+        if len(snr) != 2:
+            raise InputError(f"snr_db must be a number or a pair (w_M, w_L), got {snr_db!r}")
+        sig = tuple(
+            math.sqrt(float(np.mean(w**2)) / 10.0 ** (v.finite_scalar("snr_db", s) / 10.0))
+            for w, s in ((nominal.w_motor, snr[0]), (nominal.w_load, snr[1]))
+        )
+    fisher = np.zeros((n, n))
+    for ch, s in (("w_motor", sig[0]), ("w_load", sig[1])):
+        sens = np.column_stack([
+            (getattr(runs[1 + 2 * i], ch) - getattr(runs[2 + 2 * i], ch)) / (2 * h * values[i])
+            for i in range(n)
+        ])
+        fisher += sens.T @ sens / s**2
+    if prior_rel_std is not None:
+        rel = _rel_std(prior_rel_std, LINEAR_PARAMS)
+        for i, name in enumerate(names[1:], start=1):
+            r = rel.get(name)
+            if r is not None and r > 0:
+                fisher[i, i] += 1.0 / (r * values[i]) ** 2
+    return CramerRaoBound(names, values, fisher, (float(sig[0]), float(sig[1])),
+                          int(np.size(nominal.t)))

@@ -1,0 +1,285 @@
+"""Joint ML identification (``backlashkit.identify_joint``) and its Cramér-Rao bound.
+
+Protocol as in ``tests/test_identify.py`` (paper A's drive, theta* = 2 deg half-width,
+Ts = 1 ms). The calibration and efficiency checks use a short experiment (0.942 N m
+from rest for 2 s, then 0, 4 s record, SNR 30 dB on both speeds) so that 20 seeded
+trials stay fast.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import backlashkit as bk
+from backlashkit import signals
+from backlashkit.cli import main
+from backlashkit.errors import InputError
+from backlashkit.identify import Record
+from backlashkit.identify_joint import (
+    LINEAR_PARAMS,
+    CramerRaoBound,
+    JointIdentifier,
+    cramer_rao_bound,
+)
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+DRIVE_TOML = str(EXAMPLES / "paper_drive.toml")
+P_TRUE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
+THETA = 3.49e-2
+TRUE = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+A2 = 0.942
+REL = 0.1  # prior relative std of the calibration study
+N_TRIALS = 20
+#: With true coverage 0.95, P(X >= 17 of 20) = 0.984 (binomial), so a calibrated
+#: estimator fails this check with probability 1.6 %; at a true coverage of 0.80
+#: it would pass with probability 0.41 only.
+MIN_COVERED = 17
+
+
+@pytest.fixture(scope="module")
+def short():
+    t = signals.time_grid(4.0, 1e-3)
+    u = signals.step_down(t, A2, t_s=2.0)
+    return t, u, TRUE.simulate(t, u)
+
+
+def _noisy(clean, snr, seed) -> Record:
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    a, b = ss.spawn(2)
+    return Record(clean.t, clean.torque, signals.add_noise(clean.w_motor, snr, rng=a),
+                  signals.add_noise(clean.w_load, snr, rng=b))
+
+
+@pytest.fixture(scope="module")
+def trials(short):
+    """20 seeded MAP fits: prior ~ N(P*, (0.1 P*)^2) per parameter, noise 30 dB."""
+    t, u, clean = short
+    out = []
+    for k in range(N_TRIALS):
+        s_noise, s_prior = np.random.SeedSequence([7, k]).spawn(2)
+        rng = np.random.default_rng(s_prior)
+        prior = bk.TwoMassDrive(**{n: x * (1 + REL * rng.standard_normal())
+                                   for n, x in P_TRUE.items()})
+        out.append(JointIdentifier(prior, prior_rel_std=REL).fit(_noisy(clean, 30, s_noise)))
+    return out
+
+
+# --- Cramér-Rao bound: closed-form checks -------------------------------------------
+
+
+def test_crb_scales_with_noise_and_samples(short):
+    t, u, _ = short
+    base = cramer_rao_bound(TRUE, t, u, noise_std=(0.5, 0.5), estimate="all")
+    double = cramer_rao_bound(TRUE, t, u, noise_std=(1.0, 1.0), estimate="all")
+    assert double.theta_std == pytest.approx(2 * base.theta_std, rel=1e-9)
+    # two independent repeats: Fisher information adds, std falls by sqrt(2)
+    assert (base + base).theta_std == pytest.approx(base.theta_std / np.sqrt(2), rel=1e-9)
+    # the same experiment sampled twice as fast (2N samples): ~ 1/sqrt(2)
+    t2 = signals.time_grid(4.0, 0.5e-3)
+    fine = cramer_rao_bound(TRUE, t2, signals.step_down(t2, A2, t_s=2.0),
+                            noise_std=(0.5, 0.5), estimate="all")
+    assert fine.theta_std == pytest.approx(base.theta_std / np.sqrt(2), rel=0.05)
+
+
+def test_crb_structure_and_snr(short):
+    t, u, clean = short
+    known = cramer_rao_bound(TRUE, t, u, snr_db=30)
+    joint = cramer_rao_bound(TRUE, t, u, snr_db=30, estimate="all")
+    informed = cramer_rao_bound(TRUE, t, u, snr_db=30, estimate="all", prior_rel_std=REL)
+    assert isinstance(joint, CramerRaoBound)
+    assert known.names == ("theta",) and joint.names == ("theta", *LINEAR_PARAMS)
+    assert np.allclose(joint.fisher, joint.fisher.T, rtol=1e-8, atol=0)
+    assert known.theta_std < informed.theta_std < joint.theta_std
+    # snr_db follows signals.add_noise's definition
+    s_m = np.sqrt(np.mean(clean.w_motor**2) / 10**3)
+    assert joint.noise_std[0] == pytest.approx(s_m, rel=1e-12)
+    by_std = cramer_rao_bound(TRUE, t, u, noise_std=joint.noise_std, estimate="all")
+    assert by_std.theta_std == pytest.approx(joint.theta_std, rel=1e-12)
+    sub = cramer_rao_bound(TRUE, t, u, snr_db=30, estimate=["k_sh", "theta"])
+    assert sub.names == ("theta", "k_sh")
+    assert known.theta_std <= sub.theta_std <= joint.theta_std
+
+
+@pytest.mark.parametrize(
+    "kwargs, pattern",
+    [
+        ({}, "exactly one of noise_std"),
+        ({"snr_db": 30, "noise_std": (1, 1)}, "exactly one of noise_std"),
+        ({"snr_db": 30, "estimate": ("J_M",)}, "including 'theta'"),
+        ({"snr_db": 30, "estimate": "some"}, "estimate must be 'all'"),
+        ({"noise_std": (1, -1)}, r"noise_std\[1\] \(s_L\) must be > 0"),
+        ({"snr_db": (1, 2, 3)}, "snr_db must be a number or a pair"),
+    ],
+)
+def test_crb_validation(short, kwargs, pattern):
+    t, u, _ = short
+    with pytest.raises(InputError, match=pattern):
+        cramer_rao_bound(TRUE, t, u, **kwargs)
+
+
+def test_crb_needs_theta(short):
+    t, u, _ = short
+    with pytest.raises(InputError, match="no backlash value"):
+        cramer_rao_bound(bk.TwoMassDrive(**P_TRUE), t, u, snr_db=30)
+
+
+# --- the estimator ------------------------------------------------------------------
+
+
+def test_coverage_of_ci95(trials):
+    covered = sum(e.ci95_[0] <= THETA <= e.ci95_[1] for e in trials)
+    assert covered >= MIN_COVERED, covered
+    for e in trials:
+        assert e.ci95_ == pytest.approx((e.theta_ - 1.96 * e.std_, e.theta_ + 1.96 * e.std_))
+
+
+def test_std_across_trials_near_crb(trials, short):
+    t, u, _ = short
+    crb = cramer_rao_bound(TRUE, t, u, snr_db=30, estimate="all", prior_rel_std=REL).theta_std
+    thetas = np.array([e.theta_ for e in trials])
+    spread = float(np.std(thetas, ddof=1))
+    # 20 trials: the sample std has a relative scatter of about 1/sqrt(38) = 16 %
+    assert 0.6 * crb < spread < 1.5 * crb, (spread, crb)
+    assert abs(np.mean(thetas) - THETA) < 3 * crb
+    # the reported standard error agrees with the bound (local linearisation)
+    assert np.median([e.std_ for e in trials]) == pytest.approx(crb, rel=0.3)
+
+
+def test_fitted_attributes(trials):
+    e = trials[0]
+    assert e.estimated_ == ("theta", *LINEAR_PARAMS)
+    assert set(e.params_) == set(LINEAR_PARAMS) and e.drive_.theta == e.theta_
+    assert e.noise_std_.shape == (1, 2) and np.all(e.noise_std_ > 0)
+    assert e.fit_percent_.shape == (1, 2) and np.all(e.fit_percent_ > 90)
+    (res_m, res_l), = e.residuals_
+    assert res_m.size == res_l.size == 4001
+    assert e.noise_std_[0, 0] == pytest.approx(np.sqrt(np.mean(res_m**2)), rel=1e-3)
+    assert e.covariance_.shape == (7, 7) and e.param_std_["theta"] == e.std_
+    assert e.cost_ > 0 and e.model_start_ == ["rest"]
+
+
+def test_wrong_prior_without_penalty_recovers_truth(short):
+    """Nearly noise-free data, 20 % prior errors refined from the data alone."""
+    _, _, clean = short
+    factors = (1.2, 0.8, 1.2, 0.8, 1.2, 0.8)
+    prior = bk.TwoMassDrive(**{n: x * f for (n, x), f in zip(P_TRUE.items(), factors,
+                                                              strict=True)})
+    e = JointIdentifier(prior).fit(_noisy(clean, 80, 3))
+    assert e.theta_ == pytest.approx(THETA, rel=1e-3)
+    for n in LINEAR_PARAMS:
+        assert e.params_[n] == pytest.approx(P_TRUE[n], rel=2e-2), n
+    assert e.std_ < 1e-3 * THETA
+
+
+def test_known_noise_and_subset_of_parameters(short):
+    _, _, clean = short
+    prior = TRUE.with_theta(None)
+    e = JointIdentifier(prior, prior_rel_std={"k_sh": 0.1, "J_M": 0.0, "theta": 1.0},
+                        noise=(0.5, 0.5)).fit(_noisy(clean, 30, 4))
+    assert e.estimated_ == ("theta", "k_sh")
+    assert e.params_["J_M"] == P_TRUE["J_M"]
+    assert e.noise_std_.tolist() == [[0.5, 0.5]]
+    assert abs(e.theta_ - THETA) < 4 * e.std_
+
+
+def test_steady_start(short):
+    """A record that starts in steady state under the held torque."""
+    t = signals.time_grid(3.0, 1e-3)
+    u = signals.step_down(t, A2, t_s=1.0)
+    clean = TRUE.simulate(t, u, initial_state=TRUE.steady_state(A2))
+    e = JointIdentifier(bk.TwoMassDrive(**P_TRUE), prior_rel_std=0.05,
+                        pre_window=0.5).fit(_noisy(clean, 40, 5))
+    assert e.model_start_ == ["steady"]
+    assert e.residuals_[0][0].size == 2501
+    assert abs(e.theta_ - THETA) < 4 * e.std_ and e.std_ < 0.02 * THETA
+    with pytest.raises(InputError, match="pre_window"):
+        JointIdentifier(bk.TwoMassDrive(**P_TRUE), start="steady",
+                        pre_window=2.0).fit(_noisy(clean, 40, 5))
+
+
+def test_paper_protocol_quick():
+    """Paper A's protocol (80 s records, paper SNRs), Err_p = 30 %, 3 runs."""
+    t = signals.time_grid(80.0, 1e-3)
+    out = []
+    for k in range(3):
+        s1, s2, sp = np.random.SeedSequence([2002, 300, k]).spawn(3)
+        x = np.random.default_rng(sp).uniform(-1, 1, 6)
+        prior = bk.TwoMassDrive(**{n: v * (1 - 0.3 * xi)
+                                   for (n, v), xi in zip(P_TRUE.items(), x, strict=True)})
+        recs = []
+        for a, snr, s in ((0.157, (17.4, 6.43), s1), (A2, (35.7, 35.6), s2)):
+            r = TRUE.simulate(t, signals.step_down(t, a, t_s=40.0))
+            sm, sl = s.spawn(2)
+            recs.append(Record(t, r.torque, signals.add_noise(r.w_motor, snr[0], rng=sm),
+                               signals.add_noise(r.w_load, snr[1], rng=sl)))
+        e = JointIdentifier(prior).fit(recs)
+        assert e.std_ < 1.0e-3
+        assert abs(e.theta_ - THETA) < 4 * e.std_
+        out.append(e.theta_)
+    assert abs(np.mean(out) - THETA) < 0.02 * THETA
+
+
+@pytest.mark.parametrize(
+    "kwargs, pattern",
+    [
+        ({"prior_rel_std": {"J_X": 0.1}}, "unknown parameter 'J_X'"),
+        ({"prior_rel_std": -0.1}, "prior_rel_std must be >= 0"),
+        ({"prior_rel_std": {"J_M": -1}}, r"prior_rel_std\['J_M'\] must be >= 0"),
+        ({"start": "middle"}, "start must be 'auto', 'rest' or 'steady'"),
+        ({"noise": (1.0,)}, "noise must be a pair"),
+        ({"noise": (1.0, 0.0)}, r"noise\[1\] \(s_L\) must be > 0"),
+        ({"n_grid": 1}, "n_grid must be an integer >= 2"),
+        ({"fd_step": 0.5}, "fd_step must be < 0.1"),
+        ({"theta_max": 0}, "theta_max must be > 0"),
+    ],
+)
+def test_parameters_validated(short, kwargs, pattern):
+    _, _, clean = short
+    with pytest.raises(InputError, match=pattern):
+        JointIdentifier(bk.TwoMassDrive(**P_TRUE), **kwargs).fit(_noisy(clean, 30, 1))
+
+
+def test_prior_type_validated(short):
+    _, _, clean = short
+    with pytest.raises(InputError, match="prior must be a TwoMassDrive"):
+        JointIdentifier({"J_M": 1}).fit(_noisy(clean, 30, 1))
+
+
+# --- CLI --------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def short_csv(tmp_path_factory):
+    path = tmp_path_factory.mktemp("joint") / "exp.csv"
+    assert main(["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.942",
+                 "--hold", "2", "--snr-motor", "30", "--snr-load", "30", "--seed", "1",
+                 "--out", str(path)]) == 0
+    return path
+
+
+def test_cli_joint_json_with_uncertainty_table(short_csv, tmp_path, capsys):
+    prior = tmp_path / "prior.toml"
+    text = Path(DRIVE_TOML).read_text().replace("k_sh = 78.0", "k_sh = 85.0")
+    prior.write_text(text + "\n[uncertainty]\nk_sh = 0.2\nJ_M = 0.1\n")
+    capsys.readouterr()
+    code = main(["identify", str(short_csv), "--drive", str(prior), "--method", "joint",
+                 "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["method"] == "joint"
+    assert doc["std"] > 0 and doc["ci95"][0] < doc["theta"] < doc["ci95"][1]
+    assert abs(doc["theta"] - THETA) < 4 * doc["std"]
+    assert doc["estimated"] == ["theta", "J_M", "k_sh"]
+    assert doc["prior_rel_std"] == {"k_sh": 0.2, "J_M": 0.1}
+    assert doc["params"]["k_sh"] == pytest.approx(78.0, rel=0.02)
+    assert doc["records"][0]["model_start"] == "rest"
+    code = main(["identify", str(short_csv), "--drive", str(prior), "--method", "joint",
+                 "--prior-rel-std", "0"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "95% interval" in out and "theta     =" in out
