@@ -133,12 +133,17 @@ def main(argv=None) -> int:
     print("measuring the scipy event-located reference ...", file=sys.stderr)
     from backlashkit.verify import reference_simulate
 
-    rows["scipy reference (DOP853 1e-10)"], ref = median_time(
-        lambda: reference_simulate(drive, t, u, method="DOP853", rtol=1e-10), slow_repeats
+    rows["scipy reference (DOP853 1e-10)"], _ = median_time(
+        lambda: reference_simulate(drive, t, u, method="DOP853", rtol=1e-10),
+        slow_repeats,
+        warmup=False,
     )
+    # Speed errors are judged against a tighter run: at rtol 1e-10 the reference's own
+    # error on this record is ~3e-8 of the speed.
+    ref = reference_simulate(drive, t, u, method="DOP853", rtol=1e-13)
     print("measuring the NumPy reference kernel ...", file=sys.stderr)
     rows["numpy reference kernel"], npref = median_time(
-        lambda: bk.simulate_drive(drive, t, u, backend="numpy"), slow_repeats
+        lambda: bk.simulate_drive(drive, t, u, backend="numpy"), slow_repeats, warmup=False
     )
     print("measuring python-control ...", file=sys.stderr)
     import control as ct
@@ -149,6 +154,7 @@ def main(argv=None) -> int:
             sys_, t, u, X0=x0, solve_ivp_method="RK45", solve_ivp_kwargs=dict(rtol=1e-8, atol=1e-10)
         ),
         slow_repeats,
+        warmup=False,
     )
 
     speed_ref = ref.states[:, :2]
@@ -168,15 +174,23 @@ def main(argv=None) -> int:
     )
 
     print("measuring a batch of 1000 runs (theta grid) on 1 and 2 workers ...", file=sys.stderr)
+    # 8 s records (the same step-down, held 4 s): with the full 80 s records the batch
+    # writes 1.9 GB of fresh output, and page faulting that memory, not the simulation,
+    # decides the timing (measured 1.4x to 2.8x from run to run).
     drives = [drive.with_theta(th) for th in np.linspace(0.5, 5.0, 1000) * np.pi / 180]
+    tb = t[:8001]
+    ub = np.where(tb < 4.0, 0.157, 0.0)
+    batch_times: dict[int, list[float]] = {1: [], 2: []}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", bk.SensitivityWarning)
-        b1, _ = median_time(
-            lambda: bk.simulate_batch(drives, t, u, workers=1), max(1, slow_repeats)
-        )
-        b2, _ = median_time(
-            lambda: bk.simulate_batch(drives, t, u, workers=2), max(1, slow_repeats)
-        )
+        for workers in (1, 2):  # warm-up of each, then interleaved runs
+            bk.simulate_batch(drives, tb, ub, workers=workers)
+        for _ in range(max(3, slow_repeats)):
+            for workers in (1, 2):
+                t0 = time.perf_counter()
+                bk.simulate_batch(drives, tb, ub, workers=workers)
+                batch_times[workers].append(time.perf_counter() - t0)
+    b1, b2 = (statistics.median(batch_times[w]) for w in (1, 2))
     print("measuring first-call latency (fresh interpreters) ...", file=sys.stderr)
     fc_sim, fc_base = first_call_latency(3)
 
@@ -201,7 +215,7 @@ def main(argv=None) -> int:
     )
     print(f"max |event time - reference|: {event_err:.1e} s over {ev_ours.size} contact changes")
     print(
-        f"batch of 1000: 1 worker {b1:.3f} s, 2 workers {b2:.3f} s, speed-up {b1 / b2:.2f}x "
+        f"batch of 1000 (8 s records): 1 worker {b1:.3f} s, 2 workers {b2:.3f} s, speed-up {b1 / b2:.2f}x "
         "(target >= 1.7x)"
     )
     print(
