@@ -215,8 +215,8 @@ def main(argv=None) -> int:
     )
     print(f"max |event time - reference|: {event_err:.1e} s over {ev_ours.size} contact changes")
     print(
-        f"batch of 1000 (8 s records): 1 worker {b1:.3f} s, 2 workers {b2:.3f} s, speed-up {b1 / b2:.2f}x "
-        "(target >= 1.7x)"
+        f"batch of 1000 (8 s records): 1 worker {b1:.3f} s, 2 workers {b2:.3f} s, "
+        f"speed-up {b1 / b2:.2f}x (target >= 1.7x)"
     )
     print(
         f"first call (fresh interpreter, import + 1 s simulation): {fc_sim * 1e3:.0f} ms; "
