@@ -22,11 +22,19 @@ def public_objects():
         obj = getattr(backlashkit, name)
         yield f"backlashkit.{name}", obj
         if inspect.isclass(obj) and not issubclass(obj, enum.Enum):
-            for attr, member in vars(obj).items():
-                if attr.startswith("_"):
+            # own methods and those inherited from backlashkit's own base classes
+            seen: set[str] = set()
+            for klass in obj.__mro__:
+                if not klass.__module__.startswith("backlashkit"):
                     continue
-                if inspect.isfunction(member) or isinstance(member, (classmethod, staticmethod)):
-                    yield f"backlashkit.{name}.{attr}", member
+                for attr, member in vars(klass).items():
+                    if attr.startswith("_") or attr in seen:
+                        continue
+                    seen.add(attr)
+                    if inspect.isfunction(member) or isinstance(
+                        member, (classmethod, staticmethod)
+                    ):
+                        yield f"backlashkit.{name}.{attr}", member
 
 
 @pytest.mark.parametrize("qualname", [q for q, _ in public_objects()])

@@ -50,8 +50,42 @@ def _vector(name: str, values: Sequence[float], size: int | None, check) -> tupl
     return tuple(check(f"{name}[{i}]", x) for i, x in enumerate(arr))
 
 
+class _Simulates:
+    """The ``simulate`` method shared by the drive models."""
+
+    def simulate(
+        self,
+        t: Sequence[float] | np.ndarray,
+        torque: Sequence[float] | np.ndarray,
+        *,
+        law: ShaftLaw | str = "paper",
+        initial_state: Sequence[float] | np.ndarray | None = None,
+    ) -> DriveResponse:
+        """Simulate the drive under a zero-order-hold motor torque.
+
+        Parameters
+        ----------
+        t : array_like
+            Uniform, strictly increasing time grid in s.
+        torque : array_like
+            Motor torque in N m, one sample per entry of ``t`` (held over the sample).
+        law : {"paper", "no-pull"} or ShaftLaw, optional
+            Contact law of the shafts, default ``"paper"``.
+        initial_state : array_like, optional
+            State at ``t[0]``; default rest with every twist 0.
+
+        Returns
+        -------
+        DriveResponse
+            See :func:`backlashkit.simulate.simulate_drive`, which this calls.
+        """
+        from .simulate import simulate_drive
+
+        return simulate_drive(self, t, torque, law=law, initial_state=initial_state)
+
+
 @dataclass(frozen=True)
-class DriveChain:
+class DriveChain(_Simulates):
     """A chain of ``N`` inertias joined by ``N - 1`` elastic shafts with backlash.
 
     Inertia ``i`` obeys ``J_i dw_i/dt = -f_i w_i + T_{i-1} - T_i`` (plus the input
@@ -148,39 +182,8 @@ class DriveChain:
         phi = phi + torques / np.asarray(self.k)
         return np.concatenate([np.full(self.n_inertias, w), phi])
 
-    def simulate(
-        self,
-        t: Sequence[float] | np.ndarray,
-        torque: Sequence[float] | np.ndarray,
-        *,
-        law: ShaftLaw | str = "paper",
-        initial_state: Sequence[float] | np.ndarray | None = None,
-    ) -> DriveResponse:
-        """Simulate the drive under a zero-order-hold motor torque.
-
-        Parameters
-        ----------
-        t : array_like
-            Uniform, strictly increasing time grid in s.
-        torque : array_like
-            Motor torque in N m, one sample per entry of ``t`` (held over the sample).
-        law : {"paper", "no-pull"} or ShaftLaw, optional
-            Contact law of the shafts, default ``"paper"``.
-        initial_state : array_like, optional
-            State at ``t[0]``; default rest with every twist 0.
-
-        Returns
-        -------
-        DriveResponse
-            See :func:`backlashkit.simulate.simulate_drive`, which this calls.
-        """
-        from .simulate import simulate_drive
-
-        return simulate_drive(self, t, torque, law=law, initial_state=initial_state)
-
-
 @dataclass(frozen=True)
-class TwoMassDrive:
+class TwoMassDrive(_Simulates):
     """Motor and load joined by an elastic shaft with backlash (paper A, eq. 2).
 
     ::
@@ -293,33 +296,3 @@ class TwoMassDrive:
             twisted by ``theta + f_L w / k_sh`` (mirrored for a negative torque).
         """
         return self.to_chain().steady_state(torque)
-
-    def simulate(
-        self,
-        t: Sequence[float] | np.ndarray,
-        torque: Sequence[float] | np.ndarray,
-        *,
-        law: ShaftLaw | str = "paper",
-        initial_state: Sequence[float] | np.ndarray | None = None,
-    ) -> DriveResponse:
-        """Simulate the drive under a zero-order-hold motor torque.
-
-        Parameters
-        ----------
-        t : array_like
-            Uniform, strictly increasing time grid in s.
-        torque : array_like
-            Motor torque in N m, one sample per entry of ``t`` (held over the sample).
-        law : {"paper", "no-pull"} or ShaftLaw, optional
-            Contact law of the shafts, default ``"paper"``.
-        initial_state : array_like, optional
-            State at ``t[0]``; default rest with every twist 0.
-
-        Returns
-        -------
-        DriveResponse
-            See :func:`backlashkit.simulate.simulate_drive`, which this calls.
-        """
-        from .simulate import simulate_drive
-
-        return simulate_drive(self, t, torque, law=law, initial_state=initial_state)

@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from .errors import InputError
+
 if TYPE_CHECKING:
     import matplotlib.axes
     import matplotlib.figure
@@ -27,7 +29,7 @@ def _axes(ax, n: int):
         return fig, list(fig.subplots(n, 1, sharex=True))
     axes = list(ax) if isinstance(ax, Sequence) else [ax]
     if len(axes) != n:
-        raise ValueError(f"ax must be a sequence of {n} Axes, got {len(axes)}")
+        raise InputError(f"ax must be a sequence of {n} Axes, got {len(axes)}")
     return axes[0].figure, axes
 
 

@@ -234,11 +234,6 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         })
     }
 
-    /// Internal steps per sample.
-    pub fn substeps(&self) -> usize {
-        self.substeps
-    }
-
     fn mode(&mut self, modes: &[i8]) -> usize {
         let id = encode(modes);
         if self.cache[id].is_none() {
