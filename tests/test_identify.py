@@ -162,6 +162,17 @@ def test_fir_is_zero_phase_and_validated():
         fir_lowpass(x, 20.0, TS, numtaps=10)
 
 
+@pytest.mark.parametrize("numtaps", [3, 11, 661, 1651])
+@pytest.mark.parametrize("cutoff", [0.003, 0.05, 0.5, 0.97])
+def test_fir_taps_match_scipy_firwin(numtaps, cutoff):
+    from scipy.signal import firwin
+
+    from backlashkit.identify import _firwin_hamming
+
+    np.testing.assert_allclose(_firwin_hamming(numtaps, cutoff), firwin(numtaps, cutoff),
+                               rtol=1e-12, atol=1e-15)
+
+
 # --- (c) the two estimators on the paper's protocol ---------------------------------
 
 

@@ -80,7 +80,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "records", metavar="EXP.csv", nargs="+", help="experiment: columns t,torque,w_motor,w_load"
+        "records", metavar="EXP.csv", nargs="+",
+        help="experiment file(s): CSV with columns t,torque,w_motor,w_load (SI), or .mat "
+        "(v7.3 too) / .npz with variables of those names (a file may hold several records)",
     )
     p.add_argument(
         "--drive",
@@ -116,10 +118,82 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="joint: relative std of every linear parameter of the prior (overrides the "
         "[uncertainty] table; 0 = known exactly)"
     )
+    add_reader_options(p)
     p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
     add_report_option(p)
     p.set_defaults(func=run)
     return p
+
+
+def add_reader_options(p: argparse.ArgumentParser) -> None:
+    """Options of :func:`backlashkit.records.read_records` for every experiment file.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The parser to extend.
+    """
+    g = p.add_argument_group("reading the experiment files (all files alike)")
+    g.add_argument(
+        "--columns", metavar="OURS=THEIRS,...", default=None,
+        help="the file's names of our columns t, torque, w_motor, w_load, e.g. "
+        "'t=time,w_motor=n_mot,w_load=n_load' (unmapped ones keep our names)",
+    )
+    g.add_argument("--sample-time", type=float, default=None, metavar="TS",
+                   help="sample time in s when the files have no time column (t = 0 first)")
+    g.add_argument("--delimiter", choices=(",", ";", "tab"), default=None,
+                   help="CSV separator (default: detected from the header)")
+    g.add_argument("--decimal", choices=(".", ","), default=None,
+                   help="CSV decimal mark (default: detected)")
+    g.add_argument("--speed-unit", choices=("rad/s", "rpm"), default="rad/s",
+                   help="unit of the speeds in the files; rpm are converted (default rad/s)")
+    g.add_argument("--resample", choices=("linear",), default=None,
+                   help="resample non-uniform time onto a uniform grid and bridge missing "
+                   "samples (default: they are errors)")
+
+
+def _parse_columns(text: str | None) -> dict[str, str] | None:
+    from .errors import InputError
+
+    if text is None:
+        return None
+    out = {}
+    for item in text.split(","):
+        ours, eq, theirs = item.partition("=")
+        if not eq or not ours.strip() or not theirs.strip():
+            raise InputError(
+                f"--columns must be OURS=THEIRS pairs separated by commas, e.g. "
+                f"'t=time,w_motor=n_mot'; got {text!r}"
+            )
+        out[ours.strip()] = theirs.strip()
+    return out
+
+
+def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]:
+    """Read the experiment files with the reader options of ``args``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments holding the options of :func:`add_reader_options`.
+    paths : list of str
+        The files.
+
+    Returns
+    -------
+    list of Record
+        Every record of every file, in order.
+    """
+    from .records import read_records
+
+    columns = _parse_columns(args.columns)
+    delimiter = "\t" if args.delimiter == "tab" else args.delimiter
+    out: list[Record] = []
+    for path in paths:
+        out += read_records(path, columns=columns, sample_time=args.sample_time,
+                            delimiter=delimiter, decimal=args.decimal,
+                            speed_unit=args.speed_unit, resample=args.resample)
+    return out
 
 
 def _num(x: float | None) -> float | None:
@@ -143,8 +217,8 @@ def run(args: argparse.Namespace) -> int:
 
     prior = read_drive_toml(args.drive, require_theta=False)
     prior = prior.with_theta(None) if prior.theta is not None else prior
-    records = [Record.from_csv(path) for path in args.records]
-    finals = None if not args.final else [Record.from_csv(path) for path in args.final]
+    records = read_experiments(args, args.records)
+    finals = None if not args.final else read_experiments(args, args.final)
     per_record: list[dict[str, Any]] = []
     std: float | None = None
     ci95: list[float] | None = None

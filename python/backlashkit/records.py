@@ -206,6 +206,9 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
             f"{name}: not a UTF-8 text file ({exc.reason} at byte {exc.start}); save it as "
             "UTF-8 CSV"
         ) from None
+    fast = _fast_csv(name, text, mapping, need, delimiter, decimal)
+    if fast is not None:
+        return fast
     lines = [
         (k + 1, line)
         for k, line in enumerate(text.splitlines())
@@ -263,6 +266,60 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
     return name, cols, lambda i: f"line {numbers[i]}", 0.0
 
 
+def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], delimiter,
+              decimal) -> _Raw | None:
+    """A well-formed numeric table read by :func:`numpy.loadtxt` (C speed), or None.
+
+    None sends the file to the line-by-line reader below, which reads the same files
+    the same way and names the line and column of whatever is wrong; this path only
+    takes files with nothing to report (plain header, every cell a finite number or
+    ``nan``, the same number of fields on every line).
+    """
+    pos, header_no = 0, 0
+    while pos < len(text):  # the header: the first line neither blank nor a comment
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end + 1
+        header_no += 1
+        line = text[pos:end].strip()
+        pos = end
+        if line and not line.startswith("#"):
+            break
+    else:
+        return None
+    if delimiter is None:
+        delimiter = next((d for d in (";", "\t") if d in line), ",")
+    header = [c.strip() for c in line.split(delimiter)]
+    body = text[pos:]
+    if decimal is None:
+        decimal = "," if delimiter != "," and "," in body else "."
+    if ('"' in line or (decimal == "," and delimiter == ",") or len(set(header)) < len(header)
+            or any(mapping[f] not in header for f in need)):
+        return None
+    if all(_is_number(c, decimal) for c in header):
+        return None
+    try:
+        table = np.loadtxt(io.StringIO(body.replace(",", ".") if decimal == "," else body),
+                           delimiter=delimiter, comments="#", ndmin=2, dtype=float)
+    except ValueError:
+        return None
+    if table.shape[0] == 0 or table.shape[1] != len(header) or np.isinf(table).any():
+        return None
+    if "t" not in need and mapping["t"] in header:
+        need = ["t", *need]  # read it so that the conflict with sample_time is reported
+    cols = {f: np.ascontiguousarray(table[:, header.index(mapping[f])]) for f in need}
+    numbers: list[int] = []
+
+    def label(i: int) -> str:  # line numbers only when a message needs one
+        if not numbers:
+            numbers.extend(
+                header_no + k + 1 for k, ln in enumerate(body.splitlines())
+                if ln.strip() and not ln.lstrip().startswith("#")
+            )
+        return f"line {numbers[i]}"
+
+    return name, cols, label, 0.0
+
+
 _MISSING = {"", "nan", "na", "n/a", "null"}
 
 
@@ -275,6 +332,14 @@ def _is_number(cell: str, decimal: str) -> bool:
 
 
 def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
+    try:  # fast path: numpy parses the whole column (about 10x the loop below)
+        fast = np.array([c.replace(",", ".") for c in cells] if decimal == "," else cells,
+                        dtype=float)
+    except ValueError:
+        fast = None
+    if fast is not None and not np.isinf(fast).any():
+        return fast
+    # the cell-by-cell loop: missing-value markers, and the message naming the bad cell
     out = np.empty(len(cells))
     for r, raw in enumerate(cells):
         cell = raw.strip()

@@ -475,6 +475,34 @@ def simulate_batch(
     ]
 
 
+def _simulate_packed(
+    n_inertias: int,
+    params: np.ndarray,
+    t0: float,
+    ts: float,
+    torque: np.ndarray,
+    x0: np.ndarray,
+    *,
+    law: ShaftLaw | str,
+    workers: int | None,
+) -> np.ndarray:
+    """States of a batch, shape ``(len(params), n, 2N - 1)``: the kernel without wrappers.
+
+    For the estimators' inner loops, which simulate thousands of parameter vectors:
+    ``params`` rows are packed ``[J, f, k, d, theta]`` (the fields of a
+    :class:`DriveChain`); ``torque`` has shape ``(1, n)`` or ``(b, n)``; ``x0`` has
+    shape ``(b, 2N - 1)``. Nothing is validated here but by the kernel (``ValueError``).
+    """
+    from . import _core
+
+    states, _, _ = _core.simulate_chain_batch(
+        n_inertias, np.ascontiguousarray(params, float), ShaftLaw.parse(law).code,
+        float(t0), float(ts), np.ascontiguousarray(torque, float),
+        np.ascontiguousarray(x0, float), workers or 0,
+    )
+    return states
+
+
 @dataclass(frozen=True)
 class Sensitivity:
     """How much a simulation's result depends on rounding (see :func:`assess_sensitivity`).
