@@ -400,3 +400,44 @@ def test_cli_final_records(experiment_csv, tmp_path, capsys):
     code, out, err = cli(["identify", str(experiment_csv), "--final", str(step2), "--drive",
                           DRIVE_TOML, "--method", "regression"], capsys)
     assert code == 2 and "--final only applies with --method two-step" in err
+
+
+def test_cli_reader_options_give_the_same_answer(experiment_csv, tmp_path, capsys):
+    """A European export (';', decimal commas, rpm, no time column, other names) read
+    with --delimiter/--decimal/--speed-unit/--sample-time/--columns gives the same fit."""
+    import csv
+
+    with open(experiment_csv) as fh:
+        rows = list(csv.DictReader(fh))
+    rpm = 60.0 / (2.0 * np.pi)
+    eu = tmp_path / "export.csv"
+    lines = ["Moment;n_mot;n_last"] + [
+        ";".join(repr(x).replace(".", ",") for x in
+                 (float(r["torque"]), float(r["w_motor"]) * rpm, float(r["w_load"]) * rpm))
+        for r in rows
+    ]
+    eu.write_text("\n".join(lines) + "\n")
+    base = ["identify", "--drive", DRIVE_TOML, "--method", "two-step", "--json"]
+    code, out, err = cli([*base, str(experiment_csv)], capsys)
+    assert code == 0, err
+    ref = json.loads(out)
+    code, out, err = cli([*base, str(eu), "--delimiter", ";", "--decimal", ",",
+                          "--speed-unit", "rpm", "--sample-time", "0.001",
+                          "--columns", "torque=Moment,w_motor=n_mot,w_load=n_last"], capsys)
+    assert code == 0, err
+    got = json.loads(out)
+    assert got["theta"] == pytest.approx(ref["theta"], rel=1e-6)
+    assert got["records"][0]["t_c"] == pytest.approx(ref["records"][0]["t_c"], abs=1e-9)
+    # a bad mapping is one line naming the option
+    code, out, err = cli([*base, str(eu), "--columns", "torque"], capsys)
+    assert code == 2 and "--columns must be OURS=THEIRS" in err and err.count("\n") == 1
+
+
+def test_cli_reads_npz(clean, tmp_path, capsys):
+    r = clean[A1]
+    path = tmp_path / "exp.npz"
+    np.savez(path, t=r.t, torque=r.torque, w_motor=r.w_motor, w_load=r.w_load)
+    code, out, err = cli(["identify", str(path), "--drive", DRIVE_TOML, "--method",
+                          "regression", "--json"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["theta"] == pytest.approx(THETA, rel=0.02)

@@ -1,11 +1,13 @@
 """``backlashkit identify``: identify the backlash from step-down experiments.
 
 Reads one or more experiment files (CSV, columns ``t,torque,w_motor,w_load`` in SI, as
-written by ``backlashkit simulate --experiment step-down``) and a prior drive file
-(``[drive]`` with the linear parameters; a ``theta`` in it is ignored; an optional
-``[uncertainty]`` table gives relative standard deviations for the joint method), and
-runs paper A's two-step method (default), its regression baseline, or the joint
-maximum-likelihood fit of theta and the linear parameters with its standard error. See
+written by ``backlashkit simulate --experiment step-down``, or other layouts, units,
+``.mat`` and ``.npz`` through the options of :func:`backlashkit.records.read_records`)
+and a prior drive file (``[drive]`` with the linear parameters; a ``theta`` in it is
+ignored; an optional ``[uncertainty]`` table gives relative standard deviations for the
+joint method), and runs the joint maximum-likelihood fit of theta and the linear
+parameters with its standard error (default), paper A's two-step method or its
+regression baseline. See
 :mod:`backlashkit.identify` and :mod:`backlashkit.identify_joint` for the methods and
 their documented choices.
 """
@@ -44,10 +46,11 @@ without either, the linear parameters are refined from the data alone. It report
 standard error std and a 95% interval ci95 of theta.
 
 Each EXP.csv holds columns t,torque,w_motor,w_load (SI) with one step-down of the
-torque from a positive level. Paper A's protocol uses a small step (a_1) for the
-pre-estimate and a larger one (a_2) for the least squares: give the latter with
---final (the positional files are then used for the pre-estimate only; the joint
-method fits all files together).
+torque from a positive level (other names, separators, decimal commas, rpm, a sample
+time instead of a time column, .mat and .npz files: see the reading options).
+Paper A's protocol uses a small step (a_1) for the pre-estimate and a larger one
+(a_2) for the least squares: give the latter with --final (the positional files are
+then used for the pre-estimate only; the joint method fits all files together).
 """
 
 _EPILOG = """\

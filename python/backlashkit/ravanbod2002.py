@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 import warnings
@@ -97,7 +98,7 @@ def _experiment(drive: TwoMassDrive, t: np.ndarray, a: float, snr, seed, name: s
 
 
 def protocol_records(
-    err_p: float, seed: np.random.SeedSequence
+    err_p: float, seed: np.random.SeedSequence, *, snr1: tuple[float, float] = SNR1
 ) -> tuple[Record, Record, TwoMassDrive]:
     """One run of the protocol: the two noisy records and the perturbed prior.
 
@@ -107,6 +108,8 @@ def protocol_records(
         Relative prior error ``Err_p`` (0.1 for 10 %).
     seed : numpy.random.SeedSequence
         Seed of the run (spawned into step 1 noise, step 2 noise and the prior draw).
+    snr1 : tuple of float, optional
+        SNR of step 1 ``(w_M, w_L)`` in dB (default the paper's 17.4 and 6.43).
 
     Returns
     -------
@@ -116,7 +119,7 @@ def protocol_records(
     truth = _truth()
     t = signals.time_grid(2 * T_S, TS)
     s1, s2, sp = seed.spawn(3)
-    rec1 = _experiment(truth, t, A1, SNR1, s1, "step1")
+    rec1 = _experiment(truth, t, A1, snr1, s1, "step1")
     rec2 = _experiment(truth, t, A2, SNR2, s2, "step2")
     x = np.random.default_rng(sp).uniform(-1.0, 1.0, len(P_TRUE))
     prior = TwoMassDrive(**{k: val * (1.0 - err_p * xi)
@@ -124,10 +127,10 @@ def protocol_records(
     return rec1, rec2, prior
 
 
-def _one_run(task: tuple[float, np.random.SeedSequence]) -> dict[str, Any]:
+def _one_run(task: tuple[float, np.random.SeedSequence, tuple[float, float]]) -> dict[str, Any]:
     """Every estimator on one run; a method that refuses the data gives None."""
-    err_p, seed = task
-    rec1, rec2, prior = protocol_records(err_p, seed)
+    err_p, seed, snr1 = task
+    rec1, rec2, prior = protocol_records(err_p, seed, snr1=snr1)
     out: dict[str, Any] = {}
     t0 = time.perf_counter()
     with warnings.catch_warnings():
@@ -159,6 +162,7 @@ def run_ravanbod2002(
     seed: int = 2002,
     err_p: Sequence[float] = ERR_P,
     jobs: int = 1,
+    snr1: tuple[float, float] = SNR1,
     progress=None,
 ) -> dict[str, Any]:
     """Run paper A's protocol and summarise every estimator per ``Err_p``.
@@ -173,6 +177,9 @@ def run_ravanbod2002(
         Prior errors (default 0.1, 0.2, 0.3, 0.4).
     jobs : int, optional
         Worker processes (default 1); the results do not depend on it.
+    snr1 : tuple of float, optional
+        Step-1 SNR ``(w_M, w_L)`` in dB (default the paper's 17.4 and 6.43). Raising
+        it (e.g. 60, 60) shows what Table 1 needs: see the README.
     progress : callable, optional
         Called with a one-line message after every ``Err_p``.
 
@@ -197,16 +204,17 @@ def run_ravanbod2002(
     for e in errs:
         if not 0.0 <= e < 1.0:
             raise InputError(f"err_p values must be in [0, 1) (a relative error), got {e!r}")
+    snr1 = (float(snr1[0]), float(snr1[1]))
     truth = _truth()
     t = signals.time_grid(2 * T_S, TS)
     u1, u2 = signals.step_down(t, A1, t_s=T_S), signals.step_down(t, A2, t_s=T_S)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)
-        crb_theta = (cramer_rao_bound(truth, t, u1, snr_db=SNR1)
+        crb_theta = (cramer_rao_bound(truth, t, u1, snr_db=snr1)
                      + cramer_rao_bound(truth, t, u2, snr_db=SNR2)).theta_std
-        crb_all = (cramer_rao_bound(truth, t, u1, snr_db=SNR1, estimate="all")
+        crb_all = (cramer_rao_bound(truth, t, u1, snr_db=snr1, estimate="all")
                    + cramer_rao_bound(truth, t, u2, snr_db=SNR2, estimate="all")).theta_std
-    tasks = [(e, s) for e in errs
+    tasks = [(e, s, snr1) for e in errs
              for s in np.random.SeedSequence([seed, round(1000 * e)]).spawn(runs)]
     start = time.perf_counter()
     if jobs == 1:
@@ -239,7 +247,7 @@ def run_ravanbod2002(
         "theta_true": THETA,
         "protocol": {
             "drive": P_TRUE, "ts": TS, "t_s": T_S, "a_1": A1, "a_2": A2,
-            "snr_step1_db": list(SNR1), "snr_step2_db": list(SNR2),
+            "snr_step1_db": list(snr1), "snr_step2_db": list(SNR2),
             "prior": "P_hat = P* (1 - Err_p X), X ~ U[-1, 1] per parameter",
             "runs": runs, "seed": seed, "jobs": jobs,
         },
@@ -301,7 +309,8 @@ def format_tables(doc: dict[str, Any]) -> str:
 
     lines = [
         f"paper A protocol: theta* = {th:.4g} rad (half-width); {doc['protocol']['runs']} runs "
-        f"per Err_p; seed {doc['protocol']['seed']}",
+        f"per Err_p; seed {doc['protocol']['seed']}; SNR (w_M, w_L) step 1 "
+        f"{tuple(doc['protocol']['snr_step1_db'])} dB, step 2 {SNR2} dB",
         "Table 1 (two-step) and Table 2 (regression): ours beside the paper's; mean in rad, "
         "err % = (theta* - mean)/theta*, std with ddof=1",
         f"{'Err_p':>5} | {'two-step':>8} {'err%':>6} {'std':>8} {'fail':>4} | "
@@ -349,11 +358,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     Parameters
     ----------
     parser : argparse.ArgumentParser
-        The parser of the ``ravanbod2002`` target.
-
-    Returns
-    -------
-    None
+        The parser of the ``ravanbod2002`` target (extended in place).
     """
     parser.add_argument("--runs", type=int, default=10, help="runs per Err_p (default 10)")
     parser.add_argument("--seed", type=int, default=2002, help="root seed (default 2002)")
@@ -361,6 +366,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="worker processes (default 1); results do not depend on it")
     parser.add_argument("--err-p", default="0.1,0.2,0.3,0.4", metavar="E1,E2,...",
                         help="prior errors to run (default 0.1,0.2,0.3,0.4)")
+    parser.add_argument("--snr-step1", default="17.4,6.43", metavar="SNR_M,SNR_L",
+                        help="step-1 SNR of w_M,w_L in dB (default the paper's 17.4,6.43)")
     parser.add_argument("--json", metavar="FILE", help="write the JSON document to FILE ('-': "
                         "stdout, the tables then go to stderr)")
     parser.add_argument("--report", metavar="DIR",
@@ -368,11 +375,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
 
-def _parse_errs(text: str) -> list[float]:
+def _numbers(option: str, text: str) -> list[float]:
     try:
         return [float(x) for x in text.split(",")]
     except ValueError:
-        raise InputError(f"--err-p must be numbers separated by commas, got {text!r}") from None
+        raise InputError(f"{option} must be numbers separated by commas, got {text!r}") from None
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -381,7 +388,8 @@ def run_cli(args: argparse.Namespace) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        With ``runs``, ``seed``, ``jobs``, ``err_p``, ``json``, ``report``, ``force``.
+        With ``runs``, ``seed``, ``jobs``, ``err_p``, ``snr_step1``, ``json``,
+        ``report``, ``force``.
 
     Returns
     -------
@@ -397,8 +405,14 @@ def run_cli(args: argparse.Namespace) -> int:
             raise InputError(f"--report {rep} exists and is not a directory")
         if rep.exists() and any(rep.iterdir()) and not force:
             raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
-    doc = run_ravanbod2002(runs=args.runs, seed=args.seed, err_p=_parse_errs(args.err_p),
-                           jobs=args.jobs, progress=lambda m: print(m, file=sys.stderr))
+    snr1 = _numbers("--snr-step1", args.snr_step1)
+    if len(snr1) != 2 or not all(math.isfinite(x) for x in snr1):
+        raise InputError(f"--snr-step1 must be two finite numbers SNR_M,SNR_L in dB, got "
+                         f"{args.snr_step1!r}")
+    doc = run_ravanbod2002(runs=args.runs, seed=args.seed,
+                           err_p=_numbers("--err-p", args.err_p), jobs=args.jobs,
+                           snr1=(snr1[0], snr1[1]),
+                           progress=lambda m: print(m, file=sys.stderr))
     bars = checks(doc)
     doc["checks"] = [{"bar": b, "value": v, "met": bool(m)} for b, v, m in bars]
     text = format_tables(doc) + "\n\n" + "\n".join(

@@ -1,0 +1,94 @@
+"""Benchmark: identification speed (issue 3's targets), medians of several runs.
+
+1. ``backlashkit identify e1.csv e2.csv --drive PRIOR.toml --json`` (joint, the default
+   method) on paper A's two 80 s records, as a fresh process pinned to one core
+   (``taskset -c 0`` where available, else ``RAYON_NUM_THREADS=1``): the whole
+   command, interpreter start and file reading included. Target: < 2 s.
+2. The same fit in-process (``JointIdentifier(workers=1).fit``), beside the faithful
+   two-step method and the regression baseline, for the split of the time.
+3. With ``--reproduce``: ``backlashkit reproduce ravanbod2002 --runs 10 --jobs 2``
+   wall time (target < 60 s on 2 cores), once.
+
+The prior is paper A's drive with a 30 % error drawn as in the protocol.
+
+Run: ``python benchmarks/bench_identify.py [--repeats 5] [--reproduce]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from backlashkit.identify import RegressionIdentifier, TwoStepIdentifier
+from backlashkit.identify_joint import JointIdentifier
+from backlashkit.ravanbod2002 import protocol_records
+
+
+def _median(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main() -> None:
+    """Print the timings."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--reproduce", action="store_true")
+    args = ap.parse_args()
+    rec1, rec2, prior = protocol_records(0.3, np.random.SeedSequence(2024))
+    exe = [sys.executable, "-m", "backlashkit.cli"]
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        for rec, name in ((rec1, "e1.csv"), (rec2, "e2.csv")):
+            cols = np.column_stack([rec.t, rec.torque, rec.w_motor, rec.w_load])
+            np.savetxt(d / name, cols, delimiter=",", header="t,torque,w_motor,w_load",
+                       comments="", fmt="%.17g")
+        (d / "prior.toml").write_text("[drive]\n" + "".join(
+            f"{k} = {getattr(prior, k)!r}\n" for k in ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")))
+        cmd = [*exe, "identify", str(d / "e1.csv"), str(d / "e2.csv"), "--drive",
+               str(d / "prior.toml"), "--json"]
+        env = dict(os.environ)
+        if shutil.which("taskset"):
+            cmd, how = ["taskset", "-c", "0", *cmd], "taskset -c 0"
+        else:
+            env["RAYON_NUM_THREADS"], how = "1", "RAYON_NUM_THREADS=1"
+
+        def run_cli() -> None:
+            subprocess.run(cmd, check=True, capture_output=True, env=env)
+
+        t_cli = _median(run_cli, args.repeats)
+    recs = [rec1, rec2]
+    t_joint = _median(lambda: JointIdentifier(prior, workers=1).fit(recs), args.repeats)
+    t_two = _median(lambda: TwoStepIdentifier(prior, workers=1).fit(rec1, final_records=rec2),
+                    args.repeats)
+    t_reg = _median(lambda: RegressionIdentifier(prior, workers=1).fit(rec2), args.repeats)
+    print(f"paper A's two 80 s records (Ts = 1 ms), prior error 30 %; medians of {args.repeats}")
+    print(f"{'backlashkit identify (joint), whole command, 1 core':<55} {t_cli:7.2f} s "
+          f"(target < 2 s; {how})")
+    print(f"{'  JointIdentifier.fit, in process, workers=1':<55} {t_joint:7.2f} s")
+    print(f"{'  TwoStepIdentifier.fit (paper A), workers=1':<55} {t_two:7.2f} s")
+    print(f"{'  RegressionIdentifier.fit (Table 2 baseline), workers=1':<55} {t_reg:7.2f} s")
+    if args.reproduce:
+        t0 = time.perf_counter()
+        subprocess.run([*exe, "reproduce", "ravanbod2002", "--runs", "10", "--jobs", "2"],
+                       check=False, capture_output=True)
+        print(f"{'backlashkit reproduce ravanbod2002 --runs 10 --jobs 2':<55} "
+              f"{time.perf_counter() - t0:7.1f} s (target < 60 s on 2 cores; "
+              f"{os.cpu_count()} cores here)")
+
+
+if __name__ == "__main__":
+    main()
