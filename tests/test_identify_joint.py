@@ -175,6 +175,17 @@ def test_wrong_prior_without_penalty_recovers_truth(short):
     assert e.std_ < 1e-3 * THETA
 
 
+def test_stiffness_grid_starts(short):
+    """With k_sh 40 % low in the prior, the gridded stiffness gives starts near the
+    truth's ringing frequency, and the fit still recovers theta and k_sh."""
+    _, _, clean = short
+    prior = bk.TwoMassDrive(**{**P_TRUE, "k_sh": 0.6 * P_TRUE["k_sh"]})
+    e = JointIdentifier(prior, stiffness_grid=5).fit(_noisy(clean, 60, 5))
+    assert e.theta_ == pytest.approx(THETA, rel=1e-2)
+    assert e.params_["k_sh"] == pytest.approx(P_TRUE["k_sh"], rel=1e-2)
+    assert len(e.theta_starts_) >= 2
+
+
 def test_known_noise_and_subset_of_parameters(short):
     _, _, clean = short
     prior = TRUE.with_theta(None)
@@ -235,6 +246,8 @@ def test_paper_protocol_quick():
         ({"n_grid": 1}, "n_grid must be an integer >= 2"),
         ({"fd_step": 0.5}, "fd_step must be < 0.1"),
         ({"theta_max": 0}, "theta_max must be > 0"),
+        ({"stiffness_grid": 0}, "stiffness_grid must be an integer >= 1"),
+        ({"stiffness_span": 1.0}, "stiffness_span must be > 1"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):
