@@ -38,11 +38,11 @@ import math
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,6 +51,10 @@ from .errors import InputError, SensitivityWarning
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .identify_joint import JointIdentifier, cramer_rao_bound
 from .plants import TwoMassDrive
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "ERR_P", "PAPER", "add_arguments", "checks", "format_tables", "plot_estimates",
@@ -163,7 +167,7 @@ def run_ravanbod2002(
     err_p: Sequence[float] = ERR_P,
     jobs: int = 1,
     snr1: tuple[float, float] = SNR1,
-    progress=None,
+    progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Run paper A's protocol and summarise every estimator per ``Err_p``.
 
@@ -428,7 +432,7 @@ def run_cli(args: argparse.Namespace) -> int:
     return 0 if all(m for _, _, m in bars) else 1
 
 
-def plot_estimates(doc: dict[str, Any], *, ax=None):
+def plot_estimates(doc: dict[str, Any], *, ax: Axes | None = None) -> Figure:
     """Estimates of every run per ``Err_p`` and method, with the paper's mean +- std.
 
     Parameters
