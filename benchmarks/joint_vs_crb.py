@@ -1,6 +1,8 @@
 """Joint ML identification (``JointIdentifier``) on paper A's protocol versus the CRB.
 
-Protocol (paper A, Section 5; project NOTES): the paper drive (theta* = 2 deg =
+Protocol (paper A, Section 5; project NOTES), built by
+:func:`backlashkit.ravanbod2002.protocol_records` with the seeds of ``backlashkit
+reproduce ravanbod2002``: the paper drive (theta* = 2 deg =
 3.49e-2 rad half-width, Ts = 1 ms); step 1: ``C_M = a_1 = 0.157`` N m for 40 s from
 rest, then 0 (80 s record), SNR 17.4 dB on ``w_M`` and 6.43 dB on ``w_L``; step 2: the
 same with ``a_2 = 0.942`` N m, SNR 35.7 / 35.6 dB. SNR = 10 log10(mean(w^2) / noise
@@ -30,23 +32,8 @@ import numpy as np
 
 import backlashkit as bk
 from backlashkit import signals
-from backlashkit.identify import Record
 from backlashkit.identify_joint import JointIdentifier, cramer_rao_bound
-
-P_TRUE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
-THETA = 3.49e-2
-A1, A2 = 0.157, 0.942
-SNR1, SNR2 = (17.4, 6.43), (35.7, 35.6)
-T_S = 40.0
-TS = 1e-3
-
-
-def experiment(truth, t, a, snr, seed: np.random.SeedSequence, name: str) -> Record:
-    """Simulate one step-down experiment with white measurement noise."""
-    r = truth.simulate(t, signals.step_down(t, a, t_s=T_S))
-    sm, sl = seed.spawn(2)
-    return Record(t, r.torque, signals.add_noise(r.w_motor, snr[0], rng=sm),
-                  signals.add_noise(r.w_load, snr[1], rng=sl), name=name)
+from backlashkit.ravanbod2002 import A1, A2, P_TRUE, SNR1, SNR2, T_S, THETA, TS, protocol_records
 
 
 def main() -> None:
@@ -76,14 +63,9 @@ def main() -> None:
         seeds = np.random.SeedSequence([args.seed, round(1000 * err)]).spawn(args.runs)
         est, std, cover = [], [], 0
         t0 = time.perf_counter()
-        for ss in seeds:
-            s1, s2, sp = ss.spawn(3)
-            x = np.random.default_rng(sp).uniform(-1.0, 1.0, len(P_TRUE))
-            prior = bk.TwoMassDrive(**{k: val * (1 - err * xi)
-                                       for (k, val), xi in zip(P_TRUE.items(), x, strict=True)})
-            recs = [experiment(truth, t, A1, SNR1, s1, "step1"),
-                    experiment(truth, t, A2, SNR2, s2, "step2")]
-            fit = JointIdentifier(prior, prior_rel_std=rel).fit(recs)
+        for ss in seeds:  # the seeds of `backlashkit reproduce ravanbod2002`
+            rec1, rec2, prior = protocol_records(err, ss)
+            fit = JointIdentifier(prior, prior_rel_std=rel).fit([rec1, rec2])
             est.append(fit.theta_)
             std.append(fit.std_)
             cover += fit.ci95_[0] <= THETA <= fit.ci95_[1]

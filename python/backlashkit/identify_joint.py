@@ -623,13 +623,13 @@ class JointIdentifier:
         if "k_sh" in free and self.stiffness_grid > 1:
             k_scales = np.geomspace(1.0 / self.stiffness_span, self.stiffness_span,
                                     self.stiffness_grid)
-        z_rows = []
+        blocks = []
         for ks in k_scales:
             zk = z_prior.copy()
             if "k_sh" in free:
                 zk[free.index("k_sh")] += math.log(ks)
-            z_rows.append(np.column_stack([np.log(grid), np.tile(zk, (grid.size, 1))]))
-        zg = np.concatenate(z_rows)
+            blocks.append(np.column_stack([np.log(grid), np.tile(zk, (grid.size, 1))]))
+        zg = np.concatenate(blocks)
         costs = np.sum(rows0(zg) ** 2, axis=1).reshape(len(k_scales), grid.size)
         pad = np.pad(costs, 1, constant_values=np.inf)
         is_min = ((costs <= pad[1:-1, :-2]) & (costs <= pad[1:-1, 2:])

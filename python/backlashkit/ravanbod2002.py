@@ -334,6 +334,13 @@ def format_tables(doc: dict[str, Any]) -> str:
             f"{_fmt(p['regression']['mean'], '7.4f')} {err(p['regression']['mean'])} "
             f"{_fmt(p['regression']['std'], '8.2e')}"
         )
+    ini = []
+    for row in doc["rows"]:
+        x = np.array([v for v in row["methods"]["two_step"]["theta_ini"] if v is not None])
+        std = f"{np.std(x, ddof=1):.2e}" if x.size > 1 else "-"
+        ini.append(f"{row['err_p']:.0%}: {np.mean(x):.4f} (std {std})" if x.size else "-")
+    lines.append("two-step pre-estimate theta_ini (eq. 6, step 1), mean and std: "
+                 + "; ".join(ini))
     crb = doc["crb"]
     lines += [
         "",

@@ -217,8 +217,7 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
     if not lines:
         raise InputError(f"{name}: the file is empty; expected a header line naming the columns")
     header_no, header_text = lines[0]
-    if delimiter is None:
-        delimiter = next((d for d in (";", "\t") if d in header_text), ",")
+    delimiter = delimiter or _sniff_delimiter(header_text)
     try:
         reader = csv.reader(io.StringIO("\n".join(line for _, line in lines)),
                             delimiter=delimiter)
@@ -266,14 +265,19 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
     return name, cols, lambda i: f"line {numbers[i]}", 0.0
 
 
+def _sniff_delimiter(header: str) -> str:
+    """``;`` if the header line holds one, else a tab if it holds one, else ``,``."""
+    return next((d for d in (";", "\t") if d in header), ",")
+
+
 def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], delimiter,
               decimal) -> _Raw | None:
     """A well-formed numeric table read by :func:`numpy.loadtxt` (C speed), or None.
 
     None sends the file to the line-by-line reader below, which reads the same files
     the same way and names the line and column of whatever is wrong; this path only
-    takes files with nothing to report (plain header, every cell a finite number or
-    ``nan``, the same number of fields on every line).
+    takes files with nothing to report (plain header, no comment after it, every cell
+    a finite number or ``nan``, the same number of fields on every line).
     """
     pos, header_no = 0, 0
     while pos < len(text):  # the header: the first line neither blank nor a comment
@@ -286,8 +290,7 @@ def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], de
             break
     else:
         return None
-    if delimiter is None:
-        delimiter = next((d for d in (";", "\t") if d in line), ",")
+    delimiter = delimiter or _sniff_delimiter(line)
     header = [c.strip() for c in line.split(delimiter)]
     body = text[pos:]
     if decimal is None:
@@ -299,7 +302,7 @@ def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], de
         return None
     try:
         table = np.loadtxt(io.StringIO(body.replace(",", ".") if decimal == "," else body),
-                           delimiter=delimiter, comments="#", ndmin=2, dtype=float)
+                           delimiter=delimiter, comments=None, ndmin=2, dtype=float)
     except ValueError:
         return None
     if table.shape[0] == 0 or table.shape[1] != len(header) or np.isinf(table).any():
@@ -310,11 +313,9 @@ def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], de
     numbers: list[int] = []
 
     def label(i: int) -> str:  # line numbers only when a message needs one
-        if not numbers:
-            numbers.extend(
-                header_no + k + 1 for k, ln in enumerate(body.splitlines())
-                if ln.strip() and not ln.lstrip().startswith("#")
-            )
+        if not numbers:  # blank lines are skipped by loadtxt, comments are not taken
+            numbers.extend(header_no + k + 1 for k, ln in enumerate(body.splitlines())
+                           if ln.strip())
         return f"line {numbers[i]}"
 
     return name, cols, label, 0.0
@@ -332,14 +333,6 @@ def _is_number(cell: str, decimal: str) -> bool:
 
 
 def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
-    try:  # fast path: numpy parses the whole column (about 10x the loop below)
-        fast = np.array([c.replace(",", ".") for c in cells] if decimal == "," else cells,
-                        dtype=float)
-    except ValueError:
-        fast = None
-    if fast is not None and not np.isinf(fast).any():
-        return fast
-    # the cell-by-cell loop: missing-value markers, and the message naming the bad cell
     out = np.empty(len(cells))
     for r, raw in enumerate(cells):
         cell = raw.strip()
