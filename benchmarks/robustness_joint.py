@@ -9,13 +9,19 @@ records from rest, torque ``0.1 a_max`` then ``0.6 a_max`` held 40 s, then 0; Ts
 fits :class:`~backlashkit.identify_joint.JointIdentifier` with its defaults (the
 linear parameters refined from the data, no penalty).
 
-Reported per scenario: mean relative error, worst relative error, std/CRB (joint
-bound), coverage of ``ci95_``; overall, how many trials off by more than 5 % have a
+Reported per scenario: the Cramér-Rao bound of theta relative to theta (all seven
+parameters estimated, both records), mean relative error, worst relative error,
+std/CRB, coverage of ``ci95_``; overall, how many trials off by more than 5 % have a
 lower cost at the true parameters than at the estimate (the optimiser's fault).
-Issue 3 asks: within 5 % everywhere, about 95 % coverage.
+Issue 3 asks: within 5 % everywhere, about 95 % coverage. Where the CRB itself is above
+2.5 % of theta (0.5 deg at 20 dB: 4.6-7.2 %), no unbiased estimator stays within 5 %
+in 95 % of the trials, so the summary also gives the worst error over the other
+scenarios and the count of trials beyond ``max(5 %, 3 CRB)``.
 
 Run: ``python benchmarks/robustness_joint.py [--trials 8] [--seed 3] [--jobs 2]
-[--stiffness-grid 9]``.
+[--stiffness-grid 9] [--split-shifts 0.5] [--search-factor 3]`` (``--split-shifts ''
+--search-factor none`` is the estimator before the split restarts and the bounded
+screening).
 Trial ``i`` of a scenario uses ``SeedSequence([seed, scenario index]).spawn(trials)[i]``,
 so results do not depend on ``--jobs``.
 """
@@ -67,7 +73,7 @@ def records(drive, snr, seed):
 
 
 def trial(task):
-    drive, snr, err_p, seed, stiffness_grid = task
+    drive, snr, err_p, seed, options = task
     s_rec, s_prior = seed.spawn(2)
     recs = records(drive, snr, s_rec)
     names = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
@@ -76,7 +82,7 @@ def trial(task):
                                for n, xi in zip(names, x, strict=True)})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)
-        fit = JointIdentifier(prior, workers=1, stiffness_grid=stiffness_grid).fit(recs)
+        fit = JointIdentifier(prior, workers=1, **options).fit(recs)
         # diagnosis: weighted cost (the fit's noise levels) at the truth and at the fit;
         # truth lower = the optimiser missed the global minimum, not a limit of the data
         costs = [sum(np.sum(((rec.w_motor - r.w_motor) / s_m) ** 2)
@@ -107,36 +113,50 @@ def main() -> None:
     ap.add_argument("--err-p", type=float, default=0.4)
     ap.add_argument("--stiffness-grid", type=int, default=1,
                     help="JointIdentifier(stiffness_grid=...) (default 1, its default)")
+    ap.add_argument("--split-shifts", default="0.5",
+                    help="JointIdentifier(split_shifts=...), comma-separated ('' for none)")
+    ap.add_argument("--search-factor", default="3",
+                    help="JointIdentifier(search_factor=...) ('none' for unbounded)")
     args = ap.parse_args()
+    options = {
+        "stiffness_grid": args.stiffness_grid,
+        "split_shifts": tuple(float(x) for x in args.split_shifts.split(",") if x.strip()),
+        "search_factor": None if args.search_factor == "none" else float(args.search_factor),
+    }
     start = time.perf_counter()
     scen = list(scenarios(args.err_p))
-    tasks = [(d, snr, e, s, args.stiffness_grid) for k, d, snr, e in scen
+    tasks = [(d, snr, e, s, options) for k, d, snr, e in scen
              for s in np.random.SeedSequence([args.seed, k]).spawn(args.trials)]
     with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
         results = list(pool.map(trial, tasks, chunksize=1))
     print(f"joint ML, Err_p = {args.err_p:.0%}, {args.trials} trials per scenario, "
-          f"seed {args.seed}, stiffness_grid {args.stiffness_grid}; "
-          "err = (theta_hat - theta) / theta")
-    print(f"{'drive':<11} {'theta':>6} {'SNR':>4} | {'mean err%':>9} {'max |err|%':>10} "
-          f"{'std/CRB':>7} {'cover95':>7}")
-    n_cover = n_all = n_fail = n_truth_better = 0
-    worst = 0.0
+          f"seed {args.seed}, options {options}; err = (theta_hat - theta) / theta")
+    print(f"{'drive':<11} {'theta':>6} {'SNR':>4} | {'CRB%':>5} {'mean err%':>9} "
+          f"{'max |err|%':>10} {'std/CRB':>7} {'cover95':>7}")
+    n_cover = n_all = n_fail = n_truth_better = n_gross = 0
+    worst = worst_resolvable = 0.0
     for i, (_, d, snr, _) in enumerate(scen):
         chunk = results[i * args.trials : (i + 1) * args.trials]
         est = np.array([r[0] for r in chunk])
         err = (est - d.theta) / d.theta
+        bound = crb(d, snr) / d.theta
         cover = sum(lo <= d.theta <= hi for _, _, (lo, hi), _ in chunk)
         missed = [r[3] for r, e in zip(chunk, err, strict=True) if abs(e) > 0.05]
         n_fail += len(missed)
         n_truth_better += sum(missed)
+        n_gross += int(np.sum(np.abs(err) > max(0.05, 3 * bound)))
         n_cover += cover
         n_all += len(chunk)
         worst = max(worst, float(np.max(np.abs(err))))
+        if bound <= 0.025:
+            worst_resolvable = max(worst_resolvable, float(np.max(np.abs(err))))
         print(f"{INERTIAS[d.J_L]:<11} {math.degrees(d.theta):5.1f}d {snr:4.0f} | "
-              f"{100 * np.mean(err):9.2f} {100 * np.max(np.abs(err)):10.2f} "
-              f"{np.std(est, ddof=1) / crb(d, snr):7.2f} {cover:3d}/{len(chunk):<3d}")
-    print(f"overall: worst |err| {100 * worst:.2f} %, coverage {n_cover}/{n_all} = "
+              f"{100 * bound:5.2f} {100 * np.mean(err):9.2f} {100 * np.max(np.abs(err)):10.2f} "
+              f"{np.std(est, ddof=1) / (bound * d.theta):7.2f} {cover:3d}/{len(chunk):<3d}")
+    print(f"overall: worst |err| {100 * worst:.2f} % ({100 * worst_resolvable:.2f} % where "
+          f"CRB <= 2.5 % of theta), coverage {n_cover}/{n_all} = "
           f"{100 * n_cover / n_all:.1f} %; {time.perf_counter() - start:.0f} s")
+    print(f"trials beyond max(5 %, 3 CRB): {n_gross} of {n_all}")
     print(f"trials off by more than 5 %: {n_fail}; in {n_truth_better} of them the true "
           "parameters have a lower cost than the estimate (a missed global minimum)")
 

@@ -175,6 +175,40 @@ def test_wrong_prior_without_penalty_recovers_truth(short):
     assert e.std_ < 1e-3 * THETA
 
 
+def test_model_commutation_instants_on_noise_free_data(short):
+    """The identified model's t_c, t_b match the true contact changes to 2 samples
+    (issue 3's bar; eq. 9 on the sampled load speed puts t_c ~2.4 samples early)."""
+    t, u, clean = short
+    t_s = float(t[np.flatnonzero(np.diff(u) < 0)[0] + 1])
+    lost, made = [e.time for e in clean.events if e.time >= t_s][:2]
+    prior = bk.TwoMassDrive(**{n: 1.1 * x for n, x in P_TRUE.items()})
+    e = JointIdentifier(prior).fit(Record(t, u, clean.w_motor, clean.w_load))
+    (ts_, t_c, t_b), = e.commutations_
+    assert ts_ == pytest.approx(t_s)
+    assert abs(t_c - lost) <= 2e-3 and abs(t_b - made) <= 2e-3
+    assert e.t_c_ == [t_c] and e.t_b_ == [t_b]
+    assert e.theta_ini_ is not None and e.theta_ini_ > 0
+
+
+def test_resplit_keeps_sums_and_ringing_frequency():
+    """A split restart moves J_M / J_L (or f_M / f_L) by e^shift and keeps the sum and
+    k_sh (1/J_M + 1/J_L)."""
+    from backlashkit.identify_joint import _resplit
+
+    free = list(LINEAR_PARAMS)
+    z = np.log([THETA, *(P_TRUE[n] for n in free)])
+    p = dict(zip(["theta", *free], z, strict=True))
+    for pair, shift in ((("J_M", "J_L"), 0.5), (("f_M", "f_L"), -0.5)):
+        q = dict(zip(["theta", *free], _resplit(z, free, pair, shift), strict=True))
+        a, b = pair
+        assert np.exp(q[a]) + np.exp(q[b]) == pytest.approx(np.exp(p[a]) + np.exp(p[b]))
+        assert (q[a] - q[b]) - (p[a] - p[b]) == pytest.approx(shift)
+        ring = [np.exp(d["k_sh"]) * (np.exp(-d["J_M"]) + np.exp(-d["J_L"])) for d in (p, q)]
+        assert ring[1] == pytest.approx(ring[0])
+        assert q["theta"] == p["theta"]
+    assert _resplit(z[:3], free[:2], ("f_M", "f_L"), 0.5) is None  # pair not estimated
+
+
 def test_stiffness_grid_starts(short):
     """With k_sh 40 % low in the prior, the gridded stiffness gives starts near the
     truth's ringing frequency, and the fit still recovers theta and k_sh."""
@@ -248,6 +282,10 @@ def test_paper_protocol_quick():
         ({"theta_max": 0}, "theta_max must be > 0"),
         ({"stiffness_grid": 0}, "stiffness_grid must be an integer >= 1"),
         ({"stiffness_span": 1.0}, "stiffness_span must be > 1"),
+        ({"split_shifts": (0.5, -1.0)}, r"split_shifts\[\.\.\.\] must be > 0"),
+        ({"split_shifts": 0.5}, "split_shifts must be a sequence of numbers > 0"),
+        ({"search_factor": 1.0}, "search_factor must be > 1"),
+        ({"search_factor": -2.0}, "search_factor must be > 0"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):
@@ -290,7 +328,10 @@ def test_cli_joint_json_with_uncertainty_table(short_csv, tmp_path, capsys):
     assert doc["estimated"] == ["theta", "J_M", "k_sh"]
     assert doc["prior_rel_std"] == {"k_sh": 0.2, "J_M": 0.1}
     assert doc["params"]["k_sh"] == pytest.approx(78.0, rel=0.02)
-    assert doc["records"][0]["model_start"] == "rest"
+    rec = doc["records"][0]
+    assert rec["model_start"] == "rest" and rec["commutation"] == "model"
+    assert rec["t_s"] < rec["t_c"] < rec["t_b"] < rec["t_s"] + 0.5
+    assert doc["theta_ini"] > 0
     code = main(["identify", str(short_csv), "--drive", str(prior), "--method", "joint",
                  "--prior-rel-std", "0"])
     out, err = capsys.readouterr()

@@ -126,3 +126,21 @@ def test_cli_json_and_report(tmp_path, capsys):
     assert doc["rows"][0]["err_p"] == 0.2 and "Table 1" in captured.err
     assert {p.name for p in rep.iterdir()} == {"estimates.png", "ravanbod2002.json",
                                                "report.md"}
+
+
+def test_a_refused_fit_is_recorded_not_fatal(monkeypatch):
+    """A method that refuses a run's data counts as a failure; the study goes on and
+    the joint bars report the refusal as a miss."""
+    import backlashkit.ravanbod2002 as rv
+
+    def refuse(self, records):
+        raise InputError("refused on purpose")
+
+    monkeypatch.setattr(rv.JointIdentifier, "fit", refuse)
+    doc = run_ravanbod2002(runs=2, err_p=[0.1])
+    j = doc["rows"][0]["methods"]["joint"]
+    assert j["failures"] == 2 and j["mean"] is None and j["coverage95"] == 0
+    assert doc["rows"][0]["methods"]["regression"]["failures"] == 0
+    (bar, value, met), = checks(doc)
+    assert not met and value == "2 refused"
+    assert "(2 refused)" in format_tables(doc)

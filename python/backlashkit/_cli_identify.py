@@ -20,7 +20,7 @@ import math
 import sys
 from typing import Any
 
-from .identify import Record, RegressionIdentifier, TwoStepIdentifier, find_step_down
+from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .io import read_drive_toml, read_uncertainty_toml
 from .report_identify import add_report_option, maybe_write_report
 
@@ -43,7 +43,9 @@ theta AND the linear parameters, on every record and both speeds (each weighted 
 own noise level, estimated from the data), the prior entering as a Gaussian penalty
 with the relative std of the [uncertainty] table of PRIOR.toml (or --prior-rel-std);
 without either, the linear parameters are refined from the data alone. It reports the
-standard error std and a 95% interval ci95 of theta.
+standard error std and a 95% interval ci95 of theta; its t_c, t_b are the
+contact changes of the identified model (located between samples), theta_ini is
+the eq. 6 pre-estimate it also starts from.
 
 Each EXP.csv holds columns t,torque,w_motor,w_load (SI) with one step-down of the
 torque from a positive level (other names, separators, decimal commas, rpm, a sample
@@ -235,13 +237,15 @@ def run(args: argparse.Namespace) -> int:
             rel = read_uncertainty_toml(args.drive) or None
         everything = records + (finals or [])
         est = JointIdentifier(prior, prior_rel_std=rel).fit(everything)
-        theta_ini = None
-        rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_, strict=True)
-        for rec, fitp, how, noise in rows:
+        theta_ini = est.theta_ini_
+        rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_,
+                   est.commutations_, strict=True)
+        for rec, fitp, how, noise, (t_s, t_c, t_b) in rows:
             per_record.append(
-                {"file": rec.name, "t_s": find_step_down(rec)[1], "t_c": None, "t_b": None,
+                {"file": rec.name, "t_s": t_s, "t_c": t_c, "t_b": t_b,
                  "theta_ini": None, "fit_percent": [float(x) for x in fitp],
-                 "model_start": how, "noise_std": [float(x) for x in noise]}
+                 "model_start": how, "noise_std": [float(x) for x in noise],
+                 "commutation": "model"}
             )
         bounds = [float(est.theta_max / est.n_grid), float(est.theta_max)]
         std = est.std_

@@ -566,7 +566,8 @@ def write_identification_report(
     _save(fig, out, "fit")
 
     # 2. commutation windows
-    has_comm = t_c is not None and t_b is not None and len(t_c) == len(recs)
+    has_comm = (t_c is not None and t_b is not None and len(t_c) == len(recs)
+                and all(x is not None for x in (*t_c, *t_b)))
     if has_comm:
         fig = Figure(figsize=(9, 3.2 * len(recs) + 0.3), layout="constrained")
         axes = fig.subplots(len(recs), 1, squeeze=False)[:, 0]
