@@ -209,6 +209,40 @@ def test_resplit_keeps_sums_and_ringing_frequency():
     assert _resplit(z[:3], free[:2], ("f_M", "f_L"), 0.5) is None  # pair not estimated
 
 
+def test_parametric_bootstrap(short):
+    """Resamples simulated from the estimate and refitted: std_ and ci95_ from their
+    spread, the estimate itself unchanged, the same resamples for the same seed."""
+    _, _, clean = short
+    prior = bk.TwoMassDrive(**{n: 1.1 * x for n, x in P_TRUE.items()})
+    rec = _noisy(clean, 30, 11)
+    boot = bk.ParametricBootstrap(6, seed=3)
+    e = JointIdentifier(prior, bootstrap=boot).fit(rec)
+    f = JointIdentifier(prior).fit(rec)
+    assert e.interval_ == "bootstrap" and f.interval_ == "fisher"
+    assert e.bootstrap_thetas_.shape == (6,) and f.bootstrap_thetas_ is None
+    assert e.std_ == pytest.approx(np.std(e.bootstrap_thetas_, ddof=1))
+    assert e.ci95_ == pytest.approx((e.theta_ - 1.96 * e.std_, e.theta_ + 1.96 * e.std_))
+    assert e.theta_ == f.theta_ and e.param_std_ == f.param_std_
+    # resampled around the estimate, with a spread of the Fisher std's order
+    assert abs(np.mean(e.bootstrap_thetas_) - e.theta_) < 3 * f.std_
+    assert 0.3 < e.std_ / f.std_ < 3
+    again = JointIdentifier(prior, bootstrap=boot).fit(rec)
+    np.testing.assert_array_equal(again.bootstrap_thetas_, e.bootstrap_thetas_)
+
+
+@pytest.mark.parametrize(
+    "kwargs, pattern",
+    [
+        ({"n_resamples": 1}, "n_resamples must be an integer >= 2"),
+        ({"seed": -1}, "seed must be an integer >= 0"),
+        ({"seed": 1.5}, "seed must be an integer"),
+    ],
+)
+def test_parametric_bootstrap_validated(kwargs, pattern):
+    with pytest.raises(InputError, match=pattern):
+        bk.ParametricBootstrap(**kwargs)
+
+
 def test_stiffness_grid_starts(short):
     """With k_sh 40 % low in the prior, the gridded stiffness gives starts near the
     truth's ringing frequency, and the fit still recovers theta and k_sh."""
@@ -286,6 +320,7 @@ def test_paper_protocol_quick():
         ({"split_shifts": 0.5}, "split_shifts must be a sequence of numbers > 0"),
         ({"search_factor": 1.0}, "search_factor must be > 1"),
         ({"search_factor": -2.0}, "search_factor must be > 0"),
+        ({"bootstrap": 30}, "bootstrap must be a ParametricBootstrap or None, got int"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):
@@ -337,3 +372,21 @@ def test_cli_joint_json_with_uncertainty_table(short_csv, tmp_path, capsys):
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "95% interval" in out and "theta     =" in out
+
+
+def test_cli_joint_bootstrap(short_csv, capsys):
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "3",
+                 "--seed", "4", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["interval"] == "bootstrap" and doc["std_fisher"] > 0
+    assert doc["ci95"] == pytest.approx([doc["theta"] - 1.96 * doc["std"],
+                                         doc["theta"] + 1.96 * doc["std"]])
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "3",
+                 "--method", "two-step"])
+    out, err = capsys.readouterr()
+    assert code != 0 and "--bootstrap only applies with --method joint" in err
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "1"])
+    out, err = capsys.readouterr()
+    assert code != 0 and "n_resamples must be an integer >= 2" in err

@@ -17,7 +17,12 @@ from .control import (
 )
 from .errors import InputError, SensitivityWarning
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
-from .identify_joint import CramerRaoBound, JointIdentifier, cramer_rao_bound
+from .identify_joint import (
+    CramerRaoBound,
+    JointIdentifier,
+    ParametricBootstrap,
+    cramer_rao_bound,
+)
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
 from .nonlinearities import (
@@ -49,6 +54,7 @@ __all__ = [
     "GainOnlyInverse",
     "LinearPlantWithBacklash",
     "NoInverse",
+    "ParametricBootstrap",
     "Record",
     "RegressionIdentifier",
     "SmoothFilterInverse",
