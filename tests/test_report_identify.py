@@ -142,6 +142,14 @@ def test_duck_typed_result_and_errors(tmp_path, record):
         write_identification_report(afile, record, result, prior=PRIOR)
 
 
+def test_missing_commutation_instants_skip_the_zoom(tmp_path, record):
+    """A joint fit whose model has no contact change after the step-down (t_c_ None):
+    the report is written without the commutation zoom."""
+    result = SimpleNamespace(theta_=0.03, std_=None, ci95_=None, t_c_=[None], t_b_=[None])
+    check_page(write_identification_report(tmp_path / "n", record, result, prior=PRIOR))
+    assert not (tmp_path / "n" / "commutation.png").exists()
+
+
 def test_cost_curve_matches_identifier(record, fitted):
     c = cost_curve(PRIOR, record, [fitted.theta_], workers=1)
     assert c[0] == pytest.approx(fitted.cost_, rel=1e-9)
