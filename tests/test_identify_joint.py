@@ -221,7 +221,8 @@ def test_parametric_bootstrap(short):
     assert e.interval_ == "bootstrap" and f.interval_ == "fisher"
     assert e.bootstrap_thetas_.shape == (6,) and f.bootstrap_thetas_ is None
     assert e.std_ == pytest.approx(np.std(e.bootstrap_thetas_, ddof=1))
-    assert e.ci95_ == pytest.approx((e.theta_ - 1.96 * e.std_, e.theta_ + 1.96 * e.std_))
+    q = 2.5706  # Student's 97.5 % quantile, 5 degrees of freedom (std from 6 refits)
+    assert e.ci95_ == pytest.approx((e.theta_ - q * e.std_, e.theta_ + q * e.std_), rel=1e-4)
     assert e.theta_ == f.theta_ and e.param_std_ == f.param_std_
     # resampled around the estimate, with a spread of the Fisher std's order
     assert abs(np.mean(e.bootstrap_thetas_) - e.theta_) < 3 * f.std_
@@ -302,6 +303,25 @@ def test_paper_protocol_quick():
     assert abs(np.mean(out) - THETA) < 0.02 * THETA
 
 
+def test_final_horizon(short):
+    """A final horizon longer than the record is the whole record (fitted through the
+    coarse hold simulation instead of sample by sample); a short one fits less data:
+    a wider interval around the same truth, the same noise levels."""
+    _, _, clean = short
+    prior = bk.TwoMassDrive(**{n: 1.1 * x for n, x in P_TRUE.items()})
+    rec = _noisy(clean, 30, 5)
+    whole = JointIdentifier(prior).fit(rec)
+    long = JointIdentifier(prior, final_horizon=10.0).fit(rec)
+    assert long.theta_ == pytest.approx(whole.theta_, rel=1e-6)
+    assert long.std_ == pytest.approx(whole.std_, rel=1e-4)
+    np.testing.assert_allclose(long.noise_std_, whole.noise_std_, rtol=1e-6)
+    short_h = JointIdentifier(prior, final_horizon=0.3).fit(rec)
+    assert short_h.std_ > 1.2 * whole.std_
+    assert abs(short_h.theta_ - THETA) < 4 * short_h.std_
+    np.testing.assert_allclose(short_h.noise_std_, whole.noise_std_, rtol=0.1)
+    assert len(short_h.residuals_[0][0]) == rec.t.size  # residuals: the whole record
+
+
 @pytest.mark.parametrize(
     "kwargs, pattern",
     [
@@ -321,6 +341,7 @@ def test_paper_protocol_quick():
         ({"search_factor": 1.0}, "search_factor must be > 1"),
         ({"search_factor": -2.0}, "search_factor must be > 0"),
         ({"bootstrap": 30}, "bootstrap must be a ParametricBootstrap or None, got int"),
+        ({"final_horizon": 0.0}, "final_horizon must be > 0"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):
@@ -381,12 +402,26 @@ def test_cli_joint_bootstrap(short_csv, capsys):
     assert code == 0, err
     doc = json.loads(out)
     assert doc["interval"] == "bootstrap" and doc["std_fisher"] > 0
-    assert doc["ci95"] == pytest.approx([doc["theta"] - 1.96 * doc["std"],
-                                         doc["theta"] + 1.96 * doc["std"]])
+    q = 4.3027  # Student's 97.5 % quantile, 2 degrees of freedom (std from 3 refits)
+    assert doc["ci95"] == pytest.approx([doc["theta"] - q * doc["std"],
+                                         doc["theta"] + q * doc["std"]], rel=1e-4)
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "3",
                  "--method", "two-step"])
     out, err = capsys.readouterr()
     assert code != 0 and "--bootstrap only applies with --method joint" in err
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--final-horizon", "1",
+                 "--method", "regression"])
+    out, err = capsys.readouterr()
+    assert code != 0 and "--final-horizon only applies with --method joint" in err
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--final-horizon", "0"])
+    out, err = capsys.readouterr()
+    assert code != 0 and "final_horizon must be > 0" in err
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--final-horizon", "0.5",
+                 "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["final_horizon"] == 0.5 and doc["interval"] == "fisher"
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "1"])
     out, err = capsys.readouterr()
     assert code != 0 and "n_resamples must be an integer >= 2" in err
