@@ -133,8 +133,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument(
         "--final-horizon", type=float, default=None, metavar="S",
         help="joint: final fit and interval on S seconds after the start and every torque "
-        "jump of each record instead of the whole record (a regular likelihood where the "
-        "shaft rattles: honest intervals, larger std)"
+        "jump of each record instead of the whole record (where the shaft rattles: "
+        "better calibrated intervals, larger std)"
     )
     add_reader_options(p)
     p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")

@@ -79,8 +79,8 @@ Choices (documented, configurable where it matters)
   1.1-1.4 times more than this says (``benchmarks/robustness_joint.py``);
   ``bootstrap=ParametricBootstrap(...)`` takes ``std_`` and ``ci95_`` from refits of
   data simulated from the estimate instead, and ``final_horizon`` fits the final stage
-  only on short windows after every torque jump, where the likelihood stays regular
-  (calibrated but wider intervals).
+  only on short windows after every torque jump, where the likelihood is closer to
+  regular (better calibrated but wider intervals).
 """
 
 from __future__ import annotations
@@ -487,9 +487,9 @@ class JointIdentifier:
         (default None: the whole record). Where the shaft rattles (light loads, dozens
         of impacts per record) the whole-record likelihood is not regular at the scale
         of the standard error and its Fisher interval is too narrow; a short final
-        horizon keeps it regular, at the price of a larger standard error (README,
-        "Away from paper A's drive"; ``benchmarks/robustness_joint.py
-        --final-horizon``).
+        horizon keeps it closer to regular, at the price of a larger standard error
+        (95 % coverage 92.6 % against 89.8 % over 324 simulated trials, README, "Away
+        from paper A's drive"; ``benchmarks/robustness_joint.py --final-horizon``).
     workers : int, optional
         Threads for the simulations (default all cores).
 
