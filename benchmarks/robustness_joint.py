@@ -187,13 +187,13 @@ def main() -> None:
     if args.bootstrap:
         print(f"coverage of the Fisher interval of the same fits: {n_cover_fisher}/{n_all} = "
               f"{100 * n_cover_fisher / n_all:.1f} %")
+    caveat = (" (over the whole records, which --final-horizon does not fit)"
+              if args.final_horizon else "")
     print(f"trials beyond max(5 %, 3 CRB): {n_gross} of {n_all}")
     print(f"intervals missing the truth: {n_uncovered}; in {n_uncovered_truth_better} of them "
-          "the true parameters have a lower cost than the estimate")
+          f"the true parameters have a lower cost than the estimate{caveat}")
     print(f"trials off by more than 5 %: {n_fail}; in {n_truth_better} of them the true "
-          "parameters have a lower cost than the estimate (a missed global minimum)"
-          + (" over the whole records, which --final-horizon does not fit"
-             if args.final_horizon else ""))
+          f"parameters have a lower cost than the estimate (a missed global minimum){caveat}")
 
 
 if __name__ == "__main__":

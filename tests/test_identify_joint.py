@@ -303,6 +303,32 @@ def test_paper_protocol_quick():
     assert abs(np.mean(out) - THETA) < 0.02 * THETA
 
 
+def test_stiffness_restarts_leave_a_wrong_ringing_phase():
+    """A trial of ``benchmarks/robustness_joint.py --seed 4`` (light load J_L/J_M = 2,
+    theta 2 deg, 20 dB, prior 40 % off): without the restarts the fit settles with
+    ``k_sh`` 22 % low and theta 8 % low, in a minimum the true parameters beat; a
+    restart at a 16 % higher stiffness reaches the minimum near the truth."""
+    base = {**P_TRUE, "J_L": 1.0e-2}
+    drive = bk.TwoMassDrive(**base, theta=np.deg2rad(2.0))
+    t = signals.time_grid(80.0, 1e-3)
+    s_rec, s_prior = np.random.SeedSequence([4, 3]).spawn(6)[1].spawn(2)
+    recs = []
+    for a, ss in zip((0.157, 0.942), s_rec.spawn(2), strict=True):
+        with pytest.warns(bk.SensitivityWarning):  # grazing late in the coast-down
+            r = drive.simulate(t, signals.step_down(t, a, t_s=40.0))
+        sm, sl = ss.spawn(2)
+        recs.append(Record(t, r.torque, signals.add_noise(r.w_motor, 20.0, rng=sm),
+                           signals.add_noise(r.w_load, 20.0, rng=sl)))
+    x = np.random.default_rng(s_prior).uniform(-1, 1, len(LINEAR_PARAMS))
+    prior = bk.TwoMassDrive(**{n: base[n] * (1 - 0.4 * xi)
+                               for n, xi in zip(LINEAR_PARAMS, x, strict=True)})
+    stuck = JointIdentifier(prior, stiffness_restarts=()).fit(recs)
+    fit = JointIdentifier(prior).fit(recs)
+    assert stuck.theta_ < 0.94 * drive.theta and stuck.params_["k_sh"] < 0.85 * base["k_sh"]
+    assert abs(fit.theta_ / drive.theta - 1) < 0.05
+    assert abs(fit.params_["k_sh"] / base["k_sh"] - 1) < 0.1
+
+
 def test_final_horizon(short):
     """A final horizon longer than the record is the whole record (fitted through the
     coarse hold simulation instead of sample by sample); a short one fits less data:
@@ -342,6 +368,8 @@ def test_final_horizon(short):
         ({"search_factor": -2.0}, "search_factor must be > 0"),
         ({"bootstrap": 30}, "bootstrap must be a ParametricBootstrap or None, got int"),
         ({"final_horizon": 0.0}, "final_horizon must be > 0"),
+        ({"stiffness_restarts": (0.1, 0.0)}, r"stiffness_restarts\[\.\.\.\] must be > 0"),
+        ({"stiffness_restarts": 0.1}, "stiffness_restarts must be a sequence of numbers > 0"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):

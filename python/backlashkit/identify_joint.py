@@ -51,7 +51,9 @@ Choices (documented, configurable where it matters)
   refined on a short horizon (``horizons[0]`` = 0.15 s after the record start and
   after every torque jump, a few periods of the ringing); (iii) the ``n_continue``
   best distinct ones continued on growing horizons (0.4, 1, 3 s), and those still
-  competitive there on the whole record, the lowest final cost kept. The first horizon pins the sums
+  competitive there on the whole record, the lowest final cost kept; (iv) the best
+  restarted with the stiffness shifted (``stiffness_restarts``), since the whole record
+  is multimodal in the phase of the ringing. The first horizon pins the sums
   ``J_M + J_L``, ``f_M + f_L`` and the ringing frequency but hardly how the sums split
   (the local minima met away from paper A's drive: ``J_M`` 13-46 % high with ``f_M``
   26-60 % low), so the best first-horizon solution is also restarted from other
@@ -243,6 +245,9 @@ class ParametricBootstrap:
 #: Candidates whose cost (chi-square units) on the last short horizon exceeds the best
 #: one's by more than this are not refined on the whole record.
 WHOLE_RECORD_MARGIN = 10.0
+#: A stiffness restart is refined on the final data only if it beats the best solution
+#: by more than this (chi-square units) on the longest short horizon.
+RESTART_MARGIN = 1.0
 #: First-horizon solutions costing more than this times the best one's are not
 #: continued (the right basin was within 1.1 times the best in the failures of
 #: ``benchmarks/robustness_joint.py``).
@@ -478,6 +483,15 @@ class JointIdentifier:
         The first-horizon refinements keep every linear parameter within this factor
         of the prior and ``theta`` within ``[theta_max / 1000, theta_max]`` (default
         3; None: unbounded). Later stages are unbounded.
+    stiffness_restarts : sequence of float, optional
+        After the final refinement, restarts of the best solution with ``k_sh``
+        multiplied by ``e^{+-x}`` for every ``x`` given, refined on the longest short
+        horizon and, if they beat the best solution there, on the final data; kept if
+        they lower the final cost (default ``(0.15,)``: two restarts; ``()`` for none).
+        The final cost is multimodal in the phase of the ringing: at 20 dB on a light
+        load a fit from a 40 % prior error settled 22 % below the true stiffness, in a
+        minimum costing 25 (chi-square units) more than the one a 16 % higher stiffness
+        leads to.
     bootstrap : ParametricBootstrap, optional
         Standard error and interval of ``theta`` by parametric bootstrap instead of the
         Fisher information (default None: Fisher).
@@ -573,6 +587,7 @@ class JointIdentifier:
         stiffness_span: float = 1.6,
         split_shifts: Sequence[float] = (0.5,),
         search_factor: float | None = 3.0,
+        stiffness_restarts: Sequence[float] = (0.15,),
         bootstrap: ParametricBootstrap | None = None,
         final_horizon: float | None = None,
         workers: int | None = None,
@@ -597,6 +612,7 @@ class JointIdentifier:
         self.stiffness_span = stiffness_span
         self.split_shifts = split_shifts
         self.search_factor = search_factor
+        self.stiffness_restarts = stiffness_restarts
         self.final_horizon = final_horizon
         self.bootstrap = bootstrap
         self.workers = workers
@@ -629,6 +645,15 @@ class JointIdentifier:
             ) from None
         for x in shifts:
             v.positive("split_shifts[...]", x)
+        try:
+            restarts = [float(x) for x in self.stiffness_restarts]
+        except (TypeError, ValueError):
+            raise InputError(
+                "stiffness_restarts must be a sequence of numbers > 0, got "
+                f"{self.stiffness_restarts!r}"
+            ) from None
+        for x in restarts:
+            v.positive("stiffness_restarts[...]", x)
         if self.bootstrap is not None and not isinstance(self.bootstrap, ParametricBootstrap):
             raise InputError(
                 "bootstrap must be a ParametricBootstrap or None, got "
@@ -866,6 +891,22 @@ class JointIdentifier:
         rows_full = make_residual(final_spans, final_h, sig_now)
         finals = [lm_on(rows_full, st.z, self.max_iter) for st in kept]
         best = min(finals, key=lambda st: st.cost)
+        # the final cost is multimodal in the phase of the ringing: restart the best
+        # solution with the stiffness shifted, on the longest short horizon (cheap, and
+        # it ranks solutions as the final data do); refine on the final data only the
+        # restarts that beat the best there, keep what lowers the final cost
+        if "k_sh" in free and len(self.stiffness_restarts) and len(horizons) > 1:
+            rows_short = make_residual(screen, horizons[-2], sig_now)
+            ref = lm_on(rows_short, best.z, self.max_iter)
+            for x in self.stiffness_restarts:
+                for d_ in (-x, x):
+                    z0 = best.z.copy()
+                    z0[1 + free.index("k_sh")] += d_
+                    st = lm_on(rows_short, z0, self.max_iter)
+                    if st.cost < ref.cost - RESTART_MARGIN:
+                        st = lm_on(rows_full, st.z, self.max_iter)
+                        if st.cost < best.cost:
+                            best = st
         for _ in range(self.noise_iter if fixed_noise is None else 0):
             r = best.r
             sq, count, pos = np.zeros_like(sig_now), np.zeros(len(recs)), 0
