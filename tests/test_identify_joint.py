@@ -303,7 +303,7 @@ def test_paper_protocol_quick():
     assert abs(np.mean(out) - THETA) < 0.02 * THETA
 
 
-def test_stiffness_restarts_leave_a_wrong_ringing_phase():
+def test_stiffness_restarts_escape_a_wrong_ringing_phase():
     """A trial of ``benchmarks/robustness_joint.py --seed 4`` (light load J_L/J_M = 2,
     theta 2 deg, 20 dB, prior 40 % off): without the restarts the fit settles with
     ``k_sh`` 22 % low and theta 8 % low, in a minimum the true parameters beat; a
