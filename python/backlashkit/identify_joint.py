@@ -490,8 +490,9 @@ class JointIdentifier:
         they lower the final cost (default ``(0.15,)``: two restarts; ``()`` for none).
         The final cost is multimodal in the phase of the ringing: at 20 dB on a light
         load a fit from a 40 % prior error settled 22 % below the true stiffness, in a
-        minimum costing 25 (chi-square units) more than the one a 16 % higher stiffness
-        leads to.
+        minimum the true parameters beat, and a 16 % higher stiffness leads to the
+        one near the truth (``benchmarks/robustness_joint.py --seed 4``; the trial is
+        a test).
     bootstrap : ParametricBootstrap, optional
         Standard error and interval of ``theta`` by parametric bootstrap instead of the
         Fisher information (default None: Fisher).
