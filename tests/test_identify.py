@@ -368,6 +368,36 @@ def test_cli_bad_inputs(tmp_path, capsys, kind, pattern):
     assert re.search(pattern, lines[0]), lines[0]
 
 
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--method", "two-step", "--n-theta", "0"], "--n-theta must be > 0, got 0.0"),
+        (["--method", "two-step", "--cutoff-motor", "-1"], "--cutoff-motor must be > 0"),
+        (["--method", "two-step", "--cutoff-load", "5000"],
+         "--cutoff-load must be below the Nyquist frequency pi/ts = 3141.59 rad/s of"),
+        (["--prior-rel-std", "-1"], "--prior-rel-std must be >= 0"),
+        (["--bootstrap", "1"], "--bootstrap must be an integer >= 2, got 1"),
+        (["--bootstrap", "3", "--seed", "-1"], "--seed must be >= 0, got -1"),
+        (["--final-horizon", "nan"], "--final-horizon must be finite"),
+    ],
+)
+def test_cli_errors_name_the_flag(experiment_csv, argv, message, capsys):
+    # the library names its parameters (n_resamples); the CLI user typed a flag
+    code, out, err = cli(["identify", str(experiment_csv), "--drive", DRIVE_TOML, *argv],
+                         capsys)
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+
+
+def test_two_step_names_the_bad_cutoff(clean):
+    rec = noisy_record(clean[A1], 40.0, 40.0, 0, name="e1")
+    for kwargs, pattern in (({"cutoff_motor": 0.0}, "cutoff_motor must be > 0"),
+                            ({"cutoff_load": 1e6}, "cutoff_load must be below the Nyquist "
+                             r"frequency pi/ts = 3141\.59 rad/s of e1")):
+        with pytest.raises(InputError, match=pattern):
+            TwoStepIdentifier(PRIOR, **kwargs).fit(rec)
+
+
 def test_cli_subprocess_no_traceback(tmp_path):
     bad = _write(tmp_path / "bad.csv", "\x00\x01 not a csv at all\n")
     proc = subprocess.run(

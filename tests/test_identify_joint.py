@@ -443,7 +443,7 @@ def test_cli_joint_bootstrap(short_csv, capsys):
     assert code != 0 and "--final-horizon only applies with --method joint" in err
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--final-horizon", "0"])
     out, err = capsys.readouterr()
-    assert code != 0 and "final_horizon must be > 0" in err
+    assert code != 0 and "--final-horizon must be > 0" in err
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--final-horizon", "0.5",
                  "--json"])
     out, err = capsys.readouterr()
@@ -452,4 +452,4 @@ def test_cli_joint_bootstrap(short_csv, capsys):
     assert doc["final_horizon"] == 0.5 and doc["interval"] == "fisher"
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "1"])
     out, err = capsys.readouterr()
-    assert code != 0 and "n_resamples must be an integer >= 2" in err
+    assert code != 0 and "--bootstrap must be an integer >= 2" in err

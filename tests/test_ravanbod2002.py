@@ -98,6 +98,7 @@ def test_joint_meets_the_bars_at_err_p_40():
         ({"runs": 1}, "runs must be an integer >= 2"),
         ({"jobs": 0}, "jobs must be a positive integer"),
         ({"err_p": [1.5]}, r"err_p values must be in \[0, 1\)"),
+        ({"seed": -1}, r"seed must be an integer >= 0, got -1"),
     ],
 )
 def test_validation(kwargs, pattern):
@@ -114,6 +115,23 @@ def test_cli_refuses_to_overwrite(tmp_path, capsys):
     assert out.read_text() == "{}"
     code = cli.main(["reproduce", "ravanbod2002", "--err-p", "0.1,x"])
     assert code == 2 and "--err-p must be numbers" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--runs", "1"], "--runs must be an integer >= 2"),
+        (["--jobs", "0"], "--jobs must be a positive integer"),
+        (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
+        (["--err-p", "0.2,1.5"], "--err-p values must be in [0, 1)"),
+    ],
+)
+def test_cli_errors_name_the_flag(argv, message, capsys):
+    code = cli.main(["reproduce", "ravanbod2002", *argv])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err == f"backlashkit: error: {err.split('error: ', 1)[1]}"  # one line
+    assert len(err.strip().splitlines()) == 1 and message in err, err
 
 
 def test_cli_json_and_report(tmp_path, capsys):

@@ -20,6 +20,7 @@ import math
 import sys
 from typing import Any
 
+from .cli import flag_names
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .io import read_drive_toml, read_uncertainty_toml
 from .report_identify import add_report_option, maybe_write_report
@@ -229,8 +230,25 @@ def run(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        Exit status (0 on success; bad input raises :class:`InputError`).
+        Exit status (0 on success; bad input raises :class:`InputError`, whose
+        message names the flag, e.g. ``--final-horizon``, not the parameter).
     """
+    flags = dict(_FLAGS)
+    if args.prior_rel_std is not None:  # else the [uncertainty] table gave the values
+        flags["prior_rel_std"] = "--prior-rel-std"
+    with flag_names(flags):
+        return _run(args)
+
+
+#: Library parameters set from a flag of ``identify`` -> the flag.
+_FLAGS = {
+    "n_theta": "--n-theta", "cutoff_motor": "--cutoff-motor", "cutoff_load": "--cutoff-load",
+    "n_resamples": "--bootstrap", "seed": "--seed", "final_horizon": "--final-horizon",
+    "sample_time": "--sample-time",
+}
+
+
+def _run(args: argparse.Namespace) -> int:
     from .errors import InputError
 
     prior = read_drive_toml(args.drive, require_theta=False)
@@ -254,6 +272,8 @@ def run(args: argparse.Namespace) -> int:
             rel = read_uncertainty_toml(args.drive) or None
         everything = records + (finals or [])
         boot = None
+        if args.seed < 0:  # the library's message would offer a SeedSequence
+            raise InputError(f"--seed must be >= 0, got {args.seed}")
         if args.bootstrap is not None:
             from .identify_joint import ParametricBootstrap
 

@@ -16,11 +16,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 
 from .errors import InputError
 
-__all__ = ["main"]
+__all__ = ["flag_names", "main"]
 
 #: Modules that register subcommands, in the order they are listed by ``--help``.
 SUBCOMMAND_MODULES = ("_cli_simulate", "_cli_identify", "_cli_control", "_cli_reproduce")
@@ -51,6 +52,34 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module.add_parser(sub)
     return parser
+
+
+@contextmanager
+def flag_names(flags: Mapping[str, str]) -> Iterator[None]:
+    """Name the command-line flag, not the library parameter, in input errors.
+
+    The library validates its parameters and names them (``final_horizon must be >
+    0``); a CLI user typed ``--final-horizon``. Inside this context an
+    :class:`InputError` whose message starts with a parameter of ``flags`` is raised
+    again with the flag in its place.
+
+    Parameters
+    ----------
+    flags : mapping of str to str
+        Library parameter name -> flag, e.g. ``{"final_horizon": "--final-horizon"}``.
+
+    Yields
+    ------
+    None
+    """
+    try:
+        yield
+    except InputError as exc:
+        message = str(exc)
+        for name, flag in flags.items():
+            if message.startswith(name + " "):
+                raise InputError(flag + message[len(name):]) from exc
+        raise
 
 
 def fail(message: str) -> int:

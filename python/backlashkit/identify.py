@@ -661,6 +661,9 @@ class TwoStepIdentifier:
         dt4 = v.positive("dt4", self.dt4)
         level_window = v.positive("level_window", self.level_window)
         n_grid = _check_int("n_grid", self.n_grid, 2)
+        # named here: the filter would only say "cutoff", not which one
+        v.positive("cutoff_motor", self.cutoff_motor)
+        v.positive("cutoff_load", self.cutoff_load)
         recs = _as_records(records)
         finals = recs if final_records is None else _as_records(final_records, "final_records")
         alpha = prior.f_L / prior.J_L
@@ -669,6 +672,13 @@ class TwoStepIdentifier:
             com = commutation_instants(
                 rec, alpha, dt1=self.dt1, dt2=self.dt2, dt3=self.dt3, anchor=self.anchor
             )
+            for name, cut in (("cutoff_motor", self.cutoff_motor),
+                              ("cutoff_load", self.cutoff_load)):
+                if not cut < math.pi / rec.ts:
+                    raise InputError(
+                        f"{name} must be below the Nyquist frequency pi/ts = "
+                        f"{math.pi / rec.ts:.6g} rad/s of {rec.name}, got {cut!r}"
+                    )
             wmf = fir_lowpass(rec.w_motor, self.cutoff_motor, rec.ts, numtaps=self.numtaps)
             wlf = fir_lowpass(rec.w_load, self.cutoff_load, rec.ts, numtaps=self.numtaps)
             ini = pre_estimate(wmf, wlf, rec.ts, com.i_c, com.i_b)

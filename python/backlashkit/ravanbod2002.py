@@ -205,12 +205,14 @@ def run_ravanbod2002(
     Raises
     ------
     InputError
-        If ``runs``, ``jobs`` or an ``Err_p`` is out of range.
+        If ``runs``, ``jobs``, ``seed`` or an ``Err_p`` is out of range.
     """
     if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 2:
         raise InputError(f"runs must be an integer >= 2 (a spread needs two runs), got {runs!r}")
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise InputError(f"jobs must be a positive integer, got {jobs!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be an integer >= 0, got {seed!r}")
     errs = [float(e) for e in err_p]
     for e in errs:
         if not 0.0 <= e < 1.0:
@@ -436,10 +438,14 @@ def run_cli(args: argparse.Namespace) -> int:
     if len(snr1) != 2 or not all(math.isfinite(x) for x in snr1):
         raise InputError(f"--snr-step1 must be two finite numbers SNR_M,SNR_L in dB, got "
                          f"{args.snr_step1!r}")
-    doc = run_ravanbod2002(runs=args.runs, seed=args.seed,
-                           err_p=_numbers("--err-p", args.err_p), jobs=args.jobs,
-                           snr1=(snr1[0], snr1[1]),
-                           progress=lambda m: print(m, file=sys.stderr))
+    from .cli import flag_names
+
+    flags = {"runs": "--runs", "seed": "--seed", "jobs": "--jobs", "err_p": "--err-p"}
+    with flag_names(flags):
+        doc = run_ravanbod2002(runs=args.runs, seed=args.seed,
+                               err_p=_numbers("--err-p", args.err_p), jobs=args.jobs,
+                               snr1=(snr1[0], snr1[1]),
+                               progress=lambda m: print(m, file=sys.stderr))
     bars = checks(doc)
     doc["checks"] = [{"bar": b, "value": v, "met": bool(m)} for b, v, m in bars]
     text = format_tables(doc) + "\n\n" + "\n".join(
