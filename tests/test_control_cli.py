@@ -77,6 +77,11 @@ def test_reproduce_runner(tmp_path, capsys):
     for v in doc["variants"].values():
         assert {"controller", "theta_b_final", "rms_error_last", "max_abs_error_last"} <= set(v)
     assert doc["variants"]["smooth-filter"]["rms_error_last"] <= 2e-2
-    assert (tmp_path / "rep" / "fig5_exact_inverse.png").exists()
+    rep = tmp_path / "rep"
+    assert {"fig5_exact_inverse.png", "fig5_exact_inverse.svg", "comparison.svg",
+            "trace_exact.csv", "index.html"} <= {p.name for p in rep.iterdir()}
+    page = (rep / "index.html").read_text(encoding="utf-8")
+    assert 'src="fig6_smooth_inverse_alpha6.png"' in page and "MET" in page
+    assert "MISSED" not in page  # the runner returned 0: every bar met
     with pytest.raises(Exception, match="already exists"):
         tao1995.run_cli(p.parse_args(["--json", str(out)]))

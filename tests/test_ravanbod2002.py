@@ -7,6 +7,7 @@ checks share a few small runs; the full ``--runs 10`` reproduction is a benchmar
 
 from __future__ import annotations
 
+import html
 import json
 import math
 
@@ -142,8 +143,16 @@ def test_cli_json_and_report(tmp_path, capsys):
     doc = json.loads(captured.out)
     assert code in (0, 1) and code == (0 if all(c["met"] for c in doc["checks"]) else 1)
     assert doc["rows"][0]["err_p"] == 0.2 and "Table 1" in captured.err
-    assert {p.name for p in rep.iterdir()} == {"estimates.png", "ravanbod2002.json",
-                                               "report.md"}
+    assert {p.name for p in rep.iterdir()} == {"estimates.png", "estimates.svg",
+                                               "ravanbod2002.json", "index.html"}
+    page = (rep / "index.html").read_text(encoding="utf-8")
+    # self-contained: only the files beside it; every bar and both tables are on it
+    assert "<script" not in page and "http" not in page.replace("ravanbod2002.json", "")
+    assert 'src="estimates.png"' in page and "Table 1" in page and "Table 2" in page
+    for c in doc["checks"]:
+        assert html.escape(c["bar"]) in page
+    row = doc["rows"][0]["methods"]["two_step"]
+    assert f"{row['mean']:.4f}" in page
 
 
 def test_a_refused_fit_is_recorded_not_fatal(monkeypatch):

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._html import figure, page, save_figure
 from .errors import InputError
 from .identify import (
     DEFAULT_DT4,
@@ -69,19 +70,6 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike[str]
-
-_CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1000px;
-margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
-h1{font-size:1.5em;margin-bottom:.2em}h2{font-size:1.2em;margin-top:1.8em;
-border-bottom:1px solid #ddd}
-table{border-collapse:collapse;margin:.6em 0}
-th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}
-th{background:#f3f3f3}td.l,th.l{text-align:left}
-figure{margin:1em 0}img{max-width:100%;height:auto;border:1px solid #eee}
-figcaption{font-size:.9em;color:#555}.note{color:#555;font-size:.9em}
-"""
-
 
 # --- numbers -----------------------------------------------------------------------
 
@@ -454,20 +442,6 @@ def _deg(x: Any) -> str:
     return _fmt(math.degrees(float(x)), ".4g")
 
 
-def _save(fig, directory: Path, stem: str) -> str:
-    fig.savefig(directory / f"{stem}.png", dpi=110)
-    fig.savefig(directory / f"{stem}.svg")
-    return stem
-
-
-def _figure_html(stem: str, caption: str) -> str:
-    return (
-        f'<figure><a href="{stem}.svg"><img src="{stem}.png" alt="{html.escape(caption)}">'
-        f"</a><figcaption>{html.escape(caption)} (<a href=\"{stem}.svg\">SVG</a>)"
-        "</figcaption></figure>"
-    )
-
-
 def write_identification_report(
     directory: PathLike,
     records: Any,
@@ -563,7 +537,7 @@ def write_identification_report(
         plot_speed_fit(f.t, f.w_motor, f.sim_motor, label="w_M", ax=axes[k, 0])
         plot_speed_fit(f.t, f.w_load, f.sim_load, label="w_L", ax=axes[k, 1])
         axes[k, 0].set_title(_short(f.record.name), fontsize="medium", loc="left")
-    _save(fig, out, "fit")
+    save_figure(fig, out, "fit")
 
     # 2. commutation windows
     has_comm = (t_c is not None and t_b is not None and len(t_c) == len(recs)
@@ -574,7 +548,7 @@ def write_identification_report(
         for rec, c, b, ax in zip(recs, t_c, t_b, axes, strict=True):
             plot_commutation(rec, float(c), float(b), cutoff_motor=cut_m, cutoff_load=cut_l,
                              ax=ax)
-        _save(fig, out, "commutation")
+        save_figure(fig, out, "commutation")
 
     # 3. cost curve
     top = 2.0 * theta
@@ -594,7 +568,7 @@ def write_identification_report(
     fig = plot_cost(grid, costs, theta=theta,
                     theta_ini=None if theta_ini is None else float(theta_ini),
                     bounds=None if bounds is None else (float(bounds[0]), float(bounds[1])))
-    _save(fig, out, "cost")
+    save_figure(fig, out, "cost")
 
     # 4. residual autocorrelation
     fig = Figure(figsize=(8, 3.2), layout="constrained")
@@ -602,7 +576,7 @@ def write_identification_report(
     for f in fits:
         plot_residual_acf(f.w_motor - f.sim_motor, ts=f.record.ts,
                           label=_short(f.record.name, 30) if len(fits) > 1 else None, ax=ax)
-    _save(fig, out, "residual_acf")
+    save_figure(fig, out, "residual_acf")
 
     # the page
     std = getattr(result, "std_", None)
@@ -660,12 +634,12 @@ def write_identification_report(
         '<p class="note">fit = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) over '
         f"[t_s, t_s + {dt4:g} s]; model: prior with the estimated theta, started at the "
         "measured steady state.</p>",
-        _figure_html("fit", "Measured (grey) and simulated (red) motor and load speeds"),
+        figure("fit", "Measured (grey) and simulated (red) motor and load speeds"),
     ]
     if has_comm:
         sections += [
             "<h2>Commutation window</h2>",
-            _figure_html(
+            figure(
                 "commutation",
                 "Filtered speeds around the step-down: contact loss t_c, impact t_b and the "
                 "integral of w_M - w_L (shaded) whose -1/2 is the pre-estimate (eq. 6)",
@@ -673,21 +647,15 @@ def write_identification_report(
         ]
     sections += [
         "<h2>Criterion against theta</h2>",
-        _figure_html("cost", f"W_1(theta) on w_M; shaded: {window}"),
+        figure("cost", f"W_1(theta) on w_M; shaded: {window}"),
         "<h2>Residual autocorrelation</h2>",
-        _figure_html(
+        figure(
             "residual_acf",
             "Normalised autocorrelation of w_M - w_M,sim; inside the dashed band "
             "±1.96/sqrt(N) the residual is compatible with white noise",
         ),
     ]
-    page = (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-        f"<title>{html.escape(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n"
-        + "\n".join(sections)
-        + "\n</body>\n</html>\n"
-    )
-    index.write_text(page, encoding="utf-8")
+    index.write_text(page(title, sections), encoding="utf-8")
     return index
 
 
