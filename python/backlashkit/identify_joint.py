@@ -50,8 +50,8 @@ Choices (documented, configurable where it matters)
   (:class:`~backlashkit.identify.TwoStepIdentifier`) as starts; (ii) every start
   refined on a short horizon (``horizons[0]`` = 0.15 s after the record start and
   after every torque jump, a few periods of the ringing); (iii) the ``n_continue``
-  best distinct ones continued on growing horizons (0.4, 1, 3 s) and, on a second
-  path, on finer steps (``fine_horizons``: 0.25, 0.4, 0.6, 1, 1.6, 3 s), and the end
+  best distinct ones continued on growing horizons (0.4, 1, 3 s) and the best one also
+  on finer steps (``fine_horizons``: 0.25, 0.4, 0.6, 1, 1.6, 3 s), and the end
   points still competitive there refined on the whole record, the lowest final cost
   kept; (iv) the best
   restarted with the stiffness shifted (``stiffness_restarts``), since the whole record
@@ -471,13 +471,13 @@ class JointIdentifier:
         multi-start runs on the first, the best solutions are continued on the next.
     fine_horizons : sequence of float, optional
         Horizons in s inserted between the first and the last of ``horizons`` for a
-        second continuation path from the same solutions (default ``(0.25, 0.6,
-        1.6)``; ``()`` for one path). The end points of both paths compete on the
-        whole record like the candidates of one path (identical ones are refined
-        once). On a rattling light load a long step of the horizon can land in the
-        wrong basin (``theta`` 15 % off at 5 deg, 20 dB, where the CRB is 1.1 %) and a
-        short one elsewhere; the lower final cost decides. It costs about 0.1 s per
-        fit on paper A's drive.
+        second continuation path from the best first-horizon solution (default
+        ``(0.25, 0.6, 1.6)``; ``()`` for one path). The end points of both paths
+        compete on the whole record like the candidates of one path (identical ones
+        are refined once). On a rattling light load a long step of the horizon can
+        land in the wrong basin (``theta`` 15 % off at 5 deg, 20 dB, where the CRB is
+        1.1 %) and a short one elsewhere; the lower final cost decides. It costs
+        about 0.1 s per fit on paper A's drive.
     n_continue : int, optional
         Distinct solutions of the first horizon, with a cost within 1.25 times the
         best one's, continued on the growing horizons (default at most 3); those still
@@ -882,9 +882,10 @@ class JointIdentifier:
                 break
             if all(np.max(np.abs(st.z - c_.z)) > SAME_POINT for c_ in cands):
                 cands.append(st)
-        # two continuation paths from the same candidates, the second with finer steps:
-        # a long step can jump to the wrong basin where the ringing is rich (a light
-        # load), a short one elsewhere; their end points compete below (same horizon)
+        # two continuation paths, the second with finer steps and from the best
+        # candidate only (the cost of all of them did not pay): a long step can jump to
+        # the wrong basin where the ringing is rich (a light load), a short one
+        # elsewhere; their end points compete below (on the same last horizon)
         short = horizons[:-1]
         paths = [short[1:]]
         if len(short) > 1:
@@ -894,8 +895,8 @@ class JointIdentifier:
                 paths.append(fine)
         rows_at: dict = {}
         ends: list[_LMState] = []
-        for path in paths:
-            path_states = cands
+        for k_path, path in enumerate(paths):
+            path_states = cands if k_path == 0 else cands[:1]
             for hz in path:
                 if hz not in rows_at:
                     rows_at[hz] = make_residual(screen, hz, sig_now)
