@@ -477,7 +477,7 @@ class JointIdentifier:
         are refined once). On a rattling light load a long step of the horizon can
         land in the wrong basin (``theta`` 15 % off at 5 deg, 20 dB, where the CRB is
         1.1 %) and a short one elsewhere; the lower final cost decides. It costs
-        about 0.1 s per fit on paper A's drive.
+        0.1-0.2 s per fit on paper A's drive (README, "Speed").
     n_continue : int, optional
         Distinct solutions of the first horizon, with a cost within 1.25 times the
         best one's, continued on the growing horizons (default at most 3); those still

@@ -506,8 +506,8 @@ def plot_estimates(doc: dict[str, Any], *, ax: Axes | None = None) -> Figure:
 
 
 def _write_report(rep: Path, doc: dict[str, Any], text: str, body: str) -> None:
-    """``index.html`` (tables beside the paper's, the bars, the estimates' figure), the
-    figure as PNG and SVG, and the JSON document, into ``rep``."""
+    """``index.html`` (tables beside the paper's, the bars of ``doc["checks"]``, the
+    estimates' figure), the figure as PNG and SVG, and the JSON document, into ``rep``."""
     from ._html import bars_table, figure, page, save_figure, table
 
     rep.mkdir(parents=True, exist_ok=True)
@@ -551,7 +551,7 @@ def _write_report(rep: Path, doc: dict[str, Any], text: str, body: str) -> None:
         "the paper's sign; std with ddof = 1. Every estimate is in "
         '<a href="ravanbod2002.json">ravanbod2002.json</a>.</p>',
         "<h2>Bars (issue 3)</h2>",
-        bars_table((b, v, m) for b, v, m in checks(doc)),
+        bars_table((c["bar"], c["value"], c["met"]) for c in doc["checks"]),
         "<h2>Table 1: two-step method (eq. 6 pre-estimate, then least squares)</h2>",
         method_table("two_step"),
         "<h2>Table 2: regression baseline (theta over [0, 15 deg])</h2>",
