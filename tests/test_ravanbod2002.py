@@ -131,7 +131,7 @@ def test_cli_errors_name_the_flag(argv, message, capsys):
     code = cli.main(["reproduce", "ravanbod2002", *argv])
     out, err = capsys.readouterr()
     assert code == 2 and out == ""
-    assert err == f"backlashkit: error: {err.split('error: ', 1)[1]}"  # one line
+    assert err.startswith("backlashkit: error: ")
     assert len(err.strip().splitlines()) == 1 and message in err, err
 
 
