@@ -78,6 +78,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate as v
+from ._clipping import check_not_clipped
 from .errors import InputError
 from .plants import TwoMassDrive
 
@@ -178,7 +179,10 @@ def _as_records(records, what: str = "records") -> list[Record]:
     recs = list(records)
     if not recs:
         raise InputError(f"{what} must hold at least one record, got none")
-    return [_as_record(r, i) for i, r in enumerate(recs)]
+    out = [_as_record(r, i) for i, r in enumerate(recs)]
+    for rec in out:  # a clipped speed cannot be fitted: refuse it rather than answer
+        check_not_clipped(rec)
+    return out
 
 
 def find_step_down(record: Record) -> tuple[int, float, float, float]:
