@@ -39,14 +39,13 @@ import json
 import math
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
 import backlashkit as bk
 from backlashkit import signals
+from backlashkit._parallel import process_pool
 from backlashkit.errors import SensitivityWarning
 from backlashkit.identify import Record
 from backlashkit.identify_joint import JointIdentifier, ParametricBootstrap, cramer_rao_bound
@@ -156,7 +155,7 @@ def main() -> None:
             if args.bootstrap:
                 opts["bootstrap"] = ParametricBootstrap(args.bootstrap, seed=i)
             tasks.append((d, snr, e, s, opts))
-    with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
+    with process_pool(args.jobs) as pool:
         results = list(pool.map(trial, tasks, chunksize=1))
     if args.dump:
         rows = [{"scenario": k, "trial": i, "drive": INERTIAS[d.J_L], "theta": d.theta,

@@ -40,14 +40,13 @@ import sys
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import signals
+from ._parallel import process_pool
 from .errors import InputError, SensitivityWarning
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .identify_joint import JointIdentifier, cramer_rao_bound
@@ -237,8 +236,8 @@ def run_ravanbod2002(
             results.append(_one_run(task))
             if progress and (k + 1) % runs == 0:
                 progress(f"Err_p = {task[0]:.0%}: {runs} runs, {time.perf_counter() - start:.1f} s")
-    else:  # "spawn": fresh interpreters, no fork of a process that has started threads
-        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
+    else:
+        with process_pool(jobs) as pool:
             results = list(pool.map(_one_run, tasks))
         if progress:
             progress(f"{len(tasks)} runs on {jobs} processes, {time.perf_counter() - start:.1f} s")
