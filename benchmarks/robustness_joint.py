@@ -22,7 +22,7 @@ scenarios and the count of trials beyond ``max(5 %, 3 CRB)``.
 
 Run: ``python benchmarks/robustness_joint.py [--trials 8] [--seed 3] [--jobs 2]
 [--stiffness-grid 9] [--split-shifts 0.5] [--search-factor 3] [--final-horizon H]
-[--fine-horizons 0.25,0.6,1.6]
+[--fine-horizons 0.25,0.6,1.6] [--ambiguity-starts 4]
 [--bootstrap N] [--scenarios 0,1,...] [--dump FILE]``. ``--bootstrap N`` gives every fit
 ``ParametricBootstrap(N, seed=trial index)`` (N + 1 fits per trial) and reports the
 coverage of its interval beside that of the Fisher interval of the same fits;
@@ -129,6 +129,9 @@ def main() -> None:
     ap.add_argument("--fine-horizons", default="0.25,0.6,1.6",
                     help="JointIdentifier(fine_horizons=...), comma-separated ('' for one "
                     "continuation path, the code before it)")
+    ap.add_argument("--ambiguity-starts", type=int, default=4,
+                    help="JointIdentifier(ambiguity_starts=...) (default 4, its default; 0: "
+                    "off, the code before it)")
     ap.add_argument("--bootstrap", type=int, default=0,
                     help="ParametricBootstrap(n_resamples) per fit (default 0: Fisher)")
     ap.add_argument("--scenarios", default="",
@@ -142,6 +145,7 @@ def main() -> None:
         "search_factor": None if args.search_factor == "none" else float(args.search_factor),
         "final_horizon": args.final_horizon,
         "fine_horizons": tuple(float(x) for x in args.fine_horizons.split(",") if x.strip()),
+        "ambiguity_starts": args.ambiguity_starts,
     }
     start = time.perf_counter()
     scen = list(scenarios(args.err_p))
