@@ -107,7 +107,7 @@ def test_cli_reports_a_clipped_file(responses, tmp_path, capsys):
     rec = _clipped_record(responses, "x")
     path = tmp_path / "clipped.csv"
     write_csv(path, {"t": rec.t, "torque": rec.torque, "w_motor": rec.w_motor,
-                             "w_load": rec.w_load})
+                     "w_load": rec.w_load})
     drive = tmp_path / "drive.toml"
     drive.write_text("[drive]\n" + "".join(f"{k} = {v!r}\n" for k, v in P_TRUE.items()))
     code = main(["identify", str(path), "--drive", str(drive), "--json"])

@@ -4,7 +4,7 @@ Every worker's NumPy would otherwise start one OpenBLAS thread per core, so ``jo
 workers on ``jobs`` cores run ``jobs`` squared busy threads: the Gauss-Newton products
 ``J^T J`` of the joint fit (320 010 x 7 on paper A's records) gain nothing from a second
 thread (3.4 ms either way, one process), but two workers with two threads each made
-``backlashkit reproduce ravanbod2002 --runs 10 --jobs 2`` take 68 s instead of 28 s on
+``backlashkit reproduce ravanbod2002 --runs 10 --jobs 2`` take 68 s instead of 31 s on
 a 2-core machine (README, "Speed").
 """
 
