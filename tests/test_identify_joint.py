@@ -327,7 +327,7 @@ def _robustness_trial(seed: int, scenario: int, trial: int, trials: int, theta_d
 
 
 def test_stiffness_restarts_escape_a_wrong_ringing_phase():
-    """A trial of ``benchmarks/robustness_joint.py --seed 4`` (light load J_L/J_M = 2,
+    """A trial of ``benchmarks/robustness_joint.py --trials 6 --seed 4`` (light load J_L/J_M = 2,
     theta 2 deg, 20 dB, prior 40 % off): without the restarts the fit settles with
     ``k_sh`` 22 % low and theta 8 % low, in a minimum the true parameters beat; a
     restart at a 16 % higher stiffness reaches the minimum near the truth (so does the

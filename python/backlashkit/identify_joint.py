@@ -541,7 +541,7 @@ class JointIdentifier:
         The final cost is multimodal in the phase of the ringing: at 20 dB on a light
         load a fit from a 40 % prior error settled 22 % below the true stiffness, in a
         minimum the true parameters beat, and a 16 % higher stiffness leads to the
-        one near the truth (``benchmarks/robustness_joint.py --seed 4``; the trial is
+        one near the truth (``benchmarks/robustness_joint.py --trials 6 --seed 4``; the trial is
         a test).
     bootstrap : ParametricBootstrap, optional
         Standard error and interval of ``theta`` by parametric bootstrap instead of the
