@@ -98,7 +98,7 @@ def trial(task):
                          (d.simulate(rec.t, rec.torque) for rec in recs), strict=True))
                  for d in (drive, fit.drive_)]
     fisher = fit.param_std_["theta"]
-    return fit.theta_, fit.std_, fit.ci95_, costs[0] < costs[1], fisher
+    return fit.theta_, fit.std_, fit.ci95_, costs[0] < costs[1], fisher, fit.ambiguous_
 
 
 def crb(drive, snr):
@@ -165,7 +165,7 @@ def main() -> None:
         rows = [{"scenario": k, "trial": i, "drive": INERTIAS[d.J_L], "theta": d.theta,
                  "theta_deg": math.degrees(d.theta), "snr_db": snr,
                  "estimate": r[0], "std": r[1], "ci95": list(r[2]), "truth_cost_lower": bool(r[3]),
-                 "std_fisher": r[4]}
+                 "std_fisher": r[4], "ambiguous": bool(r[5])}
                 for (k, d, snr, _), chunk_start in zip(scen, range(0, len(results), args.trials),
                                                        strict=True)
                 for i, r in enumerate(results[chunk_start : chunk_start + args.trials])]
@@ -186,8 +186,8 @@ def main() -> None:
         est = np.array([r[0] for r in chunk])
         err = (est - d.theta) / d.theta
         bound = crb(d, snr) / d.theta
-        cover = sum(lo <= d.theta <= hi for _, _, (lo, hi), _, _ in chunk)
-        cover_fisher = sum(abs(th - d.theta) <= 1.96 * sf for th, *_, sf in chunk)
+        cover = sum(lo <= d.theta <= hi for _, _, (lo, hi), *_ in chunk)
+        cover_fisher = sum(abs(r[0] - d.theta) <= 1.96 * r[4] for r in chunk)
         missed = [r[3] for r, e in zip(chunk, err, strict=True) if abs(e) > 0.05]
         uncovered = [r[3] for r in chunk if not r[2][0] <= d.theta <= r[2][1]]
         n_uncovered += len(uncovered)
@@ -222,6 +222,8 @@ def main() -> None:
     caveat = (" (over the whole records, which --final-horizon does not fit)"
               if args.final_horizon else "")
     print(f"trials beyond max(5 %, 3 CRB): {n_gross} of {n_all}")
+    n_amb = sum(bool(r[5]) for r in results)
+    print(f"ambiguous searches (JointIdentifier.ambiguous_): {n_amb} of {n_all}")
     print(f"intervals missing the truth: {n_uncovered}; in {n_uncovered_truth_better} of them "
           f"the true parameters have a lower cost than the estimate{caveat}")
     print(f"trials off by more than 5 %: {n_fail}; in {n_truth_better} of them the true "

@@ -368,6 +368,7 @@ def test_ambiguity_starts_continue_more_candidates():
     drive, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
     usual = JointIdentifier(prior, ambiguity_starts=0).fit(recs)
     fit = JointIdentifier(prior).fit(recs)
+    assert usual.ambiguous_ and fit.ambiguous_  # detected either way; acted on if asked
     assert usual.theta_ < 0.8 * drive.theta and usual.params_["k_sh"] > 1.3 * drive.k_sh
     assert abs(usual.theta_ - drive.theta) > 1.96 * usual.std_
     assert abs(fit.theta_ / drive.theta - 1) < 0.1
@@ -386,6 +387,7 @@ def test_final_horizon(short):
     prior = bk.TwoMassDrive(**{n: 1.1 * x for n, x in P_TRUE.items()})
     rec = _noisy(clean, 30, 5)
     whole = JointIdentifier(prior).fit(rec)
+    assert not whole.ambiguous_  # paper A's drive: the continuation paths agree
     long = JointIdentifier(prior, final_horizon=10.0).fit(rec)
     assert long.theta_ == pytest.approx(whole.theta_, rel=1e-6)
     assert long.std_ == pytest.approx(whole.std_, rel=1e-4)

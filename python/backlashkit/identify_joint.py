@@ -609,6 +609,11 @@ class JointIdentifier:
         for, located by the model's event detection between samples rather than on
         the sampled load speed); ``None`` for an instant that does not occur (or
         every entry when the record has no step-down).
+    ambiguous_ : bool
+        True when the continuation paths ended in distinct minima of nearly equal cost
+        (``ambiguity_starts``): the likelihood is multimodal on these records, and the
+        estimate deserves a second look (e.g. a parametric bootstrap or a longer
+        record).
     t_c_, t_b_ : list of float or None
         The ``t_c`` and ``t_b`` of ``commutations_``.
     """
@@ -942,7 +947,8 @@ class JointIdentifier:
             ends += continued(path, cands if k_path == 0 else cands[:1])
         # distinct end points of nearly equal cost: the landscape is multimodal here, so
         # continue more first-horizon solutions (more grid minima among their starts)
-        if self.ambiguity_starts and len(paths[0]) and _basins(ends) > 1:
+        self.ambiguous_ = bool(len(paths[0]) and _basins(ends) > 1)
+        if self.ambiguity_starts and self.ambiguous_:
             more = np.flatnonzero(is_min.ravel())
             more = more[np.argsort(costs.ravel()[more])]
             more = more[self.n_starts : self.n_starts + self.ambiguity_starts]
