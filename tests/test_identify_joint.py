@@ -26,6 +26,7 @@ from backlashkit.identify_joint import (
     JointIdentifier,
     cramer_rao_bound,
 )
+from backlashkit.io import write_csv
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 DRIVE_TOML = str(EXAMPLES / "paper_drive.toml")
@@ -379,6 +380,22 @@ def test_ambiguity_starts_continue_more_candidates():
     assert sse[1] < sse[0] - 10
 
 
+def test_cli_notes_an_ambiguous_fit(tmp_path, capsys):
+    """``identify`` says when the search found distinct minima (the trial above)."""
+    _, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
+    paths = []
+    for k, rec in enumerate(recs):
+        paths.append(str(tmp_path / f"e{k}.csv"))
+        write_csv(paths[-1], {"t": rec.t, "torque": rec.torque, "w_motor": rec.w_motor,
+                              "w_load": rec.w_load})
+    drive = tmp_path / "prior.toml"
+    drive.write_text("[drive]\n" + "".join(f"{n} = {getattr(prior, n)!r}\n"
+                                           for n in LINEAR_PARAMS))
+    assert main(["identify", *paths, "--drive", str(drive)]) == 0
+    out, _ = capsys.readouterr()
+    assert "note: the search ended in distinct minima of nearly equal cost" in out
+
+
 def test_final_horizon(short):
     """A final horizon longer than the record is the whole record (fitted through the
     coarse hold simulation instead of sample by sample); a short one fits less data:
@@ -503,6 +520,7 @@ def test_cli_joint_bootstrap(short_csv, capsys):
     assert code == 0, err
     doc = json.loads(out)
     assert doc["final_horizon"] == 0.5 and doc["interval"] == "fisher"
+    assert doc["ambiguous"] is False
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "1"])
     out, err = capsys.readouterr()
     assert code != 0 and "--bootstrap must be an integer >= 2" in err

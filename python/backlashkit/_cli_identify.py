@@ -295,6 +295,7 @@ def _run(args: argparse.Namespace) -> int:
         ci95 = [float(x) for x in est.ci95_]
         extra = {
             "interval": est.interval_,
+            "ambiguous": est.ambiguous_,
             "final_horizon": est.final_horizon,
             "std_fisher": est.param_std_["theta"],
             "params": est.params_,
@@ -369,6 +370,10 @@ def _run(args: argparse.Namespace) -> int:
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"std {std:.3g} rad, 95% interval [{ci95[0]:.5g}, {ci95[1]:.5g}] rad{how}",
               file=out)
+        if est.ambiguous_:
+            print("note: the search ended in distinct minima of nearly equal cost (the "
+                  "likelihood is multimodal on these records); the interval describes the "
+                  "best one only: try --bootstrap N or longer records", file=out)
         for name in est.estimated_[1:]:
             print(f"{name:<9} = {est.params_[name]:.5g} (std {est.param_std_[name]:.3g})",
                   file=out)
