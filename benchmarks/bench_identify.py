@@ -13,6 +13,10 @@
    estimator's model instants (``JointIdentifier.commutations_``, what ``identify``
    reports by default) fitted to the same noise-free records with the 30 % prior.
 
+5. The Gauss-Newton product ``J^T J`` of the joint fit's final stage (320 010 x 7, the
+   shape on these records) with the BLAS library's default threads and with one
+   (why ``JointIdentifier.fit`` and the worker pools run one, ``backlashkit._parallel``).
+
 ``--stiffness-grid N`` times ``JointIdentifier(stiffness_grid=N)`` in 2. instead.
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
@@ -34,6 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from backlashkit import TwoMassDrive, signals
 from backlashkit.identify import (
@@ -98,6 +103,12 @@ def main() -> None:
           f"{f' (stiffness_grid={args.stiffness_grid})' if args.stiffness_grid > 1 else ''}")
     print(f"{'  TwoStepIdentifier.fit (paper A), workers=1':<55} {t_two:7.2f} s")
     print(f"{'  RegressionIdentifier.fit (Table 2 baseline), workers=1':<55} {t_reg:7.2f} s")
+    jac = np.random.default_rng(0).standard_normal((7, 320_010)).T  # as the fit lays it out
+    t_gram = _median(lambda: [jac.T @ jac for _ in range(20)], args.repeats) / 20
+    with threadpool_limits(limits=1, user_api="blas"):
+        t_gram1 = _median(lambda: [jac.T @ jac for _ in range(20)], args.repeats) / 20
+    print(f"{'  J^T J (320010 x 7), BLAS default threads / one thread':<55} "
+          f"{1e3 * t_gram:5.2f} / {1e3 * t_gram1:.2f} ms")
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
     t = signals.time_grid(2 * T_S, TS)
     clean = []

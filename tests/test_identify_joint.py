@@ -327,6 +327,13 @@ def _robustness_trial(seed: int, scenario: int, trial: int, trials: int, theta_d
     return drive, recs, prior
 
 
+def _weighted_sse(est, noise):
+    """Sum of squared residuals of a fit weighted by ``noise`` (one set of noise levels
+    for the fits compared, so that their costs compare)."""
+    return sum(np.sum(em**2) / s_m**2 + np.sum(el**2) / s_l**2
+               for (em, el), (s_m, s_l) in zip(est.residuals_, noise, strict=True))
+
+
 def test_stiffness_restarts_escape_a_wrong_ringing_phase():
     """A trial of ``benchmarks/robustness_joint.py --trials 6 --seed 4`` (light load J_L/J_M = 2,
     theta 2 deg, 20 dB, prior 40 % off): without the restarts the fit settles with
@@ -353,11 +360,7 @@ def test_fine_horizons_avoid_a_wrong_basin():
     assert one_path.theta_ < 0.9 * drive.theta
     assert abs(fit.theta_ / drive.theta - 1) < 0.02
     assert abs(fit.theta_ - drive.theta) < 1.96 * fit.std_
-    # the same noise levels: the costs compare
-    sse = [sum(np.sum(em**2) / s_m**2 + np.sum(el**2) / s_l**2
-               for (em, el), (s_m, s_l) in zip(e.residuals_, fit.noise_std_, strict=True))
-           for e in (one_path, fit)]
-    assert sse[1] < sse[0] - 100
+    assert _weighted_sse(fit, fit.noise_std_) < _weighted_sse(one_path, fit.noise_std_) - 100
 
 
 def test_ambiguity_starts_continue_more_candidates():
@@ -374,10 +377,7 @@ def test_ambiguity_starts_continue_more_candidates():
     assert abs(usual.theta_ - drive.theta) > 1.96 * usual.std_
     assert abs(fit.theta_ / drive.theta - 1) < 0.1
     assert abs(fit.theta_ - drive.theta) < 1.96 * fit.std_
-    sse = [sum(np.sum(em**2) / s_m**2 + np.sum(el**2) / s_l**2
-               for (em, el), (s_m, s_l) in zip(e.residuals_, fit.noise_std_, strict=True))
-           for e in (usual, fit)]
-    assert sse[1] < sse[0] - 10
+    assert _weighted_sse(fit, fit.noise_std_) < _weighted_sse(usual, fit.noise_std_) - 10
 
 
 def test_cli_notes_an_ambiguous_fit(tmp_path, capsys):

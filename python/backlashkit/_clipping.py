@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
+from .signals import _noise_hp
 
 #: Fewest samples at a channel's extreme counted as clipping.
 MIN_COUNT = 5
@@ -73,8 +74,6 @@ def find_clipping(y: np.ndarray) -> Clipping | None:
         The clipped samples (module docstring for the criteria; the side with more of
         them if both are), or None if the channel is not clipped.
     """
-    from .identify_joint import _noise_hp  # here: it imports identify, which imports us
-
     y = np.asarray(y, float)
     n = y.size
     if n < MIN_COUNT + 1:

@@ -1,11 +1,11 @@
 """Process pools for the studies (``reproduce``, the benchmarks): one BLAS thread each.
 
 Every worker's NumPy would otherwise start one OpenBLAS thread per core, so ``jobs``
-workers on ``jobs`` cores run ``jobs`` squared busy threads: the Gauss-Newton products
-``J^T J`` of the joint fit (320 010 x 7 on paper A's records) gain nothing from a second
-thread (3.4 ms either way, one process), but two workers with two threads each made
-``backlashkit reproduce ravanbod2002 --runs 10 --jobs 2`` take 68 s instead of 31 s on
-a 2-core machine (README, "Speed").
+workers on ``jobs`` cores run ``jobs`` squared busy threads. The Gauss-Newton products
+``J^T J`` of the joint fit (320 010 x 7 on paper A's records) gain nothing from a
+second thread (3.3 ms either way in one process, ``benchmarks/bench_identify.py``),
+but two workers with two threads each made ``backlashkit reproduce ravanbod2002
+--runs 10 --jobs 2`` take 68 s instead of 31 s on a 2-core machine (README, "Speed").
 """
 
 from __future__ import annotations

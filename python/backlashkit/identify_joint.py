@@ -102,6 +102,7 @@ from . import _validate as v
 from .errors import InputError, SensitivityWarning
 from .identify import Record, TwoStepIdentifier, _as_records, find_step_down
 from .plants import TwoMassDrive
+from .signals import _noise_hp
 
 __all__ = [
     "CramerRaoBound",
@@ -119,14 +120,6 @@ ArrayLike = Sequence[float] | np.ndarray
 
 def _drive(base: TwoMassDrive, names: Sequence[str], values: np.ndarray) -> TwoMassDrive:
     return replace(base, **{n: float(x) for n, x in zip(names, values, strict=True)})
-
-
-def _noise_hp(y: np.ndarray) -> float:
-    """Noise std from the robust spread of the second difference (``/ sqrt(6)``)."""
-    d2 = np.diff(y, 2)
-    if d2.size < 3:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
 
 
 @dataclass

@@ -458,3 +458,11 @@ def measure_snr_db(clean: ArrayLike, noisy: ArrayLike) -> float:
     if power == 0.0:
         return -math.inf
     return 10.0 * math.log10(power / var)
+
+
+def _noise_hp(y: np.ndarray) -> float:
+    """Noise std from the robust spread of the second difference (``/ sqrt(6)``)."""
+    d2 = np.diff(y, 2)
+    if d2.size < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
