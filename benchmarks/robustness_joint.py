@@ -22,10 +22,12 @@ scenarios and the count of trials beyond ``max(5 %, 3 CRB)``.
 
 Run: ``python benchmarks/robustness_joint.py [--trials 20] [--seed 5] [--jobs 2]
 [--stiffness-grid 9] [--split-shifts 0.5] [--search-factor 3] [--final-horizon H]
-[--fine-horizons 0.25,0.6,1.6] [--ambiguity-starts 4]
-[--bootstrap N] [--scenarios 0,1,...] [--dump FILE]``. ``--bootstrap N`` gives every fit
-``ParametricBootstrap(N, seed=trial index)`` (N + 1 fits per trial) and reports the
-coverage of its interval beside that of the Fisher interval of the same fits;
+[--fine-horizons 0.25,0.6,1.6] [--ambiguity-starts 4] [--interval profile|fisher]
+[--bootstrap N] [--scenarios 0,1,...] [--dump FILE]``. ``--interval`` chooses the
+interval (default the profile likelihood, the identifier's default); ``--bootstrap N``
+gives every fit ``ParametricBootstrap(N, seed=trial index)`` (N + 1 fits per trial).
+Unless the interval is Fisher's, the coverage of the Fisher interval of the same fits
+is reported beside it;
 ``--scenarios`` runs only the listed rows (0-8: J_L/J_M = 2, 9-17: 14, 18-26: 51).
 Trial ``i`` of a scenario uses ``SeedSequence([seed, scenario index]).spawn(trials)[i]``,
 so results do not depend on ``--jobs``.
@@ -48,7 +50,8 @@ from backlashkit import signals
 from backlashkit._parallel import process_pool
 from backlashkit.errors import SensitivityWarning
 from backlashkit.identify import Record
-from backlashkit.identify_joint import JointIdentifier, ParametricBootstrap, cramer_rao_bound
+from backlashkit.identify_joint import JointIdentifier, cramer_rao_bound
+from backlashkit.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
 
 BASE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 #: load inertia -> label (ratio J_L / J_M about 2, 14, 50)
@@ -98,7 +101,8 @@ def trial(task):
                          (d.simulate(rec.t, rec.torque) for rec in recs), strict=True))
                  for d in (drive, fit.drive_)]
     fisher = fit.param_std_["theta"]
-    return fit.theta_, fit.std_, fit.ci95_, costs[0] < costs[1], fisher, fit.ambiguous_
+    return (fit.theta_, fit.std_, fit.ci95_, costs[0] < costs[1], fisher, fit.ambiguous_,
+            fit.ci95_bounded_)
 
 
 def crb(drive, snr):
@@ -132,6 +136,8 @@ def main() -> None:
     ap.add_argument("--ambiguity-starts", type=int, default=4,
                     help="JointIdentifier(ambiguity_starts=...) (default 4, its default; 0: "
                     "off, the code before it)")
+    ap.add_argument("--interval", choices=("profile", "fisher"), default="profile",
+                    help="JointIdentifier(interval=...) (default profile, its default)")
     ap.add_argument("--bootstrap", type=int, default=0,
                     help="ParametricBootstrap(n_resamples) per fit (default 0: Fisher)")
     ap.add_argument("--scenarios", default="",
@@ -146,6 +152,7 @@ def main() -> None:
         "final_horizon": args.final_horizon,
         "fine_horizons": tuple(float(x) for x in args.fine_horizons.split(",") if x.strip()),
         "ambiguity_starts": args.ambiguity_starts,
+        "interval": ProfileLikelihood() if args.interval == "profile" else FisherInterval(),
     }
     start = time.perf_counter()
     scen = list(scenarios(args.err_p))
@@ -157,7 +164,7 @@ def main() -> None:
         for i, s in enumerate(np.random.SeedSequence([args.seed, k]).spawn(args.trials)):
             opts = dict(options)
             if args.bootstrap:
-                opts["bootstrap"] = ParametricBootstrap(args.bootstrap, seed=i)
+                opts["interval"] = ParametricBootstrap(args.bootstrap, seed=i)
             tasks.append((d, snr, e, s, opts))
     with process_pool(args.jobs) as pool:
         results = list(pool.map(trial, tasks, chunksize=1))
@@ -165,17 +172,18 @@ def main() -> None:
         rows = [{"scenario": k, "trial": i, "drive": INERTIAS[d.J_L], "theta": d.theta,
                  "theta_deg": math.degrees(d.theta), "snr_db": snr,
                  "estimate": r[0], "std": r[1], "ci95": list(r[2]), "truth_cost_lower": bool(r[3]),
-                 "std_fisher": r[4], "ambiguous": bool(r[5])}
+                 "std_fisher": r[4], "ambiguous": bool(r[5]), "ci95_bounded": list(r[6])}
                 for (k, d, snr, _), chunk_start in zip(scen, range(0, len(results), args.trials),
                                                        strict=True)
                 for i, r in enumerate(results[chunk_start : chunk_start + args.trials])]
         Path(args.dump).write_text(json.dumps(rows, indent=1) + "\n")
+    fisher_too = args.bootstrap or args.interval != "fisher"
     print(f"joint ML, Err_p = {args.err_p:.0%}, {args.trials} trials per scenario, "
           f"seed {args.seed}, options {options}, bootstrap {args.bootstrap}; "
           "err = (theta_hat - theta) / theta")
     print(f"{'drive':<11} {'theta':>6} {'SNR':>4} | {'CRB%':>5} {'mean err%':>9} "
           f"{'max |err|%':>10} {'std/CRB':>7} {'cover95':>7}"
-          + (f" {'Fisher':>7}" if args.bootstrap else ""))
+          + (f" {'Fisher':>7}" if fisher_too else ""))
     n_cover = n_cover_fisher = n_all = n_fail = n_truth_better = n_gross = 0
     n_uncovered = n_uncovered_truth_better = 0
     n_res = n_cover_res = 0
@@ -209,14 +217,14 @@ def main() -> None:
         print(f"{INERTIAS[d.J_L]:<11} {math.degrees(d.theta):5.1f}d {snr:4.0f} | "
               f"{100 * bound:5.2f} {100 * np.mean(err):9.2f} {100 * np.max(np.abs(err)):10.2f} "
               f"{np.std(est, ddof=1) / (bound * d.theta):7.2f} {cover:3d}/{len(chunk):<3d}"
-              + (f" {cover_fisher:3d}/{len(chunk):<3d}" if args.bootstrap else ""))
+              + (f" {cover_fisher:3d}/{len(chunk):<3d}" if fisher_too else ""))
     print(f"overall: worst |err| {100 * worst:.2f} % ({100 * worst_resolvable:.2f} % where "
           f"CRB <= 2.5 % of theta), coverage {n_cover}/{n_all} = "
           f"{100 * n_cover / n_all:.1f} %; {time.perf_counter() - start:.0f} s")
     print("coverage by drive: " + ", ".join(f"{k} {c}/{n}" for k, (c, n) in by_ratio.items())
           + f"; where CRB <= 2.5 % of theta: {n_cover_res}/{n_res} = "
           f"{100 * n_cover_res / max(n_res, 1):.1f} %")
-    if args.bootstrap:
+    if fisher_too:
         print(f"coverage of the Fisher interval of the same fits: {n_cover_fisher}/{n_all} = "
               f"{100 * n_cover_fisher / n_all:.1f} %")
     caveat = (" (over the whole records, which --final-horizon does not fit)"
@@ -224,6 +232,8 @@ def main() -> None:
     print(f"trials beyond max(5 %, 3 CRB): {n_gross} of {n_all}")
     n_amb = sum(bool(r[5]) for r in results)
     print(f"ambiguous searches (JointIdentifier.ambiguous_): {n_amb} of {n_all}")
+    n_open = sum(not all(r[6]) for r in results)
+    print(f"intervals with an open end (JointIdentifier.ci95_bounded_): {n_open} of {n_all}")
     print(f"intervals missing the truth: {n_uncovered}; in {n_uncovered_truth_better} of them "
           f"the true parameters have a lower cost than the estimate{caveat}")
     print(f"trials off by more than 5 %: {n_fail}; in {n_truth_better} of them the true "

@@ -135,8 +135,48 @@ def test_crb_needs_theta(short):
 def test_coverage_of_ci95(trials):
     covered = sum(e.ci95_[0] <= THETA <= e.ci95_[1] for e in trials)
     assert covered >= MIN_COVERED, covered
-    for e in trials:
-        assert e.ci95_ == pytest.approx((e.theta_ - 1.96 * e.std_, e.theta_ + 1.96 * e.std_))
+    for e in trials:  # the profile interval, close to Fisher's on paper A's drive at 30 dB
+        assert e.interval_ == "profile" and e.ci95_bounded_ == (True, True)
+        lo, hi = e.ci95_
+        assert 0.8 < (e.theta_ - lo) / (1.96 * e.std_) < 1.25
+        assert 0.8 < (hi - e.theta_) / (1.96 * e.std_) < 1.25
+
+
+def _independent_profile(est, rec, theta):
+    """Cost rise of the profile at ``theta`` by scipy's least_squares over the other
+    log-parameters (the model simulated by ``TwoMassDrive.simulate``, weighted by the
+    fit's noise levels), started from the fit."""
+    from scipy.optimize import least_squares
+
+    (s_m, s_l), = est.noise_std_
+
+    def residual(w):
+        drive = bk.TwoMassDrive(**dict(zip(LINEAR_PARAMS, np.exp(w), strict=True)), theta=theta)
+        r = drive.simulate(rec.t, rec.torque)
+        return np.r_[(rec.w_motor - r.w_motor) / s_m, (rec.w_load - r.w_load) / s_l]
+
+    w0 = np.log([est.params_[n] for n in LINEAR_PARAMS])
+    sol = least_squares(residual, w0, method="lm", xtol=1e-10, ftol=1e-10)
+    at_fit = residual(w0) if theta == est.theta_ else None
+    return 2 * sol.cost - est.cost_, at_fit
+
+
+def test_profile_interval_ends_checked_independently(short):
+    """At both ends of ``ci95_`` the best fit with ``theta`` held costs 3.84 more than
+    the estimate (within the search's tolerance, 0.25), refitted here by scipy's
+    Levenberg-Marquardt on the public simulator."""
+    _, _, clean = short
+    rec = _noisy(clean, 20, 21)
+    prior = bk.TwoMassDrive(**{n: 1.1 * x for n, x in P_TRUE.items()})
+    e = JointIdentifier(prior).fit(rec)
+    fisher = JointIdentifier(prior, interval=bk.FisherInterval()).fit(rec)
+    assert e.theta_ == fisher.theta_ and e.std_ == fisher.std_
+    assert fisher.ci95_ == pytest.approx((e.theta_ - 1.96 * e.std_, e.theta_ + 1.96 * e.std_))
+    _, r = _independent_profile(e, rec, e.theta_)
+    assert float(r @ r) == pytest.approx(e.cost_, rel=1e-9)  # same cost function
+    for end in e.ci95_:
+        rise, _ = _independent_profile(e, rec, end)
+        assert rise == pytest.approx(3.84, abs=0.5), (end, rise)
 
 
 def test_std_across_trials_near_crb(trials, short):
@@ -218,8 +258,8 @@ def test_parametric_bootstrap(short):
     prior = bk.TwoMassDrive(**{n: 1.1 * x for n, x in P_TRUE.items()})
     rec = _noisy(clean, 30, 11)
     boot = bk.ParametricBootstrap(6, seed=3)
-    e = JointIdentifier(prior, bootstrap=boot).fit(rec)
-    f = JointIdentifier(prior).fit(rec)
+    e = JointIdentifier(prior, interval=boot).fit(rec)
+    f = JointIdentifier(prior, interval=bk.FisherInterval()).fit(rec)
     assert e.interval_ == "bootstrap" and f.interval_ == "fisher"
     assert e.bootstrap_thetas_.shape == (6,) and f.bootstrap_thetas_ is None
     assert e.std_ == pytest.approx(np.std(e.bootstrap_thetas_, ddof=1))
@@ -229,7 +269,7 @@ def test_parametric_bootstrap(short):
     # resampled around the estimate, with a spread of the Fisher std's order
     assert abs(np.mean(e.bootstrap_thetas_) - e.theta_) < 3 * f.std_
     assert 0.3 < e.std_ / f.std_ < 3
-    again = JointIdentifier(prior, bootstrap=boot).fit(rec)
+    again = JointIdentifier(prior, interval=boot).fit(rec)
     np.testing.assert_array_equal(again.bootstrap_thetas_, e.bootstrap_thetas_)
 
 
@@ -380,6 +420,36 @@ def test_ambiguity_starts_continue_more_candidates():
     assert _weighted_sse(fit, fit.noise_std_) < _weighted_sse(usual, fit.noise_std_) - 10
 
 
+def test_profile_interval_of_theta_alone(short):
+    """With the linear parameters known the profile is the cost itself: at the ends of
+    ``ci95_`` the weighted cost of the simulated drive is 3.84 above the estimate's."""
+    _, _, clean = short
+    rec = _noisy(clean, 30, 8)
+    e = JointIdentifier(bk.TwoMassDrive(**P_TRUE), prior_rel_std=0).fit(rec)
+    assert e.estimated_ == ("theta",) and e.interval_ == "profile"
+    (s_m, s_l), = e.noise_std_
+    for end in e.ci95_:
+        r = bk.TwoMassDrive(**P_TRUE, theta=end).simulate(rec.t, rec.torque)
+        cost = (np.sum(((rec.w_motor - r.w_motor) / s_m) ** 2)
+                + np.sum(((rec.w_load - r.w_load) / s_l) ** 2))
+        assert cost - e.cost_ == pytest.approx(3.84, abs=0.25)
+    assert e.ci95_[0] < e.theta_ < e.ci95_[1]
+
+
+def test_profile_interval_follows_a_rattling_likelihood():
+    """A trial of ``benchmarks/robustness_joint.py --seed 5 --trials 20`` (light load,
+    theta 5 deg, 30 dB): the estimate is 2.9 Fisher standard errors above the truth;
+    the profile likelihood rises more slowly below the estimate than its curvature
+    says, and its interval, asymmetric, covers the truth."""
+    drive, recs, prior = _robustness_trial(5, 7, 2, 20, 5.0, 30.0)
+    fit = JointIdentifier(prior).fit(recs)
+    assert fit.interval_ == "profile" and fit.ci95_bounded_ == (True, True)
+    assert abs(fit.theta_ - drive.theta) > 1.96 * fit.std_  # Fisher's misses
+    lo, hi = fit.ci95_
+    assert lo <= drive.theta <= hi
+    assert fit.theta_ - lo > 1.3 * (hi - fit.theta_)
+
+
 def test_cli_notes_an_ambiguous_fit(tmp_path, capsys):
     """``identify`` says when the search found distinct minima (the trial above)."""
     _, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
@@ -434,7 +504,9 @@ def test_final_horizon(short):
         ({"split_shifts": 0.5}, "split_shifts must be a sequence of numbers > 0"),
         ({"search_factor": 1.0}, "search_factor must be > 1"),
         ({"search_factor": -2.0}, "search_factor must be > 0"),
-        ({"bootstrap": 30}, "bootstrap must be a ParametricBootstrap or None, got int"),
+        ({"interval": 30}, "interval must be a ProfileLikelihood, FisherInterval or "
+         r"ParametricBootstrap \(backlashkit.intervals\), got int"),
+        ({"interval": "fisher"}, "interval must be .* got str"),
         ({"final_horizon": 0.0}, "final_horizon must be > 0"),
         ({"stiffness_restarts": (0.1, 0.0)}, r"stiffness_restarts\[\.\.\.\] must be > 0"),
         ({"fine_horizons": (0.3, -1.0)}, r"fine_horizons\[\.\.\.\] must be > 0"),
@@ -500,9 +572,27 @@ def test_cli_joint_bootstrap(short_csv, capsys):
     assert code == 0, err
     doc = json.loads(out)
     assert doc["interval"] == "bootstrap" and doc["std_fisher"] > 0
+    assert doc["ci95_bounded"] == [True, True]
     q = 4.3027  # Student's 97.5 % quantile, 2 degrees of freedom (std from 3 refits)
     assert doc["ci95"] == pytest.approx([doc["theta"] - q * doc["std"],
                                          doc["theta"] + q * doc["std"]], rel=1e-4)
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--interval", "fisher",
+                 "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["interval"] == "fisher" and doc["std"] == doc["std_fisher"]
+    assert doc["ci95"] == pytest.approx([doc["theta"] - 1.96 * doc["std"],
+                                         doc["theta"] + 1.96 * doc["std"]])
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--interval", "fisher",
+                 "--bootstrap", "3"])
+    out, err = capsys.readouterr()
+    assert code == 2 and err.count("\n") == 1
+    assert "give --interval or --bootstrap, not both" in err
+    code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--interval", "profile",
+                 "--method", "regression"])
+    out, err = capsys.readouterr()
+    assert code != 0 and "--interval only applies with --method joint" in err
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "3",
                  "--method", "two-step"])
     out, err = capsys.readouterr()
@@ -519,7 +609,7 @@ def test_cli_joint_bootstrap(short_csv, capsys):
     out, err = capsys.readouterr()
     assert code == 0, err
     doc = json.loads(out)
-    assert doc["final_horizon"] == 0.5 and doc["interval"] == "fisher"
+    assert doc["final_horizon"] == 0.5 and doc["interval"] == "profile"
     assert doc["ambiguous"] is False
     code = main(["identify", str(short_csv), "--drive", DRIVE_TOML, "--bootstrap", "1"])
     out, err = capsys.readouterr()

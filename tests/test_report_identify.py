@@ -150,6 +150,13 @@ def test_missing_commutation_instants_skip_the_zoom(tmp_path, record):
     assert not (tmp_path / "n" / "commutation.png").exists()
 
 
+def test_estimates_table_names_the_interval(tmp_path, record):
+    result = SimpleNamespace(theta_=0.03, std_=1e-3, ci95_=(0.0285, 0.0322),
+                             interval_="profile", t_c_=[None], t_b_=[None])
+    page = check_page(write_identification_report(tmp_path / "p", record, result, prior=PRIOR))
+    assert "95 % interval (rad, profile likelihood)" in page and "0.0322" in page
+
+
 def test_cost_curve_matches_identifier(record, fitted):
     c = cost_curve(PRIOR, record, [fitted.theta_], workers=1)
     assert c[0] == pytest.approx(fitted.cost_, rel=1e-9)

@@ -20,9 +20,9 @@ from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .identify_joint import (
     CramerRaoBound,
     JointIdentifier,
-    ParametricBootstrap,
     cramer_rao_bound,
 )
+from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
 from .nonlinearities import (
@@ -55,6 +55,7 @@ __all__ = [
     "LinearPlantWithBacklash",
     "NoInverse",
     "ParametricBootstrap",
+    "ProfileLikelihood",
     "Record",
     "RegressionIdentifier",
     "SmoothFilterInverse",
@@ -67,6 +68,7 @@ __all__ = [
     "CramerRaoBound",
     "DriveChain",
     "DriveResponse",
+    "FisherInterval",
     "InputError",
     "JointIdentifier",
     "NearGrazing",

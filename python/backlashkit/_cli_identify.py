@@ -44,7 +44,8 @@ theta AND the linear parameters, on every record and both speeds (each weighted 
 own noise level, estimated from the data), the prior entering as a Gaussian penalty
 with the relative std of the [uncertainty] table of PRIOR.toml (or --prior-rel-std);
 without either, the linear parameters are refined from the data alone. It reports the
-standard error std and a 95% interval ci95 of theta; its t_c, t_b are the
+standard error std (Fisher information) and a 95% interval ci95 of theta (profile
+likelihood; --interval fisher: theta +- 1.96 std); its t_c, t_b are the
 contact changes of the identified model (located between samples), theta_ini is
 the eq. 6 pre-estimate it also starts from.
 
@@ -125,9 +126,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "[uncertainty] table; 0 = known exactly)"
     )
     p.add_argument(
+        "--interval", choices=("profile", "fisher"), default=None,
+        help="joint: ci95 from the profile likelihood (default) or theta +- 1.96 std "
+        "(Fisher information; no extra fits)"
+    )
+    p.add_argument(
         "--bootstrap", type=int, default=None, metavar="N",
-        help="joint: std and ci95 from N parametric-bootstrap refits instead of the Fisher "
-        "information (N + 1 fits; for rattling light loads at low SNR)"
+        help="joint: std and ci95 from N parametric-bootstrap refits instead (N + 1 fits)"
     )
     p.add_argument("--seed", type=int, default=0,
                    help="joint --bootstrap: seed of the resamples' noise (default 0)")
@@ -259,7 +264,7 @@ def _run(args: argparse.Namespace) -> int:
     std: float | None = None
     ci95: list[float] | None = None
     extra: dict[str, Any] = {}
-    for option, value in (("--bootstrap", args.bootstrap),
+    for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
                           ("--final-horizon", args.final_horizon)):
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")
@@ -271,14 +276,16 @@ def _run(args: argparse.Namespace) -> int:
         else:
             rel = read_uncertainty_toml(args.drive) or None
         everything = records + (finals or [])
-        boot = None
+        from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+
         if args.seed < 0:  # the library's message would offer a SeedSequence
             raise InputError(f"--seed must be >= 0, got {args.seed}")
+        if args.bootstrap is not None and args.interval is not None:
+            raise InputError("give --interval or --bootstrap, not both")
+        interval: Any = FisherInterval() if args.interval == "fisher" else ProfileLikelihood()
         if args.bootstrap is not None:
-            from .identify_joint import ParametricBootstrap
-
-            boot = ParametricBootstrap(args.bootstrap, seed=args.seed)
-        est = JointIdentifier(prior, prior_rel_std=rel, bootstrap=boot,
+            interval = ParametricBootstrap(args.bootstrap, seed=args.seed)
+        est = JointIdentifier(prior, prior_rel_std=rel, interval=interval,
                               final_horizon=args.final_horizon).fit(everything)
         theta_ini = est.theta_ini_
         rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_,
@@ -295,6 +302,7 @@ def _run(args: argparse.Namespace) -> int:
         ci95 = [float(x) for x in est.ci95_]
         extra = {
             "interval": est.interval_,
+            "ci95_bounded": list(est.ci95_bounded_),
             "ambiguous": est.ambiguous_,
             "final_horizon": est.final_horizon,
             "std_fisher": est.param_std_["theta"],
@@ -363,13 +371,19 @@ def _run(args: argparse.Namespace) -> int:
               f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
               "method", file=out)
     else:
-        how = ("" if est.interval_ == "fisher" else
-               f" (parametric bootstrap, {est.bootstrap_thetas_.size} refits)")
+        how = {"fisher": " (Fisher)", "profile": " (profile likelihood)"}.get(est.interval_, "")
+        if est.interval_ == "bootstrap":
+            how = f" (parametric bootstrap, {est.bootstrap_thetas_.size} refits)"
         if est.final_horizon is not None:
             how += f" (fitted on {est.final_horizon:g} s after each torque jump)"
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"std {std:.3g} rad, 95% interval [{ci95[0]:.5g}, {ci95[1]:.5g}] rad{how}",
               file=out)
+        for end, bounded in zip(("lower", "upper"), est.ci95_bounded_, strict=True):
+            if not bounded:
+                print(f"note: the likelihood does not rise to the 95% level on the {end} "
+                      "side within the search range: the records hardly bound theta there "
+                      "(longer or less noisy records help)", file=out)
         if est.ambiguous_:
             print("note: the search ended in distinct minima of nearly equal cost (the "
                   "likelihood is multimodal on these records); the interval describes the "

@@ -76,15 +76,16 @@ Choices (documented, configurable where it matters)
   are silenced inside the fit.
 * **Uncertainty.** Gauss-Newton / Fisher information at the optimum,
   ``cov(log p) = (J^T W J + P)^-1`` with ``P`` the prior's information; ``std_`` of
-  ``theta`` by the delta method, ``ci95_ = theta_ +- 1.96 std_``. Calibration is
-  checked by coverage on simulated data in ``tests/test_identify_joint.py``. Where the
-  shaft rattles (light loads: dozens of impacts per record) the likelihood is not
-  regular at the scale of the standard error, and at 20-30 dB the estimates scatter
-  1.1-1.4 times more than this says (``benchmarks/robustness_joint.py``);
-  ``bootstrap=ParametricBootstrap(...)`` takes ``std_`` and ``ci95_`` from refits of
+  ``theta`` by the delta method. The 95 % interval ``ci95_`` comes from the profile
+  likelihood of ``theta`` by default (:class:`~backlashkit.intervals.ProfileLikelihood`):
+  where the shaft rattles (light loads: dozens of impacts per record) the likelihood
+  is not quadratic at the scale of the standard error, and the Fisher interval
+  ``theta_ +- 1.96 std_`` (``interval=FisherInterval()``) covers the truth less often
+  (``benchmarks/robustness_joint.py``, README "Away from paper A's drive").
+  ``interval=ParametricBootstrap(...)`` takes ``std_`` and ``ci95_`` from refits of
   data simulated from the estimate instead, and ``final_horizon`` fits the final stage
-  only on short windows after every torque jump, where the likelihood is closer to
-  regular (better calibrated but wider intervals).
+  only on short windows after every torque jump. Calibration is checked by coverage
+  on simulated data in ``tests/test_identify_joint.py``.
 """
 
 from __future__ import annotations
@@ -101,6 +102,7 @@ from threadpoolctl import threadpool_limits
 from . import _validate as v
 from .errors import InputError, SensitivityWarning
 from .identify import Record, TwoStepIdentifier, _as_records, find_step_down
+from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, profile_crossing
 from .plants import TwoMassDrive
 from .signals import _noise_hp
 
@@ -108,7 +110,6 @@ __all__ = [
     "CramerRaoBound",
     "JointIdentifier",
     "LINEAR_PARAMS",
-    "ParametricBootstrap",
     "cramer_rao_bound",
 ]
 
@@ -198,46 +199,6 @@ def _screen_spans(spans: list[_Span]) -> list[_Span]:
     return out
 
 
-@dataclass(frozen=True)
-class ParametricBootstrap:
-    """Standard error and 95 % interval of ``theta`` by parametric bootstrap.
-
-    The identified model is simulated on every record (its own start, the measured
-    torque), white Gaussian noise at the estimated levels is added, and the whole fit
-    (multi-start included, same options) is repeated ``n_resamples`` times;
-    ``std_`` is the standard deviation of the refitted ``theta`` and ``ci95_`` is
-    ``theta_ -+ q std_`` with ``q`` Student's 97.5 % quantile for ``n_resamples - 1``
-    degrees of freedom (2.05 for 30 refits: the std is itself estimated). It costs
-    ``n_resamples`` fits. It is meant for a rattling shaft (light loads, dozens of
-    impacts per record) at 20-30 dB, where the estimates scatter 1.1-1.4 times more
-    than the Fisher standard error says; it narrows that gap without closing it
-    (``benchmarks/robustness_joint.py --bootstrap``; README, "Away from paper A's
-    drive").
-
-    Parameters
-    ----------
-    n_resamples : int, optional
-        Refits (default 30; the standard error is then known to about 13 %).
-    seed : int or numpy.random.SeedSequence, optional
-        Root of the resamples' noise (default 0): resample ``i`` uses
-        ``SeedSequence(seed).spawn(n_resamples)[i]``.
-    """
-
-    n_resamples: int = 30
-    seed: int | np.random.SeedSequence = 0
-
-    def __post_init__(self) -> None:
-        from .identify import _check_int
-
-        _check_int("n_resamples", self.n_resamples, 2)
-        seed = self.seed
-        if not isinstance(seed, np.random.SeedSequence) and (
-                isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
-            raise InputError(
-                f"seed must be an integer >= 0 or a numpy.random.SeedSequence, got {seed!r}"
-            )
-
-
 #: Candidates whose cost (chi-square units) on the last short horizon exceeds the best
 #: one's by more than this are not refined on the whole record.
 WHOLE_RECORD_MARGIN = 10.0
@@ -256,6 +217,9 @@ SAME_POINT = 1e-3
 AMBIGUITY_MARGIN = 30.0
 #: Largest log-parameter difference of two end points that count as one basin.
 DISTINCT = 1e-2
+
+#: The default interval (frozen, so one instance serves every identifier).
+_PROFILE = ProfileLikelihood()
 
 #: Order of a two-mass drive's values in a packed kernel parameter row
 #: (:class:`~backlashkit.DriveChain` fields ``J, f, k, d, theta``).
@@ -504,8 +468,8 @@ class JointIdentifier:
         triggered on paper A's protocol (``benchmarks/joint_vs_crb.py --runs 10``: the
         40 fits of ``reproduce ravanbod2002``, 0 ``ambiguous_``); on
         ``benchmarks/robustness_joint.py --trials 20 --seed 5`` it raised the coverage
-        from 504 to 507 of 540 trials and removed the 54 % error at 0.5 deg, 20 dB
-        (README, "Away from paper A's drive").
+        of the Fisher intervals from 504 to 507 of 540 trials and removed the 54 %
+        error at 0.5 deg, 20 dB (README, "Away from paper A's drive").
     max_iter : int, optional
         Maximum Levenberg-Marquardt iterations (Jacobians) of the final refinement
         and of each refit after a noise re-estimation (default 40).
@@ -537,9 +501,9 @@ class JointIdentifier:
         minimum the true parameters beat, and a 16 % higher stiffness leads to the
         one near the truth (``benchmarks/robustness_joint.py --trials 6 --seed 4``; the trial is
         a test).
-    bootstrap : ParametricBootstrap, optional
-        Standard error and interval of ``theta`` by parametric bootstrap instead of the
-        Fisher information (default None: Fisher).
+    interval : ProfileLikelihood, FisherInterval or ParametricBootstrap, optional
+        Where ``ci95_`` (and, for the bootstrap, ``std_``) comes from (module
+        :mod:`backlashkit.intervals`; default ``ProfileLikelihood()``).
     final_horizon : float or None, optional
         Horizon in s of the final refinement, the noise re-estimation and the
         uncertainty, after the start of each record and after every torque jump
@@ -564,12 +528,18 @@ class JointIdentifier:
         Names of the estimated parameters, ``theta`` first.
     std_ : float
         Standard error of ``theta_`` in rad: Gauss-Newton / Fisher information, or the
-        parametric bootstrap's when ``bootstrap`` is given (``interval_``).
+        parametric bootstrap's with ``interval=ParametricBootstrap(...)``.
     ci95_ : tuple of float
-        ``theta_ -+ 1.96 std_`` (Fisher), or with Student's quantile for the
-        bootstrap's ``n_resamples - 1`` degrees of freedom.
+        95 % interval of ``theta`` in rad: the profile-likelihood interval (possibly
+        asymmetric), ``theta_ -+ 1.96 std_`` (Fisher), or ``theta_ -+ q std_`` with
+        Student's ``q`` for the bootstrap's ``n_resamples - 1`` degrees of freedom.
+    ci95_bounded_ : tuple of bool
+        Whether each end of the profile interval was reached: False for an end the
+        profile did not rise to the 95 % level within ``max_factor`` of ``theta_``
+        (the end is then the last point searched; the records hardly bound ``theta``
+        on that side). Always ``(True, True)`` for the other intervals.
     interval_ : str
-        ``"fisher"`` or ``"bootstrap"``: where ``std_`` and ``ci95_`` come from.
+        ``"profile"``, ``"fisher"`` or ``"bootstrap"``: where ``ci95_`` comes from.
     bootstrap_thetas_ : numpy.ndarray or None
         The refitted ``theta`` of every bootstrap resample (None without bootstrap).
     param_std_ : dict of str to float
@@ -608,7 +578,7 @@ class JointIdentifier:
         (``ambiguity_starts``): the likelihood is multimodal on these records, and the
         estimate deserves a second look (e.g. a parametric bootstrap or a longer
         record). It is no general warning of a miss: in ``benchmarks/robustness_joint.py
-        --trials 20 --seed 5``, 18 of 540 fits were ambiguous and 2 of the 33 intervals
+        --trials 20 --seed 5``, 18 of 540 fits were ambiguous and 3 of the 28 intervals
         that missed the truth were among them.
     t_c_, t_b_ : list of float or None
         The ``t_c`` and ``t_b`` of ``commutations_``.
@@ -642,7 +612,7 @@ class JointIdentifier:
         split_shifts: Sequence[float] = (0.5,),
         search_factor: float | None = 3.0,
         stiffness_restarts: Sequence[float] = (0.15,),
-        bootstrap: ParametricBootstrap | None = None,
+        interval: ProfileLikelihood | FisherInterval | ParametricBootstrap = _PROFILE,
         final_horizon: float | None = None,
         workers: int | None = None,
     ) -> None:
@@ -670,7 +640,7 @@ class JointIdentifier:
         self.search_factor = search_factor
         self.stiffness_restarts = stiffness_restarts
         self.final_horizon = final_horizon
-        self.bootstrap = bootstrap
+        self.interval = interval
         self.workers = workers
 
     # -- validation ------------------------------------------------------------------
@@ -697,10 +667,11 @@ class JointIdentifier:
         _check_positive_sequence("split_shifts", self.split_shifts)
         _check_positive_sequence("stiffness_restarts", self.stiffness_restarts)
         _check_positive_sequence("fine_horizons", self.fine_horizons)
-        if self.bootstrap is not None and not isinstance(self.bootstrap, ParametricBootstrap):
+        if not isinstance(self.interval, (ProfileLikelihood, FisherInterval,
+                                          ParametricBootstrap)):
             raise InputError(
-                "bootstrap must be a ParametricBootstrap or None, got "
-                f"{type(self.bootstrap).__name__}"
+                "interval must be a ProfileLikelihood, FisherInterval or ParametricBootstrap "
+                f"(backlashkit.intervals), got {type(self.interval).__name__}"
             )
         if self.search_factor is not None and not (
             v.positive("search_factor", self.search_factor) > 1.0
@@ -1003,7 +974,8 @@ class JointIdentifier:
         z = best.z
         sigma = sig_now
         # uncertainty: Gauss-Newton information (the prior's rows are in the residual)
-        jz = central_jacobian(make_residual(final_spans, final_h, sig_now), z)
+        rows_unc = make_residual(final_spans, final_h, sig_now)
+        jz = central_jacobian(rows_unc, z)
         info = jz.T @ jz
         try:
             cov_z = np.linalg.inv(info)
@@ -1025,6 +997,7 @@ class JointIdentifier:
         self.theta_ = float(values[0])
         self.std_ = float(std[0])
         self.ci95_ = (self.theta_ - 1.96 * self.std_, self.theta_ + 1.96 * self.std_)
+        self.ci95_bounded_ = (True, True)
         self.params_ = {n_: float(getattr(drive, n_)) for n_ in LINEAR_PARAMS}
         self.drive_ = drive
         self.estimated_ = names
@@ -1040,18 +1013,74 @@ class JointIdentifier:
         self.t_b_ = [c[2] for c in self.commutations_]
         self.interval_ = "fisher"
         self.bootstrap_thetas_ = None
-        if self.bootstrap is not None:
+        if isinstance(self.interval, ProfileLikelihood):
+            self._profile(rows_unc, z, cov_z, float(best.cost))
+        elif isinstance(self.interval, ParametricBootstrap):
             self._bootstrap(spans, [x[0] for x in sims])
         return self
 
+    def _profile(self, rows, z: np.ndarray, cov_z: np.ndarray, cost: float) -> None:
+        """Profile-likelihood interval of ``theta`` (:class:`ProfileLikelihood`)."""
+        prof = self.interval
+        assert isinstance(prof, ProfileLikelihood)
+        n, h = z.size, float(self.fd_step)
+        s_z = math.sqrt(cov_z[0, 0]) if cov_z[0, 0] > 0 else 0.0
+        # the other log-parameters move with theta along the Fisher covariance: the
+        # start of every held-theta refit (its exact optimum where the cost is quadratic)
+        slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(n - 1)
+
+        def side(sign: float):
+            """The cost rise of the profile at distance ``d`` (log theta) on one side."""
+            memo: dict[float, np.ndarray] = {}  # distance -> refitted other parameters
+
+            def rise(d: float) -> float:
+                zt = z[0] + sign * d
+
+                def fun(w: np.ndarray) -> np.ndarray:
+                    try:
+                        return rows(np.r_[zt, w][np.newaxis, :])[0]
+                    except ValueError:  # a step to a mode too fast for the sample time
+                        return np.full(1, np.inf)
+
+                if n == 1:  # theta alone is estimated: the profile is the cost itself
+                    r = fun(np.empty(0))
+                    return float(r @ r) - cost
+
+                def jac(w: np.ndarray, r: np.ndarray) -> np.ndarray:
+                    ww = np.repeat(np.r_[zt, w][np.newaxis, :], n - 1, axis=0)
+                    ww[:, 1:] += h * np.eye(n - 1)
+                    return ((rows(ww) - r) / h).T
+
+                if memo:  # continue from the nearest refit on this side
+                    d0 = min(memo, key=lambda x: abs(x - d))
+                    w0 = memo[d0] + slope * sign * (d - d0)
+                else:
+                    w0 = z[1:] + slope * sign * d
+                st = _lm(fun, jac, w0, max_iter=prof.max_iter)
+                memo[d] = st.z
+                return st.cost - cost
+
+            return rise
+
+        ends, bounded = [], []
+        for sign in (-1.0, 1.0):
+            d, ok = profile_crossing(side(sign), 1.96 * s_z if s_z > 0 else 0.05,
+                                     tol=prof.tol, max_evaluations=prof.max_evaluations,
+                                     largest=math.log(prof.max_factor))
+            ends.append(math.exp(z[0] + sign * d))
+            bounded.append(ok)
+        self.ci95_ = (ends[0], ends[1])
+        self.ci95_bounded_ = (bounded[0], bounded[1])
+        self.interval_ = "profile"
+
     def _bootstrap(self, spans: list[_Span], sims: list[np.ndarray]) -> None:
-        """Refit ``bootstrap.n_resamples`` records simulated from the estimate."""
-        boot = self.bootstrap
-        assert boot is not None
+        """Refit ``interval.n_resamples`` records simulated from the estimate."""
+        boot = self.interval
+        assert isinstance(boot, ParametricBootstrap)
         root = boot.seed if isinstance(boot.seed, np.random.SeedSequence) else (
             np.random.SeedSequence(boot.seed))
         params = {name: getattr(self, name) for name in _INIT_NAMES}
-        refit = JointIdentifier(**{**params, "bootstrap": None})
+        refit = JointIdentifier(**{**params, "interval": FisherInterval()})
         thetas = []
         for child in root.spawn(boot.n_resamples):
             rng = np.random.default_rng(child)

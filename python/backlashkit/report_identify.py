@@ -581,6 +581,8 @@ def write_identification_report(
     # the page
     std = getattr(result, "std_", None)
     ci95 = getattr(result, "ci95_", None)
+    kind = {"profile": ", profile likelihood", "fisher": ", Fisher",
+            "bootstrap": ", parametric bootstrap"}.get(getattr(result, "interval_", None), "")
     cost = getattr(result, "cost_", None)
     n_theta = getattr(result, "n_theta", None)
     rows = [
@@ -623,7 +625,7 @@ def write_identification_report(
         f"Prior: {prior_txt}.</p>",
         "<h2>Estimates</h2>",
         '<table><tr><th class="l">quantity</th><th>rad</th><th>deg</th><th>std (rad)</th>'
-        f"<th>95 % interval (rad)</th></tr>\n{est_rows}</table>",
+        f"<th>95 % interval (rad{kind})</th></tr>\n{est_rows}</table>",
         f'<p class="note">Criterion at the estimate W_1 = {_fmt(cost)} (rad/s)^2 '
         f"over dt_4 = {dt4:g} s after t_s.</p>",
         '<table><tr><th class="l">record</th><th>t_s (s)</th><th>t_c (s)</th>'

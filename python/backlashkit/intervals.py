@@ -1,0 +1,195 @@
+"""Where the joint estimator's 95 % interval of ``theta`` comes from.
+
+Configuration objects for ``JointIdentifier(interval=...)``:
+
+* :class:`ProfileLikelihood` (the default) -- the profile-likelihood interval: every
+  ``theta`` whose best fit, the other parameters re-optimised with ``theta`` held,
+  costs at most ``chi2_1(0.95) = 3.84`` more than the estimate (Wilks). It follows the
+  likelihood where it is not quadratic (a backlash of a few standard errors, a
+  rattling shaft), so it may be asymmetric.
+* :class:`FisherInterval` -- ``theta_ -+ 1.96 std_`` from the Gauss-Newton / Fisher
+  information at the optimum (the quadratic approximation of the same likelihood).
+* :class:`ParametricBootstrap` -- refits of records simulated from the estimate.
+
+The search for the profile's crossings (:func:`profile_crossing`) is here too; the
+fit itself lives in :mod:`backlashkit.identify_joint`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
+
+#: chi-square quantile with one degree of freedom at 95 % (1.959964 ** 2).
+CHI2_95 = 3.841458820694124
+
+
+@dataclass(frozen=True)
+class FisherInterval:
+    """95 % interval ``theta_ -+ 1.96 std_`` from the Fisher information.
+
+    ``std_`` is the Gauss-Newton standard error at the optimum (delta method from the
+    log-parameters). Cheapest (no extra fit), symmetric, and exact only where the
+    likelihood is quadratic over the interval.
+    """
+
+
+@dataclass(frozen=True)
+class ProfileLikelihood:
+    """95 % interval of ``theta`` from its profile likelihood.
+
+    For a held ``theta`` the other estimated parameters are refitted
+    (Levenberg-Marquardt from the estimate shifted along the Fisher covariance); the
+    interval ends are the ``theta`` on either side where that refit costs
+    ``3.84`` (chi-square units, i.e. ``-2 log`` likelihood ratio) more than the
+    estimate. The search starts at the Fisher ends ``theta_ exp(-+1.96 s)`` (``s`` the
+    Fisher standard error of ``log theta``) and moves by the square-root law
+    ``sqrt(cost rise)`` proportional to the distance (secant steps once bracketed),
+    until the rise is within ``tol`` of 3.84. ``std_`` stays the Fisher standard error.
+
+    Where the shaft rattles the profile is rough at the scale of a chi-square unit (a
+    refit held at ``theta`` can even end slightly below the estimate's cost); the rise
+    is then taken as 0 and the search goes on outwards. An end that does not reach
+    3.84 within a factor ``max_factor`` of ``theta_`` is reported at that factor: the
+    records do not bound ``theta`` there.
+
+    Parameters
+    ----------
+    tol : float, optional
+        Accepted distance of the cost rise from 3.84 in chi-square units (default
+        0.25: about 3 % of the half-width).
+    max_evaluations : int, optional
+        Refits per side at most (default 6); the last bracket is then interpolated.
+    max_iter : int, optional
+        Levenberg-Marquardt iterations per refit (default 20).
+    max_factor : float, optional
+        Widest interval searched: ``[theta_ / max_factor, theta_ max_factor]``
+        (default 10).
+    """
+
+    tol: float = 0.25
+    max_evaluations: int = 6
+    max_iter: int = 20
+    max_factor: float = 10.0
+
+    def __post_init__(self) -> None:
+        from .identify import _check_int
+
+        if not (isinstance(self.tol, (int, float)) and 0.0 < self.tol < CHI2_95):
+            raise InputError(f"tol must be in (0, {CHI2_95:.3f}) (chi-square units), "
+                             f"got {self.tol!r}")
+        _check_int("max_evaluations", self.max_evaluations, 1)
+        _check_int("max_iter", self.max_iter, 1)
+        if not (isinstance(self.max_factor, (int, float)) and self.max_factor > 1.0
+                and math.isfinite(self.max_factor)):
+            raise InputError(f"max_factor must be a finite number > 1, got {self.max_factor!r}")
+
+
+@dataclass(frozen=True)
+class ParametricBootstrap:
+    """Standard error and 95 % interval of ``theta`` by parametric bootstrap.
+
+    The identified model is simulated on every record (its own start, the measured
+    torque), white Gaussian noise at the estimated levels is added, and the whole fit
+    (multi-start included, same options) is repeated ``n_resamples`` times;
+    ``std_`` is the standard deviation of the refitted ``theta`` and ``ci95_`` is
+    ``theta_ -+ q std_`` with ``q`` Student's 97.5 % quantile for ``n_resamples - 1``
+    degrees of freedom (2.05 for 30 refits: the std is itself estimated). It costs
+    ``n_resamples`` fits. It is meant for a rattling shaft (light loads, dozens of
+    impacts per record) at 20-30 dB, where the estimates scatter more than the Fisher
+    standard error says (``benchmarks/robustness_joint.py --bootstrap``; README,
+    "Away from paper A's drive").
+
+    Parameters
+    ----------
+    n_resamples : int, optional
+        Refits (default 30; the standard error is then known to about 13 %).
+    seed : int or numpy.random.SeedSequence, optional
+        Root of the resamples' noise (default 0): resample ``i`` uses
+        ``SeedSequence(seed).spawn(n_resamples)[i]``.
+    """
+
+    n_resamples: int = 30
+    seed: int | np.random.SeedSequence = 0
+
+    def __post_init__(self) -> None:
+        from .identify import _check_int
+
+        _check_int("n_resamples", self.n_resamples, 2)
+        seed = self.seed
+        if not isinstance(seed, np.random.SeedSequence) and (
+                isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+            raise InputError(
+                f"seed must be an integer >= 0 or a numpy.random.SeedSequence, got {seed!r}"
+            )
+
+
+def profile_crossing(rise: Callable[[float], float], first: float, *, level: float = CHI2_95,
+                     tol: float = 0.25, max_evaluations: int = 6,
+                     largest: float = math.inf) -> tuple[float, bool]:
+    """Distance ``d > 0`` at which a profile's cost rise reaches ``level``.
+
+    Parameters
+    ----------
+    rise : callable
+        ``rise(d)``: cost rise (chi-square units) of the profile at distance ``d`` from
+        the estimate (on one side, in any coordinate); negative values count as 0.
+    first : float
+        First distance tried (> 0), e.g. the Fisher half-width.
+    level : float, optional
+        Target rise (default 3.84, 95 %).
+    tol : float, optional
+        Accepted ``|rise - level|``.
+    max_evaluations : int, optional
+        Calls of ``rise`` at most.
+    largest : float, optional
+        Largest distance searched.
+
+    Returns
+    -------
+    d : float
+        The crossing (or the bracket's interpolation after ``max_evaluations``, or
+        ``largest``).
+    bounded : bool
+        False when the rise stayed below ``level`` up to ``largest`` (or in every
+        evaluation): the end is open.
+
+    Notes
+    -----
+    Near the optimum ``sqrt(rise)`` grows linearly with ``d``, so the steps solve that
+    line: through the origin while the crossing is not bracketed (growth at most 4
+    times per step), the secant of the bracket once it is.
+    """
+    target = math.sqrt(level)
+    lo, r_lo = 0.0, 0.0  # below the level
+    hi = r_hi = None  # above it
+    d = min(first, largest)
+    for _ in range(max_evaluations):
+        value = max(float(rise(d)), 0.0)
+        r = math.sqrt(value) if math.isfinite(value) else math.inf
+        if abs(value - level) <= tol:
+            return d, True
+        if r < target:
+            lo, r_lo = d, r
+            if d >= largest:
+                return largest, False
+        else:
+            hi, r_hi = d, r
+        if hi is None:
+            d = min(largest, 4.0 * d if r < 0.25 * target else d * target / r)
+        elif math.isinf(r_hi):
+            d = 0.5 * (lo + hi)
+        else:
+            d = lo + (target - r_lo) * (hi - lo) / (r_hi - r_lo)
+    if hi is None:
+        return lo, False
+    if math.isinf(r_hi):
+        return 0.5 * (lo + hi), True
+    return lo + (target - r_lo) * (hi - lo) / (r_hi - r_lo), True

@@ -1,0 +1,94 @@
+"""Interval configurations and the profile-likelihood crossing search
+(``backlashkit.intervals``); the intervals of fitted drives are tested in
+``tests/test_identify_joint.py``."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+import backlashkit as bk
+from backlashkit.errors import InputError
+from backlashkit.intervals import CHI2_95, profile_crossing
+
+
+def test_chi2_quantile():
+    scipy_stats = pytest.importorskip("scipy.stats")
+    assert CHI2_95 == pytest.approx(scipy_stats.chi2.ppf(0.95, 1), rel=1e-12)
+
+
+def _counted(fn):
+    calls = []
+
+    def rise(d):
+        calls.append(d)
+        return fn(d)
+
+    return rise, calls
+
+
+def test_quadratic_profile_crosses_at_the_fisher_end_in_one_step():
+    rise, calls = _counted(lambda d: (d / 0.1) ** 2)
+    d, bounded = profile_crossing(rise, 1.96 * 0.1)
+    assert bounded and d == pytest.approx(0.196) and len(calls) == 1
+
+
+@pytest.mark.parametrize("power", [1.0, 1.5, 3.0, 4.0])
+def test_non_quadratic_profiles(power):
+    """rise = (d / s)^p crosses 3.84 at s 3.84^(1/p); found within the tolerance."""
+    s = 0.05
+    rise, calls = _counted(lambda d: (d / s) ** power)
+    d, bounded = profile_crossing(rise, 1.96 * s, tol=1e-3, max_evaluations=30)
+    assert bounded
+    assert d == pytest.approx(s * CHI2_95 ** (1 / power), rel=1e-3)
+    assert len(calls) < 15
+
+
+def test_negative_and_flat_rises_move_outwards():
+    """A rise below 0 (a refit ending under the estimate's cost) counts as 0; a rise
+    that never reaches the level leaves the end open at the largest distance."""
+    rise, calls = _counted(lambda d: -0.5 if d < 0.3 else 100 * (d - 0.3))
+    d, bounded = profile_crossing(rise, 0.1, tol=1e-3, max_evaluations=40)
+    assert bounded and d == pytest.approx(0.3 + CHI2_95 / 100, rel=1e-4)
+    assert calls[1] == pytest.approx(0.4)  # 0 counts as far below: four times further
+    d, bounded = profile_crossing(lambda d: 1.0, 0.1, largest=math.log(10.0))
+    assert not bounded and d == pytest.approx(math.log(10.0))
+
+
+def test_failed_refits_are_bisected():
+    """An infinite rise (a simulation that failed) brackets like a large one."""
+    rise, calls = _counted(lambda d: math.inf if d > 0.5 else (d / 0.2) ** 2)
+    d, bounded = profile_crossing(rise, 0.6, tol=1e-3, max_evaluations=40)
+    assert bounded and d == pytest.approx(0.2 * math.sqrt(CHI2_95), rel=1e-3)
+    assert calls[1] == pytest.approx(0.3)
+
+
+def test_last_bracket_interpolated_after_max_evaluations():
+    d, bounded = profile_crossing(lambda d: (d / 0.1) ** 3, 0.05, tol=1e-9,
+                                  max_evaluations=2)
+    assert bounded and 0.05 < d < 0.2
+
+
+@pytest.mark.parametrize(
+    "kwargs, pattern",
+    [
+        ({"tol": 0.0}, r"tol must be in \(0, 3.841\)"),
+        ({"tol": 5.0}, r"tol must be in \(0, 3.841\)"),
+        ({"max_evaluations": 0}, "max_evaluations must be an integer >= 1"),
+        ({"max_iter": 1.5}, "max_iter must be an integer >= 1"),
+        ({"max_factor": 1.0}, "max_factor must be a finite number > 1"),
+        ({"max_factor": math.inf}, "max_factor must be a finite number > 1"),
+    ],
+)
+def test_profile_likelihood_validated(kwargs, pattern):
+    with pytest.raises(InputError, match=pattern):
+        bk.ProfileLikelihood(**kwargs)
+
+
+def test_configurations_are_exported():
+    assert bk.ProfileLikelihood() == bk.ProfileLikelihood()
+    assert bk.FisherInterval() == bk.FisherInterval()
+    from backlashkit import identify_joint
+
+    assert identify_joint.ParametricBootstrap is bk.ParametricBootstrap
