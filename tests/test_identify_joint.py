@@ -436,6 +436,32 @@ def test_profile_interval_of_theta_alone(short):
     assert e.ci95_[0] < e.theta_ < e.ci95_[1]
 
 
+def _in_contact_record() -> Record:
+    """8 s around a torque drop from 0.942 to 0.6 N m on a drive settled from rest: the
+    shaft never leaves its flank, so the speeds do not depend on theta at all."""
+    t = signals.time_grid(44.0, 1e-3)
+    u = np.where(t < 40.0, A2, 0.6)
+    r = TRUE.simulate(t, u)
+    keep = t >= 36.0
+    a, b = np.random.SeedSequence(3).spawn(2)
+    return Record(t[keep] - 36.0, u[keep], signals.add_noise(r.w_motor[keep], 30, rng=a),
+                  signals.add_noise(r.w_load[keep], 30, rng=b), name="in_contact.csv")
+
+
+def test_profile_interval_open_when_the_records_do_not_bound_theta(tmp_path, capsys):
+    rec = _in_contact_record()
+    e = JointIdentifier(bk.TwoMassDrive(**P_TRUE), prior_rel_std=0.1).fit(rec)
+    assert e.model_start_ == ["steady"] and e.ci95_bounded_ == (False, False)
+    assert e.ci95_ == pytest.approx((e.theta_ / 10, e.theta_ * 10))  # max_factor
+    path = tmp_path / "in_contact.csv"
+    write_csv(path, {"t": rec.t, "torque": rec.torque, "w_motor": rec.w_motor,
+                     "w_load": rec.w_load})
+    assert main(["identify", str(path), "--drive", DRIVE_TOML, "--prior-rel-std", "0.1"]) == 0
+    out, _ = capsys.readouterr()
+    assert "note: the likelihood does not rise to the 95% level on the lower side" in out
+    assert "on the upper side" in out
+
+
 def test_profile_interval_follows_a_rattling_likelihood():
     """A trial of ``benchmarks/robustness_joint.py --seed 5 --trials 20`` (light load,
     theta 5 deg, 30 dB): the estimate is 2.9 Fisher standard errors above the truth;
