@@ -23,6 +23,7 @@ from backlashkit.report_identify import (
     maybe_write_report,
     plot_commutation,
     plot_cost,
+    plot_profile,
     plot_residual_acf,
     plot_speed_fit,
     write_identification_report,
@@ -150,11 +151,16 @@ def test_missing_commutation_instants_skip_the_zoom(tmp_path, record):
     assert not (tmp_path / "n" / "commutation.png").exists()
 
 
-def test_estimates_table_names_the_interval(tmp_path, record):
+def test_profile_section_and_interval_name(tmp_path, record):
+    profile = np.array([[0.0285, 3.9], [0.03, 0.0], [0.0322, 3.7]])
     result = SimpleNamespace(theta_=0.03, std_=1e-3, ci95_=(0.0285, 0.0322),
-                             interval_="profile", t_c_=[None], t_b_=[None])
+                             interval_="profile", profile_=profile, t_c_=[None], t_b_=[None])
     page = check_page(write_identification_report(tmp_path / "p", record, result, prior=PRIOR))
     assert "95 % interval (rad, profile likelihood)" in page and "0.0322" in page
+    assert "Profile likelihood of theta" in page and (tmp_path / "p" / "profile.png").is_file()
+    result.profile_ = None  # other intervals: no section
+    page = check_page(write_identification_report(tmp_path / "q", record, result, prior=PRIOR))
+    assert "Profile likelihood" not in page and not (tmp_path / "q" / "profile.png").exists()
 
 
 def test_cost_curve_matches_identifier(record, fitted):
@@ -178,7 +184,7 @@ def test_plot_helpers_take_ax_and_return_figure(record, fitted):
     from matplotlib.figure import Figure
 
     fig = Figure()
-    axes = fig.subplots(4)
+    axes = fig.subplots(5)
     t = record.t[:100]
     assert plot_speed_fit(t, record.w_motor[:100], record.w_motor[:100], ax=axes[0]) is fig
     assert plot_commutation(record, fitted.t_c_[0], fitted.t_b_[0], ax=axes[1]) is fig
@@ -186,6 +192,8 @@ def test_plot_helpers_take_ax_and_return_figure(record, fitted):
                      bounds=(0.009, 0.013), ax=axes[2]) is fig
     assert plot_residual_acf(record.w_motor - record.w_motor.mean(), ts=record.ts,
                              ax=axes[3]) is fig
+    assert plot_profile([[0.01, 1.0], [0.02, 0.0], [0.03, 4.0]], ci95=(0.012, 0.029),
+                        ax=axes[4]) is fig
     assert isinstance(plot_cost([0.0, 0.01], [1.0, 2.0]), Figure)
 
 

@@ -540,6 +540,11 @@ class JointIdentifier:
         on that side). Always ``(True, True)`` for the other intervals.
     interval_ : str
         ``"profile"``, ``"fisher"`` or ``"bootstrap"``: where ``ci95_`` comes from.
+    profile_ : numpy.ndarray or None
+        The profile likelihood where the interval search evaluated it: rows
+        ``(theta, rise)`` sorted by ``theta``, ``rise`` the refit's cost minus
+        ``cost_`` in chi-square units (``(theta_, 0)`` included); None for the other
+        intervals. The report plots it.
     bootstrap_thetas_ : numpy.ndarray or None
         The refitted ``theta`` of every bootstrap resample (None without bootstrap).
     param_std_ : dict of str to float
@@ -1013,6 +1018,7 @@ class JointIdentifier:
         self.t_b_ = [c[2] for c in self.commutations_]
         self.interval_ = "fisher"
         self.bootstrap_thetas_ = None
+        self.profile_ = None
         if isinstance(self.interval, ProfileLikelihood):
             self._profile(rows_unc, z, cov_z, float(best.cost))
         elif isinstance(self.interval, ParametricBootstrap):
@@ -1044,6 +1050,7 @@ class JointIdentifier:
 
                 if n == 1:  # theta alone is estimated: the profile is the cost itself
                     r = fun(np.empty(0))
+                    points.append((math.exp(zt), float(r @ r) - cost))
                     return float(r @ r) - cost
 
                 def jac(w: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -1058,10 +1065,12 @@ class JointIdentifier:
                     w0 = z[1:] + slope * sign * d
                 st = _lm(fun, jac, w0, max_iter=prof.max_iter)
                 memo[d] = st.z
+                points.append((math.exp(zt), st.cost - cost))
                 return st.cost - cost
 
             return rise
 
+        points = [(math.exp(z[0]), 0.0)]
         ends, bounded = [], []
         for sign in (-1.0, 1.0):
             d, ok = profile_crossing(side(sign), 1.96 * s_z if s_z > 0 else 0.05,
@@ -1072,6 +1081,7 @@ class JointIdentifier:
         self.ci95_ = (ends[0], ends[1])
         self.ci95_bounded_ = (bounded[0], bounded[1])
         self.interval_ = "profile"
+        self.profile_ = np.array(sorted(points))
 
     def _bootstrap(self, spans: list[_Span], sims: list[np.ndarray]) -> None:
         """Refit ``interval.n_resamples`` records simulated from the estimate."""

@@ -14,14 +14,16 @@ resource, so the directory can be zipped, mailed or opened offline. It shows
 * the criterion ``W_1(theta)`` over a grid (recomputed here by simulating
   ``prior.with_theta(theta)`` with :func:`backlashkit.simulate_batch`), with the
   pre-estimate window ``theta_ini (1 +- n_theta)`` and the estimate marked;
+* for the joint estimator, the profile likelihood of ``theta`` where its interval
+  search evaluated it (``profile_``), with the 95 % level and interval;
 * the autocorrelation of the motor-speed residual with the ``+-1.96 / sqrt(N)`` band
   of white noise;
 * a table of the estimates (``std`` and ``ci95`` shown as "n/a" when the method
   gives none).
 
 The plot helpers (:func:`plot_speed_fit`, :func:`plot_commutation`,
-:func:`plot_cost`, :func:`plot_residual_acf`) take ``ax=`` and return the figure; they
-use :class:`matplotlib.figure.Figure`, never ``pyplot``.
+:func:`plot_cost`, :func:`plot_profile`, :func:`plot_residual_acf`) take ``ax=`` and
+return the figure; they use :class:`matplotlib.figure.Figure`, never ``pyplot``.
 
 The CLI hook is :func:`add_report_option` plus :func:`maybe_write_report`.
 """
@@ -64,6 +66,7 @@ __all__ = [
     "maybe_write_report",
     "plot_commutation",
     "plot_cost",
+    "plot_profile",
     "plot_residual_acf",
     "plot_speed_fit",
     "write_identification_report",
@@ -365,6 +368,63 @@ def plot_cost(
     return fig
 
 
+def plot_profile(
+    profile: Sequence[Sequence[float]] | np.ndarray,
+    *,
+    ci95: tuple[float, float] | None = None,
+    theta: float | None = None,
+    std: float | None = None,
+    ax: matplotlib.axes.Axes | None = None,
+) -> matplotlib.figure.Figure:
+    """Plot a profile likelihood of ``theta`` with the 95 % level and interval.
+
+    With ``theta`` and its Fisher ``std`` the quadratic the Fisher interval assumes,
+    ``(log(t / theta) / (std / theta))^2``, is drawn too: where the points leave it,
+    the likelihood is not quadratic and the two intervals differ.
+
+    Parameters
+    ----------
+    profile : array_like, shape (k, 2)
+        Rows ``(theta, rise)``: half-width in rad and the cost rise of the refit with
+        ``theta`` held, in chi-square units (``JointIdentifier.profile_``).
+    ci95 : tuple of float, optional
+        The interval in rad (shaded).
+    theta : float, optional
+        The estimate in rad.
+    std : float, optional
+        Its Fisher standard error in rad.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding the axes.
+    """
+    from .intervals import CHI2_95
+
+    fig, ax = _ax(ax)
+    deg = 180.0 / math.pi
+    p = np.asarray(profile, float).reshape(-1, 2)
+    if theta is not None and std is not None and theta > 0 and std > 0:
+        lo, hi = float(np.min(p[:, 0])), float(np.max(p[:, 0]))
+        span = max(hi - lo, 4.0 * std)
+        grid = np.linspace(max(lo - 0.15 * span, theta * 1e-3), hi + 0.15 * span, 200)
+        ax.plot(grid * deg, (np.log(grid / theta) / (std / theta)) ** 2, color="C0",
+                ls=":", lw=1.2, label="Fisher (quadratic)")
+    ax.plot(p[:, 0] * deg, p[:, 1], color="k", ls="none", marker="o", ms=5,
+            label="refit with theta held")
+    ax.axhline(CHI2_95, color="C3", ls="--", lw=1, label="95 % level (3.84)")
+    if ci95 is not None:
+        ax.axvspan(ci95[0] * deg, ci95[1] * deg, color="C0", alpha=0.15,
+                   label="95 % interval")
+    ax.set_xlabel("theta (half-width) [deg]")
+    ax.set_ylabel("cost rise [chi-square units]")
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(alpha=0.3)
+    return fig
+
+
 def plot_residual_acf(
     residual: Sequence[float] | np.ndarray,
     *,
@@ -570,6 +630,13 @@ def write_identification_report(
                     bounds=None if bounds is None else (float(bounds[0]), float(bounds[1])))
     save_figure(fig, out, "cost")
 
+    # 3b. profile likelihood (joint estimator with ProfileLikelihood)
+    profile = getattr(result, "profile_", None)
+    if profile is not None:
+        fig = plot_profile(profile, ci95=getattr(result, "ci95_", None), theta=theta,
+                           std=getattr(result, "std_", None))
+        save_figure(fig, out, "profile")
+
     # 4. residual autocorrelation
     fig = Figure(figsize=(8, 3.2), layout="constrained")
     ax = fig.subplots()
@@ -650,6 +717,15 @@ def write_identification_report(
     sections += [
         "<h2>Criterion against theta</h2>",
         figure("cost", f"W_1(theta) on w_M; shaded: {window}"),
+    ]
+    if profile is not None:
+        sections += [
+            "<h2>Profile likelihood of theta</h2>",
+            figure("profile", "Cost rise of the refit with theta held (the other "
+                   "estimated parameters re-optimised), where the interval search "
+                   "evaluated it; the 95 % interval ends where it reaches 3.84"),
+        ]
+    sections += [
         "<h2>Residual autocorrelation</h2>",
         figure(
             "residual_acf",
