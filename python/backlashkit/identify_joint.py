@@ -218,6 +218,13 @@ AMBIGUITY_MARGIN = 30.0
 #: Largest log-parameter difference of two end points that count as one basin.
 DISTINCT = 1e-2
 
+#: A held-theta refit of the profile search that ends more than this (chi-square units)
+#: below the estimate's cost restarts the final refinement from there (at most
+#: RECENTRE_MAX times): the likelihood of a rattling shaft is rough at the scale of
+#: 1-2 units, and the refinement can stop on a bump next to a lower point.
+RECENTRE_MARGIN = 0.5
+RECENTRE_MAX = 2
+
 #: The default interval (frozen, so one instance serves every identifier).
 _PROFILE = ProfileLikelihood()
 
@@ -319,6 +326,17 @@ def _resplit(z: np.ndarray, free: Sequence[str], pair: tuple[str, str],
         jm, jl = math.exp(z[1 + free.index("J_M")]), math.exp(z[1 + free.index("J_L")])
         z[1 + free.index("k_sh")] = math.log(omega2 / (1 / jm + 1 / jl))
     return z
+
+
+@dataclass
+class _Profiled:
+    """What the profile-likelihood search found (:meth:`JointIdentifier._profile`)."""
+
+    ci95: tuple[float, float]
+    bounded: tuple[bool, bool]
+    points: np.ndarray  # rows (theta, cost rise), sorted
+    lowest_rise: float  # the lowest refit's cost rise (< 0: below the estimate's cost)
+    lowest_z: np.ndarray  # its log-parameters
 
 
 @dataclass
@@ -503,7 +521,10 @@ class JointIdentifier:
         a test).
     interval : ProfileLikelihood, FisherInterval or ParametricBootstrap, optional
         Where ``ci95_`` (and, for the bootstrap, ``std_``) comes from (module
-        :mod:`backlashkit.intervals`; default ``ProfileLikelihood()``).
+        :mod:`backlashkit.intervals`; default ``ProfileLikelihood()``). The profile
+        search can move the estimate: a held-theta refit more than
+        :data:`RECENTRE_MARGIN` below the estimate's cost restarts the final
+        refinement from there.
     final_horizon : float or None, optional
         Horizon in s of the final refinement, the noise re-estimation and the
         uncertainty, after the start of each record and after every torque jump
@@ -976,16 +997,29 @@ class JointIdentifier:
                 pos += 2 * m
             sig_now = np.maximum(sig_now * np.sqrt(sq / count[:, np.newaxis]), 1e-300)
             best = lm_on(make_residual(final_spans, final_h, sig_now), best.z, self.max_iter)
-        z = best.z
         sigma = sig_now
-        # uncertainty: Gauss-Newton information (the prior's rows are in the residual)
         rows_unc = make_residual(final_spans, final_h, sig_now)
-        jz = central_jacobian(rows_unc, z)
-        info = jz.T @ jz
-        try:
-            cov_z = np.linalg.inv(info)
-        except np.linalg.LinAlgError:
-            cov_z = np.linalg.pinv(info)
+        profiled = None
+        for k_centre in range(RECENTRE_MAX + 1):
+            z = best.z
+            # uncertainty: Gauss-Newton information (the prior's rows are in the residual)
+            jz = central_jacobian(rows_unc, z)
+            info = jz.T @ jz
+            try:
+                cov_z = np.linalg.inv(info)
+            except np.linalg.LinAlgError:
+                cov_z = np.linalg.pinv(info)
+            if not isinstance(self.interval, ProfileLikelihood):
+                break
+            profiled = self._profile(rows_unc, z, cov_z, float(best.cost))
+            if k_centre == RECENTRE_MAX or profiled.lowest_rise > -RECENTRE_MARGIN:
+                break
+            # a held-theta refit ended below the estimate's cost: the refinement had
+            # stopped on a bump of a rough likelihood; continue from that refit
+            st = lm_on(rows_unc, profiled.lowest_z, self.max_iter)
+            if st.cost > best.cost - RECENTRE_MARGIN:
+                break
+            best = st
         values = np.exp(z)
         cov = cov_z * np.outer(values, values)  # delta method: dp = p dz
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -1019,13 +1053,15 @@ class JointIdentifier:
         self.interval_ = "fisher"
         self.bootstrap_thetas_ = None
         self.profile_ = None
-        if isinstance(self.interval, ProfileLikelihood):
-            self._profile(rows_unc, z, cov_z, float(best.cost))
+        if profiled is not None:
+            self.ci95_, self.ci95_bounded_ = profiled.ci95, profiled.bounded
+            self.profile_ = profiled.points
+            self.interval_ = "profile"
         elif isinstance(self.interval, ParametricBootstrap):
             self._bootstrap(spans, [x[0] for x in sims])
         return self
 
-    def _profile(self, rows, z: np.ndarray, cov_z: np.ndarray, cost: float) -> None:
+    def _profile(self, rows, z: np.ndarray, cov_z: np.ndarray, cost: float) -> _Profiled:
         """Profile-likelihood interval of ``theta`` (:class:`ProfileLikelihood`)."""
         prof = self.interval
         assert isinstance(prof, ProfileLikelihood)
@@ -1066,11 +1102,14 @@ class JointIdentifier:
                 st = _lm(fun, jac, w0, max_iter=prof.max_iter)
                 memo[d] = st.z
                 points.append((math.exp(zt), st.cost - cost))
+                if st.cost - cost < lowest[0]:
+                    lowest[:] = [st.cost - cost, np.r_[zt, st.z]]
                 return st.cost - cost
 
             return rise
 
         points = [(math.exp(z[0]), 0.0)]
+        lowest: list = [0.0, z]  # the lowest refit: its cost rise and log-parameters
         ends, bounded = [], []
         for sign in (-1.0, 1.0):
             d, ok = profile_crossing(side(sign), 1.96 * s_z if s_z > 0 else 0.05,
@@ -1078,10 +1117,8 @@ class JointIdentifier:
                                      largest=math.log(prof.max_factor))
             ends.append(math.exp(z[0] + sign * d))
             bounded.append(ok)
-        self.ci95_ = (ends[0], ends[1])
-        self.ci95_bounded_ = (bounded[0], bounded[1])
-        self.interval_ = "profile"
-        self.profile_ = np.array(sorted(points))
+        return _Profiled((ends[0], ends[1]), (bounded[0], bounded[1]),
+                         np.array(sorted(points)), float(lowest[0]), lowest[1])
 
     def _bootstrap(self, spans: list[_Span], sims: list[np.ndarray]) -> None:
         """Refit ``interval.n_resamples`` records simulated from the estimate."""

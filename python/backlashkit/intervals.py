@@ -54,11 +54,15 @@ class ProfileLikelihood:
     ``sqrt(cost rise)`` proportional to the distance (secant steps once bracketed),
     until the rise is within ``tol`` of 3.84. ``std_`` stays the Fisher standard error.
 
-    Where the shaft rattles the profile is rough at the scale of a chi-square unit (a
-    refit held at ``theta`` can even end slightly below the estimate's cost); the rise
-    is then taken as 0 and the search goes on outwards. An end that does not reach
-    3.84 within a factor ``max_factor`` of ``theta_`` is reported at that factor: the
-    records do not bound ``theta`` there.
+    Where the shaft rattles the profile is rough at the scale of a chi-square unit: a
+    refit held at ``theta`` can end below the estimate's cost. The rise is then taken
+    as 0 and the search goes on outwards; and when the lowest refit is more than 0.5
+    below, the estimate itself was not the nearby minimum: the joint fit refines all
+    parameters again from that refit and searches the profile around the new estimate
+    (at most twice; ``RECENTRE_MARGIN``, ``RECENTRE_MAX`` in
+    :mod:`backlashkit.identify_joint`). An end that does not reach 3.84 within a
+    factor ``max_factor`` of ``theta_`` is reported at that factor: the records do not
+    bound ``theta`` there.
 
     Parameters
     ----------
