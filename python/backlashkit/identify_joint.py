@@ -1071,6 +1071,8 @@ class JointIdentifier:
         # start of every held-theta refit (its exact optimum where the cost is quadratic)
         slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(n - 1)
 
+        evaluated = [(0.0, z)]  # every refit: cost rise and log-parameters (estimate first)
+
         def side(sign: float):
             """The cost rise of the profile at distance ``d`` (log theta) on one side."""
             memo: dict[float, np.ndarray] = {}  # distance -> refitted other parameters
@@ -1086,8 +1088,8 @@ class JointIdentifier:
 
                 if n == 1:  # theta alone is estimated: the profile is the cost itself
                     r = fun(np.empty(0))
-                    points.append((math.exp(zt), float(r @ r) - cost))
-                    return float(r @ r) - cost
+                    evaluated.append((float(r @ r) - cost, np.array([zt])))
+                    return evaluated[-1][0]
 
                 def jac(w: np.ndarray, r: np.ndarray) -> np.ndarray:
                     ww = np.repeat(np.r_[zt, w][np.newaxis, :], n - 1, axis=0)
@@ -1101,15 +1103,11 @@ class JointIdentifier:
                     w0 = z[1:] + slope * sign * d
                 st = _lm(fun, jac, w0, max_iter=prof.max_iter)
                 memo[d] = st.z
-                points.append((math.exp(zt), st.cost - cost))
-                if st.cost - cost < lowest[0]:
-                    lowest[:] = [st.cost - cost, np.r_[zt, st.z]]
-                return st.cost - cost
+                evaluated.append((st.cost - cost, np.r_[zt, st.z]))
+                return evaluated[-1][0]
 
             return rise
 
-        points = [(math.exp(z[0]), 0.0)]
-        lowest: list = [0.0, z]  # the lowest refit: its cost rise and log-parameters
         ends, bounded = [], []
         for sign in (-1.0, 1.0):
             d, ok = profile_crossing(side(sign), 1.96 * s_z if s_z > 0 else 0.05,
@@ -1117,8 +1115,10 @@ class JointIdentifier:
                                      largest=math.log(prof.max_factor))
             ends.append(math.exp(z[0] + sign * d))
             bounded.append(ok)
-        return _Profiled((ends[0], ends[1]), (bounded[0], bounded[1]),
-                         np.array(sorted(points)), float(lowest[0]), lowest[1])
+        lowest = min(evaluated, key=lambda e: e[0])
+        points = np.array(sorted((math.exp(zz[0]), r) for r, zz in evaluated))
+        return _Profiled((ends[0], ends[1]), (bounded[0], bounded[1]), points,
+                         float(lowest[0]), lowest[1])
 
     def _bootstrap(self, spans: list[_Span], sims: list[np.ndarray]) -> None:
         """Refit ``interval.n_resamples`` records simulated from the estimate."""
