@@ -17,7 +17,8 @@ ENFORCED = {"GL08", "SS01", "PR01", "PR02", "PR03", "RT01", "RT03"}
 
 
 #: Public modules whose ``__all__`` is documented API besides the package's own.
-SUBMODULES = ("identify", "identify_joint", "records", "ravanbod2002", "signals")
+SUBMODULES = ("identify", "identify_joint", "noise_models", "records", "ravanbod2002",
+              "signals")
 
 
 def _exported():

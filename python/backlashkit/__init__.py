@@ -15,7 +15,7 @@ from .control import (
     design_mrc,
     simulate_closed_loop,
 )
-from .errors import InputError, SensitivityWarning
+from .errors import CorrelatedResidualsWarning, InputError, SensitivityWarning
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .identify_joint import (
     CramerRaoBound,
@@ -25,6 +25,7 @@ from .identify_joint import (
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
+from .noise_models import ARNoise, WhiteNoise
 from .nonlinearities import (
     Backlash,
     ExactInverse,
@@ -47,6 +48,7 @@ from .simulate import (
 __version__ = "0.1.0"
 
 __all__ = [
+    "ARNoise",
     "AdaptiveLaw",
     "Backlash",
     "DiscreteAdaptiveController",
@@ -65,6 +67,7 @@ __all__ = [
     "design_mrc",
     "simulate_closed_loop",
     "ContactEvent",
+    "CorrelatedResidualsWarning",
     "CramerRaoBound",
     "DriveChain",
     "DriveResponse",
@@ -77,6 +80,7 @@ __all__ = [
     "ShaftLaw",
     "TwoMassDrive",
     "TwoStepIdentifier",
+    "WhiteNoise",
     "__version__",
     "assess_sensitivity",
     "cramer_rao_bound",

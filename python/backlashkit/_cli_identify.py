@@ -18,6 +18,7 @@ import argparse
 import json
 import math
 import sys
+import warnings
 from typing import Any
 
 from .cli import flag_names
@@ -45,9 +46,11 @@ own noise level, estimated from the data), the prior entering as a Gaussian pena
 with the relative std of the [uncertainty] table of PRIOR.toml (or --prior-rel-std);
 without either, the linear parameters are refined from the data alone. It reports the
 standard error std (Fisher information) and a 95% interval ci95 of theta (profile
-likelihood; --interval fisher: theta +- 1.96 std); its t_c, t_b are the
-contact changes of the identified model (located between samples), theta_ini is
-the eq. 6 pre-estimate it also starts from.
+likelihood; --interval fisher: theta +- 1.96 std), and says when the residuals are
+correlated from sample to sample (filtered speeds: --noise ar models the noise as
+autoregressive instead of white); its t_c, t_b are the contact changes of the
+identified model (located between samples), theta_ini is the eq. 6 pre-estimate it
+also starts from.
 
 Each EXP.csv holds columns t,torque,w_motor,w_load (SI) with one step-down of the
 torque from a positive level (other names, separators, decimal commas, rpm, a sample
@@ -136,6 +139,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument("--seed", type=int, default=0,
                    help="joint --bootstrap: seed of the resamples' noise (default 0)")
+    p.add_argument(
+        "--noise", choices=("white", "ar"), default=None,
+        help="joint: measurement noise model, white (default) or autoregressive (for "
+        "filtered speeds, whose noise is correlated from sample to sample: the "
+        "residuals are whitened, the interval widened accordingly)"
+    )
+    p.add_argument("--noise-order", type=int, default=None, metavar="P",
+                   help="joint --noise ar: order of the autoregressive model (default 2)")
     p.add_argument(
         "--final-horizon", type=float, default=None, metavar="S",
         help="joint: final fit and interval on S seconds after the start and every torque "
@@ -249,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
 _FLAGS = {
     "n_theta": "--n-theta", "cutoff_motor": "--cutoff-motor", "cutoff_load": "--cutoff-load",
     "n_resamples": "--bootstrap", "seed": "--seed", "final_horizon": "--final-horizon",
-    "sample_time": "--sample-time",
+    "sample_time": "--sample-time", "order": "--noise-order",
 }
 
 
@@ -265,7 +276,7 @@ def _run(args: argparse.Namespace) -> int:
     ci95: list[float] | None = None
     extra: dict[str, Any] = {}
     for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
-                          ("--final-horizon", args.final_horizon)):
+                          ("--final-horizon", args.final_horizon), ("--noise", args.noise)):
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")
     if args.method == "joint":
@@ -276,7 +287,9 @@ def _run(args: argparse.Namespace) -> int:
         else:
             rel = read_uncertainty_toml(args.drive) or None
         everything = records + (finals or [])
+        from .errors import CorrelatedResidualsWarning
         from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+        from .noise_models import ARNoise, WhiteNoise
 
         if args.seed < 0:  # the library's message would offer a SeedSequence
             raise InputError(f"--seed must be >= 0, got {args.seed}")
@@ -285,16 +298,26 @@ def _run(args: argparse.Namespace) -> int:
         interval: Any = FisherInterval() if args.interval == "fisher" else ProfileLikelihood()
         if args.bootstrap is not None:
             interval = ParametricBootstrap(args.bootstrap, seed=args.seed)
+        if args.noise_order is not None and args.noise != "ar":
+            raise InputError("--noise-order only applies with --noise ar")
+        noise_model: Any = WhiteNoise()
+        if args.noise == "ar":
+            noise_model = ARNoise(2 if args.noise_order is None else args.noise_order)
         est = JointIdentifier(prior, prior_rel_std=rel, interval=interval,
-                              final_horizon=args.final_horizon).fit(everything)
+                              noise_model=noise_model, final_horizon=args.final_horizon)
+        with warnings.catch_warnings():  # said below, as a note, or in the JSON
+            warnings.simplefilter("ignore", CorrelatedResidualsWarning)
+            est.fit(everything)
         theta_ini = est.theta_ini_
         rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_,
-                   est.commutations_, strict=True)
-        for rec, fitp, how, noise, (t_s, t_c, t_b) in rows:
+                   est.commutations_, est.residual_lag1_, strict=True)
+        for k, (rec, fitp, how, noise, (t_s, t_c, t_b), lag1) in enumerate(rows):
             per_record.append(
                 {"file": rec.name, "t_s": t_s, "t_c": t_c, "t_b": t_b,
                  "theta_ini": None, "fit_percent": [float(x) for x in fitp],
                  "model_start": how, "noise_std": [float(x) for x in noise],
+                 "noise_ar": None if est.noise_ar_ is None else est.noise_ar_[k].tolist(),
+                 "residual_lag1": [float(x) for x in lag1],
                  "commutation": "model"}
             )
         bounds = [float(est.theta_max / est.n_grid), float(est.theta_max)]
@@ -304,6 +327,9 @@ def _run(args: argparse.Namespace) -> int:
             "interval": est.interval_,
             "ci95_bounded": list(est.ci95_bounded_),
             "ambiguous": est.ambiguous_,
+            "noise_model": ("white" if est.noise_ar_ is None
+                            else f"ar({est.noise_ar_.shape[-1]})"),
+            "residuals_correlated": est.correlation_message() is not None,
             "final_horizon": est.final_horizon,
             "std_fisher": est.param_std_["theta"],
             "params": est.params_,
@@ -384,6 +410,11 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"note: the likelihood does not rise to the 95% level on the {end} "
                       "side within the search range: the records hardly bound theta there "
                       "(longer or less noisy records help)", file=out)
+        message = est.correlation_message()
+        if message is not None:
+            message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
+            print(f"note: {message.replace('raise the order', 'raise --noise-order')}",
+                  file=out)
         if est.ambiguous_:
             print("note: the search ended in distinct minima of nearly equal cost (the "
                   "likelihood is multimodal on these records); the interval describes the "

@@ -8,7 +8,7 @@ status 2.
 
 from __future__ import annotations
 
-__all__ = ["InputError", "SensitivityWarning"]
+__all__ = ["CorrelatedResidualsWarning", "InputError", "SensitivityWarning"]
 
 
 class InputError(ValueError):
@@ -22,4 +22,13 @@ class SensitivityWarning(UserWarning):
     relative speed) an arbitrarily small perturbation decides whether an impact
     happens, so the trajectory after it is ill-conditioned: any two accurate
     simulators may legitimately disagree there.
+    """
+
+
+class CorrelatedResidualsWarning(UserWarning):
+    """The residuals of a fit are correlated from sample to sample.
+
+    The joint estimator's likelihood treats them as white (after whitening, with an
+    autoregressive noise model); when they are not, its standard error and interval
+    are too narrow.
     """

@@ -29,17 +29,23 @@ Choices (documented, configurable where it matters)
   an ``[uncertainty]`` table: "parameters not listed are taken as exact").
 * **Model start.** ``start="auto"`` simulates a record from rest (state 0, shaft
   centred in the backlash) when it starts at rest (both measured speeds at the first
-  sample within 4 noise standard deviations of 0), otherwise from ``pre_window``
-  seconds before the torque step-down, started at the model's own steady state under
-  the torque held there (``w = a / (f_M + f_L)``, twist ``theta + f_L w / k_sh``),
-  so that the speed level measured before the step informs ``f_M + f_L``. The
-  residuals cover the simulated span (to the end of the record).
+  sample within 4 noise standard deviations of 0, or below a quarter of their level
+  just before the step-down: filtered noise can fool the first test), otherwise from
+  ``pre_window`` seconds before the torque step-down, started at the model's own
+  steady state under the torque held there (``w = a / (f_M + f_L)``, twist
+  ``theta + f_L w / k_sh``), so that the speed level measured before the step informs
+  ``f_M + f_L``. The residuals cover the simulated span (to the end of the record).
 * **Noise.** Every record and channel has its own noise level (paper A's two steps
   differ by 30 dB on ``w_L``). It starts from a high-pass estimate (robust MAD of the
   second difference, ``/ sqrt(6)``) and is then re-estimated from the residuals of the
   fit (``sqrt(RSS / N)`` per record and channel), and the fit repeated
   (``noise_iter`` times): at convergence this is the maximum of the likelihood with
   unknown variances. ``noise=(s_M, s_L)`` fixes them instead (for every record).
+  Filtered speed measurements have noise correlated from sample to sample, which the
+  white-noise likelihood takes for information: ``noise_model=ARNoise(order)`` then
+  fits an autoregressive model to the residuals of every record and channel and
+  refines the fit on the residuals whitened by it (:mod:`backlashkit.noise_models`);
+  ``residual_lag1_`` shows whether the residuals the likelihood treats as white are.
 * **Local minima.** The output error of this lightly damped drive (damping ratio
   about 0.013 for paper A's drive) is multimodal in ``theta`` and in the parameters
   that set the ringing (a 10 % error in ``k_sh`` shifts the phase by half a period
@@ -100,9 +106,10 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import _validate as v
-from .errors import InputError, SensitivityWarning
+from .errors import CorrelatedResidualsWarning, InputError, SensitivityWarning
 from .identify import Record, TwoStepIdentifier, _as_records, find_step_down
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, profile_crossing
+from .noise_models import ARNoise, WhiteNoise, fit_ar, whiten
 from .plants import TwoMassDrive
 from .signals import _noise_hp
 
@@ -138,12 +145,34 @@ class _Span:
     hold: float | None = None  # start: from rest after `level` held this long (s)
 
 
+def _starts_at_rest(rec: Record, s_m: float, s_l: float) -> bool:
+    """Whether both speeds start at rest (``start="auto"``, module docstring)."""
+    if abs(rec.w_motor[0]) <= 4 * s_m + 1e-12 and abs(rec.w_load[0]) <= 4 * s_l + 1e-12:
+        return True
+    # the high-pass estimate misses most of a filtered (correlated) noise, whose first
+    # sample can then exceed 4 of its "standard deviations": a record whose speeds
+    # start far below the level they hold before the step-down starts at rest too
+    try:
+        i_s = find_step_down(rec)[0]
+    except InputError:
+        return False
+    before = slice(max(0, i_s - REST_WINDOW), i_s)
+    return all(abs(w[0]) <= REST_FRACTION * abs(float(np.mean(w[before])))
+               for w in (rec.w_motor, rec.w_load))
+
+
+#: A record starts at rest when its first speeds are below this fraction of their mean
+#: over the last REST_WINDOW samples before the step-down (or within 4 noise std of 0).
+REST_FRACTION = 0.25
+REST_WINDOW = 20
+
+
 def _spans(recs: list[Record], start: str, pre_window: float, sig0) -> list[_Span]:
     out = []
     for k, rec in enumerate(recs):
         s_m, s_l = sig0[k]
-        at_rest = abs(rec.w_motor[0]) <= 4 * s_m + 1e-12 and abs(rec.w_load[0]) <= 4 * s_l + 1e-12
-        mode = ("rest" if at_rest else "steady") if start == "auto" else start
+        mode = ("rest" if _starts_at_rest(rec, s_m, s_l) else "steady") if start == "auto" \
+            else start
         if mode == "rest":
             i0, level = 0, None
         else:
@@ -225,8 +254,15 @@ DISTINCT = 1e-2
 RECENTRE_MARGIN = 0.5
 RECENTRE_MAX = 2
 
-#: The default interval (frozen, so one instance serves every identifier).
+#: Lag-1 autocorrelation of a residual above which (in magnitude) the fit warns that its
+#: interval is too narrow: white noise filtered to this correlation has an interval too
+#: narrow by up to ``sqrt((1 + 0.2) / (1 - 0.2)) = 1.22`` (its spectrum at 0 against its
+#: variance); the fits of white noise in the benchmarks stay below 0.01.
+CORRELATED_LAG1 = 0.2
+
+#: The default interval and noise model (frozen, so one instance serves every identifier).
 _PROFILE = ProfileLikelihood()
+_WHITE = WhiteNoise()
 
 #: Order of a two-mass drive's values in a packed kernel parameter row
 #: (:class:`~backlashkit.DriveChain` fields ``J, f, k, d, theta``).
@@ -294,6 +330,13 @@ def _basins(ends: list[_LMState]) -> int:
                 np.max(np.abs(st.z - z)) > DISTINCT for z in found):
             found.append(st.z)
     return len(found)
+
+
+def _lag1(e: np.ndarray) -> float:
+    """Lag-1 autocorrelation of a residual (mean removed; 0 for a constant one)."""
+    x = e - e.mean()
+    den = float(x @ x)
+    return float(x[1:] @ x[:-1]) / den if den > 0 else 0.0
 
 
 def _check_positive_sequence(name: str, value) -> None:
@@ -367,7 +410,11 @@ def _lm(fun, jac, z0: np.ndarray, *, max_iter: int, state: _LMState | None = Non
     if state is None or state.done:
         r0 = fun(z0)
         state = _LMState(np.array(z0, float), r0, float(r0 @ r0), None)
-        state.done = False
+        # a start the model cannot simulate (e.g. a parameter overflowing) has no
+        # Jacobian; its cost stays inf (a profile refit far out: an unbounded rise)
+        state.done = not math.isfinite(state.cost)
+        if state.done:
+            return state
     for _ in range(max_iter):
         if state.jac is None:
             state.jac = jac(state.z, state.r)
@@ -525,6 +572,14 @@ class JointIdentifier:
         search can move the estimate: a held-theta refit more than
         :data:`RECENTRE_MARGIN` below the estimate's cost restarts the final
         refinement from there.
+    noise_model : WhiteNoise or ARNoise, optional
+        The measurement noise (module :mod:`backlashkit.noise_models`; default
+        ``WhiteNoise()``). ``ARNoise(order)`` whitens the residuals by an
+        autoregressive model fitted to them: for filtered speed measurements, whose
+        noise is correlated from sample to sample and makes the white-noise interval
+        too narrow (``benchmarks/colored_noise.py``; README, "Coloured noise"). It
+        needs the whole records (``final_horizon=None``) and estimated noise levels
+        (``noise=None``).
     final_horizon : float or None, optional
         Horizon in s of the final refinement, the noise re-estimation and the
         uncertainty, after the start of each record and after every torque jump
@@ -574,7 +629,21 @@ class JointIdentifier:
         Covariance of the estimated parameters (natural units, order ``estimated_``).
     noise_std_ : numpy.ndarray
         Noise standard deviation per record and channel ``(w_M, w_L)`` in rad/s,
-        shape ``(n_records, 2)``.
+        shape ``(n_records, 2)`` (with ``ARNoise``: of the noise, not of its
+        innovation).
+    noise_innovation_std_ : numpy.ndarray
+        Standard deviation of the white innovation of the noise per record and channel
+        in rad/s, the weight of the residuals (equal to ``noise_std_`` for white
+        noise).
+    noise_ar_ : numpy.ndarray or None
+        ``ARNoise``: coefficients ``a_1 .. a_p`` of ``A(q)`` per record and channel,
+        shape ``(n_records, 2, p)``; None for white noise.
+    residual_lag1_ : numpy.ndarray
+        Lag-1 autocorrelation of the residuals the likelihood treats as white (whitened
+        by ``A(q)`` with ``ARNoise``) per record and channel, shape ``(n_records, 2)``:
+        about 0 (within a few ``1 / sqrt(N)``) when the noise model fits; above
+        :data:`CORRELATED_LAG1` in magnitude :meth:`fit` warns
+        (:meth:`correlation_message`).
     fit_percent_ : numpy.ndarray
         NRMSE fit ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)`` per record and channel,
         shape ``(n_records, 2)``.
@@ -582,8 +651,8 @@ class JointIdentifier:
         ``(w_M - w_M_hat, w_L - w_L_hat)`` per record over the simulated span (to the
         end of the record, also with ``final_horizon``).
     cost_ : float
-        Weighted sum of squared residuals (over ``final_horizon``, if given) plus the
-        prior penalty at the optimum.
+        Weighted sum of squared residuals (over ``final_horizon``, if given; whitened
+        with ``ARNoise``) plus the prior penalty at the optimum.
     theta_starts_ : list of float
         The starting values of ``theta`` refined.
     theta_two_step_ : float or None
@@ -639,6 +708,7 @@ class JointIdentifier:
         search_factor: float | None = 3.0,
         stiffness_restarts: Sequence[float] = (0.15,),
         interval: ProfileLikelihood | FisherInterval | ParametricBootstrap = _PROFILE,
+        noise_model: WhiteNoise | ARNoise = _WHITE,
         final_horizon: float | None = None,
         workers: int | None = None,
     ) -> None:
@@ -667,6 +737,7 @@ class JointIdentifier:
         self.stiffness_restarts = stiffness_restarts
         self.final_horizon = final_horizon
         self.interval = interval
+        self.noise_model = noise_model
         self.workers = workers
 
     # -- validation ------------------------------------------------------------------
@@ -699,6 +770,22 @@ class JointIdentifier:
                 "interval must be a ProfileLikelihood, FisherInterval or ParametricBootstrap "
                 f"(backlashkit.intervals), got {type(self.interval).__name__}"
             )
+        if not isinstance(self.noise_model, (WhiteNoise, ARNoise)):
+            raise InputError(
+                "noise_model must be a WhiteNoise or ARNoise (backlashkit.noise_models), "
+                f"got {type(self.noise_model).__name__}"
+            )
+        if isinstance(self.noise_model, ARNoise):
+            if self.noise is not None:
+                raise InputError(
+                    "noise=(s_M, s_L) fixes white noise levels; with noise_model=ARNoise(...) "
+                    "the noise is estimated from the residuals: give one or the other"
+                )
+            if self.final_horizon is not None:
+                raise InputError(
+                    "noise_model=ARNoise(...) whitens the residuals of whole records; it "
+                    f"cannot be combined with final_horizon (got {self.final_horizon!r})"
+                )
         if self.search_factor is not None and not (
             v.positive("search_factor", self.search_factor) > 1.0
         ):
@@ -747,7 +834,38 @@ class JointIdentifier:
         # multimodal fits of a rattling load can follow a different path on it)
         with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="blas"):
             warnings.simplefilter("ignore", SensitivityWarning)
-            return self._fit(records)
+            self._fit(records)
+        message = self.correlation_message()
+        if message is not None:
+            warnings.warn(message, CorrelatedResidualsWarning, stacklevel=2)
+        return self
+
+    def correlation_message(self) -> str | None:
+        """Say whether the residuals of the fit are too correlated for its interval.
+
+        Returns
+        -------
+        str or None
+            A sentence naming the record and speed whose residual (whitened, with
+            :class:`~backlashkit.noise_models.ARNoise`) has the largest lag-1
+            autocorrelation, when it exceeds :data:`CORRELATED_LAG1` in magnitude
+            (then the standard error and interval of ``theta`` are too narrow); None
+            otherwise. :meth:`fit` emits it as a
+            :class:`~backlashkit.errors.CorrelatedResidualsWarning`.
+        """
+        lag1 = self.residual_lag1_
+        k, c = np.unravel_index(int(np.argmax(np.abs(lag1))), lag1.shape)
+        rho = float(lag1[k, c])
+        if not abs(rho) > CORRELATED_LAG1:
+            return None
+        what = ("the noise is not white" if self.noise_ar_ is None else
+                f"ARNoise(order={self.noise_ar_.shape[-1]}) does not whiten the noise")
+        fix = ("fit with noise_model=ARNoise()" if self.noise_ar_ is None else
+               "raise the order")
+        return (f"the residual of {('w_M', 'w_L')[c]} in {self._record_names[k]} (record "
+                f"{k + 1}) has lag-1 "
+                f"autocorrelation {rho:.2f} (white noise: about 0): {what}, so the standard "
+                f"error and interval of theta are too narrow; {fix}")
 
     def _fit(self, records) -> JointIdentifier:
         prior = self.prior.with_theta(None)
@@ -799,23 +917,30 @@ class JointIdentifier:
                 out.append(np.flatnonzero(keep))
             return out
 
-        def make_residual(spans_: list[_Span], horizon: float | None, sig: np.ndarray):
+        def make_residual(spans_: list[_Span], horizon: float | None, sig: np.ndarray,
+                          ar: np.ndarray | None = None):
+            """Weighted residual rows; with ``ar`` (record, channel, lag) each channel's
+            residual is whitened by ``A(q)`` first (``sig``: innovation std then)."""
             sels = selection(spans_, horizon)
             sizes = [s_.stop if isinstance(s_, slice) else s_.size for s_ in sels]
             ends = [s_.stop if isinstance(s_, slice) else int(s_[-1]) + 1 for s_ in sels]
-            n_res = 2 * sum(sizes) + len(free)
+            lag = 0 if ar is None else ar.shape[-1]  # samples without a past, dropped
+            n_res = 2 * sum(m - lag for m in sizes) + len(free)
             ys = [(sp.y_m[s_], sp.y_l[s_]) for sp, s_ in zip(spans_, sels, strict=True)]
 
             def rows(z_rows: np.ndarray) -> np.ndarray:
                 sims = model(z_rows, spans_, ends)
                 out = np.empty((len(z_rows), n_res))
                 pos = 0
-                for sp, (ym, yl), s_, x, m in zip(spans_, ys, sels, sims, sizes, strict=True):
-                    np.subtract(ym, x[:, s_, 0], out=out[:, pos : pos + m])
-                    np.subtract(yl, x[:, s_, 1], out=out[:, pos + m : pos + 2 * m])
-                    out[:, pos : pos + m] /= sig[sp.k, 0]
-                    out[:, pos + m : pos + 2 * m] /= sig[sp.k, 1]
-                    pos += 2 * m
+                for sp, y2, s_, x, m in zip(spans_, ys, sels, sims, sizes, strict=True):
+                    for c, y in enumerate(y2):  # w_M, then w_L
+                        block = out[:, pos : pos + m - lag]
+                        if ar is None:
+                            np.subtract(y, x[:, s_, c], out=block)
+                        else:
+                            block[:] = whiten(y - x[:, s_, c], ar[sp.k, c])
+                        block /= sig[sp.k, c]
+                        pos += m - lag
                 p = np.exp(z_rows[:, 1:])
                 out[:, pos:] = (p - p_prior) / (pen * p_prior)  # 0 where no penalty
                 return out
@@ -997,8 +1122,21 @@ class JointIdentifier:
                 pos += 2 * m
             sig_now = np.maximum(sig_now * np.sqrt(sq / count[:, np.newaxis]), 1e-300)
             best = lm_on(make_residual(final_spans, final_h, sig_now), best.z, self.max_iter)
+        ar = None
+        if isinstance(self.noise_model, ARNoise):
+            # whiten by A(q) fitted to the residuals, refit; repeated noise_iter times
+            sig_now = sig_now.copy()  # the earlier stages' residual functions keep theirs
+            for _ in range(max(1, self.noise_iter)):
+                sims_f = model(best.z[np.newaxis, :], final_spans)
+                ar = np.empty((len(recs), 2, self.noise_model.order))
+                for sp, x in zip(final_spans, sims_f, strict=True):
+                    for c, y in enumerate((sp.y_m, sp.y_l)):
+                        ar[sp.k, c], var = fit_ar(y - x[0, :, c], self.noise_model.order)
+                        sig_now[sp.k, c] = math.sqrt(max(var, 1e-300))
+                best = lm_on(make_residual(final_spans, final_h, sig_now, ar), best.z,
+                             self.max_iter)
         sigma = sig_now
-        rows_unc = make_residual(final_spans, final_h, sig_now)
+        rows_unc = make_residual(final_spans, final_h, sig_now, ar)
         profiled = None
         for k_centre in range(RECENTRE_MAX + 1):
             z = best.z
@@ -1042,7 +1180,24 @@ class JointIdentifier:
         self.estimated_ = names
         self.param_std_ = dict(zip(names, (float(s) for s in std), strict=True))
         self.covariance_ = cov
-        self.noise_std_ = np.asarray(sigma, float)
+        self.noise_innovation_std_ = np.asarray(sigma, float)
+        self.noise_ar_ = ar
+        self.noise_std_ = self.noise_innovation_std_
+        self._record_names = [r.name for r in recs]
+        # the residuals the likelihood treats as white, on the fitted samples only
+        blocks: dict[tuple[int, int], list[np.ndarray]] = {}
+        pos, lag = 0, 0 if ar is None else ar.shape[-1]
+        for sp, s_ in zip(final_spans, selection(final_spans, final_h), strict=True):
+            m = (s_.stop if isinstance(s_, slice) else s_.size) - lag
+            for c in (0, 1):
+                blocks.setdefault((sp.k, c), []).append(best.r[pos : pos + m])
+                pos += m
+        self.residual_lag1_ = np.zeros((len(recs), 2))
+        for (k, c), parts in blocks.items():
+            self.residual_lag1_[k, c] = _lag1(np.concatenate(parts))
+        if ar is not None:  # the noise's own std, not its innovation's
+            self.noise_std_ = np.array([[float(np.std(e)) for e in pair]
+                                        for pair in self.residuals_])
         self.fit_percent_ = np.array(fits)
         self.cost_ = float(best.cost)
         self.theta_starts_ = starts
@@ -1133,10 +1288,9 @@ class JointIdentifier:
             rng = np.random.default_rng(child)
             records = []
             for sp, x in zip(spans, sims, strict=True):
-                s_m, s_l = self.noise_std_[sp.k]
-                records.append(Record(sp.t, sp.torque,
-                                      x[:, 0] + rng.normal(0.0, s_m, sp.t.size),
-                                      x[:, 1] + rng.normal(0.0, s_l, sp.t.size),
+                w_m, w_l = (x[:, c] + self._noise_sample(rng, sp.k, c, sp.t.size)
+                            for c in (0, 1))
+                records.append(Record(sp.t, sp.torque, w_m, w_l,
                                       name=f"{sp.record.name} (bootstrap)"))
             thetas.append(refit._fit(records).theta_)
         self.bootstrap_thetas_ = np.array(thetas)
@@ -1148,6 +1302,22 @@ class JointIdentifier:
         half = float(student_t.ppf(0.975, boot.n_resamples - 1)) * self.std_
         self.ci95_ = (self.theta_ - half, self.theta_ + half)
         self.interval_ = "bootstrap"
+
+
+    def _noise_sample(self, rng: np.random.Generator, k: int, c: int, n: int) -> np.ndarray:
+        """``n`` samples of the fitted noise of record ``k``, channel ``c``."""
+        s = self.noise_innovation_std_[k, c]
+        if self.noise_ar_ is None:
+            return rng.normal(0.0, s, n)
+        from scipy.signal import lfilter
+
+        # start in the stationary regime: run in until the slowest pole decayed 1e-6
+        a = self.noise_ar_[k, c]
+        radius = float(np.max(np.abs(np.roots(np.r_[1.0, a])))) if a.size else 0.0
+        burn = 100 if radius <= 0.0 else int(min(1e6, max(100, math.log(1e-6) / math.log(
+            min(radius, 1.0 - 1e-6)))))
+        eps = rng.normal(0.0, s, n + burn)
+        return lfilter([1.0], np.r_[1.0, a], eps)[burn:]
 
 
 #: Names of :class:`JointIdentifier`'s hyperparameters (its ``__init__`` keywords).

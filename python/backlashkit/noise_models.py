@@ -1,0 +1,148 @@
+"""Measurement-noise models of the joint estimator.
+
+Configuration objects for ``JointIdentifier(noise_model=...)``:
+
+* :class:`WhiteNoise` (the default) -- independent Gaussian samples, one variance per
+  record and speed. Right for simulated data and for speeds sampled without
+  filtering; the fit is then maximum likelihood.
+* :class:`ARNoise` -- an autoregressive process per record and speed,
+  ``A(q) e_t = eps_t`` with ``A(q) = 1 + a_1 q^-1 + ... + a_p q^-p`` and white
+  ``eps``. Measured speeds are often filtered (a speed observer, the differentiation
+  of an encoder, an anti-alias filter), so that neighbouring samples of their noise
+  are correlated. Treated as white, such noise makes every sample count as new
+  information and the interval of ``theta`` too narrow, by up to
+  ``sqrt(S(0) / var)`` (``S(0)`` the noise's spectrum at zero frequency, ``var`` its
+  variance: 3 for a first-order filter with lag-1 correlation 0.8). With
+  :class:`ARNoise` the residuals are whitened by ``A(q)`` before they are weighted (the
+  prediction-error method with an autoregressive noise model, Ljung, *System
+  Identification*, 2nd ed., Sec. 7.3): maximum likelihood again, conditional on the
+  first ``p`` samples of every record.
+
+:func:`fit_ar` (Yule-Walker) and :func:`whiten` are the pieces the fit uses; they are
+public because users may want to look at their residuals the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_toeplitz
+
+from .errors import InputError
+
+__all__ = ["ARNoise", "WhiteNoise", "fit_ar", "whiten"]
+
+#: Highest order accepted (the whitening filter drops this many samples per record).
+MAX_ORDER = 50
+
+
+@dataclass(frozen=True)
+class WhiteNoise:
+    """Independent Gaussian noise samples, one variance per record and speed.
+
+    The variances are estimated from the data (a high-pass estimate, then the
+    residuals of the fit), unless ``JointIdentifier(noise=(s_M, s_L))`` fixes them.
+    """
+
+
+@dataclass(frozen=True)
+class ARNoise:
+    """Autoregressive noise of order ``order`` per record and speed.
+
+    After the fit with white noise, the coefficients of ``A(q)`` and the innovation
+    variance of every record and speed are estimated from its residuals
+    (:func:`fit_ar`), the residuals of the model are whitened by ``A(q)``
+    (:func:`whiten`) and weighted by the innovation standard deviation, and the fit is
+    refined again; this is repeated ``JointIdentifier(noise_iter=...)`` times (at
+    least once). The Fisher information, the profile likelihood and the parametric
+    bootstrap all use the whitened residuals (the bootstrap simulates the fitted
+    autoregressive noise). On white noise the coefficients come out within a few
+    ``1 / sqrt(N)`` of 0 and the estimate hardly moves.
+
+    Parameters
+    ----------
+    order : int, optional
+        Order ``p`` of ``A(q)``, 1 to 50 (default 2: a first- or second-order filter
+        on the speed measurement).
+    """
+
+    order: int = 2
+
+    def __post_init__(self) -> None:
+        from .identify import _check_int
+
+        _check_int("order", self.order, 1)
+        if self.order > MAX_ORDER:
+            raise InputError(f"order must be at most {MAX_ORDER}, got {self.order!r}")
+
+
+def fit_ar(e, order: int) -> tuple[np.ndarray, float]:
+    """Autoregressive model of a residual sequence by the Yule-Walker equations.
+
+    Parameters
+    ----------
+    e : array_like
+        The sequence (1-D, finite; its mean is removed first), at least
+        ``2 order + 2`` samples.
+    order : int
+        Order ``p`` >= 1.
+
+    Returns
+    -------
+    a : numpy.ndarray
+        Coefficients ``a_1 .. a_p`` of ``A(q) = 1 + a_1 q^-1 + ... + a_p q^-p``
+        (``A(q) e_t`` is white). From the biased autocovariance, so ``A`` has its
+        roots inside the unit circle (a stationary model).
+    innovation_var : float
+        Variance of the white innovation ``A(q) e_t``, in the units of ``e`` squared.
+
+    Raises
+    ------
+    InputError
+        If ``e`` is too short, not finite, or constant.
+    """
+    x = np.asarray(e, float)
+    order = int(order)
+    if x.ndim != 1 or x.size < 2 * order + 2:
+        raise InputError(
+            f"fit_ar needs a 1-D sequence of at least {2 * order + 2} samples for order "
+            f"{order}, got shape {x.shape}"
+        )
+    if not np.all(np.isfinite(x)):
+        raise InputError("fit_ar: the sequence has NaN or inf samples")
+    x = x - x.mean()
+    n = x.size
+    r = np.array([x[: n - k] @ x[k:] for k in range(order + 1)]) / n
+    if not r[0] > 0:
+        raise InputError("fit_ar: the sequence is constant; no noise to model")
+    a = solve_toeplitz(r[:order], -r[1 : order + 1])
+    return a, float(r[0] + a @ r[1 : order + 1])
+
+
+def whiten(e, a) -> np.ndarray:
+    """Filter residuals by ``A(q) = 1 + a_1 q^-1 + ... + a_p q^-p`` along the last axis.
+
+    Parameters
+    ----------
+    e : array_like
+        Residuals, shape ``(..., n)`` with ``n > p``.
+    a : array_like
+        Coefficients ``a_1 .. a_p``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``e_t + a_1 e_{t-1} + ... + a_p e_{t-p}`` for ``t = p .. n - 1``, shape
+        ``(..., n - p)``: the first ``p`` samples, which lack a past, are dropped (the
+        likelihood conditional on them).
+    """
+    x = np.asarray(e, float)
+    a = np.asarray(a, float)
+    p, n = a.size, x.shape[-1]
+    if n <= p:
+        raise InputError(f"whiten needs more than {p} samples, got {n}")
+    out = x[..., p:].copy()
+    for i, ai in enumerate(a, start=1):
+        out += ai * x[..., p - i : n - i]
+    return out
