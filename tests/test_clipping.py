@@ -77,6 +77,16 @@ def test_clipped_channels_are_flagged(responses, quantum):
         assert clip is not None and clip.side == "minimum"
 
 
+def test_heavy_clipping_is_flagged(responses):
+    """With half the samples or more at the limit, the second differences are mostly
+    0: the noise is measured off the plateau, so the worst clipping is still found."""
+    y = _noisy(responses[2].w_motor, 35.0, 3)
+    for frac in (0.5, 0.7, 0.9):
+        top = np.quantile(y, 1.0 - frac)
+        clip = find_clipping(np.minimum(y, top))
+        assert clip is not None and clip.value == top and clip.count >= frac * y.size - 1
+
+
 #: the message quoted in the README ("Bad input")
 README_MESSAGE = ("exp1.csv: w_load is clipped: 17587 samples between t = 20.192 s and "
                   "40.375 s (runs of up to 13060) sit exactly at its maximum 15 rad/s, ")

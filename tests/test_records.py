@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -307,6 +308,12 @@ def test_nan_in_npz(tmp_path):
         ("t,t,w_motor,w_load\n0,1,2,3\n", ["line 1", "appears twice"]),
         ("t;torque;w_motor;w_load\n0;1,5;2;3\n0,001;1;2;3\n0,002;1;2;3,5\n",
          []),  # valid: decimal comma detected
+        # a thousands dot among decimal commas is refused, not read as a decimal point
+        ("t;torque;w_motor;w_load\n0;1,5;3.819;3\n0,001;1;2;3\n0,002;1;2;3,5\n",
+         ["line 2", "'3.819' has a '.' but the decimal mark is ','"]),
+        ("t,torque,w_motor,w_load\n0,0_942,2,3\n0.001,1,2,3\n0.002,1,2,3\n",
+         ["line 2", "'0_942' has an underscore"]),
+        ("t,torque,w_motor,w_load\n", ["too few samples"]),  # header only: no numpy warning
     ],
 )
 def test_malformed_csv(tmp_path, text, fragments):
@@ -316,7 +323,8 @@ def test_malformed_csv(tmp_path, text, fragments):
         (rec,) = read_records(path)
         assert rec.torque[0] == 1.5 and rec.w_load[-1] == 3.5
         return
-    with pytest.raises(InputError) as exc:
+    with pytest.raises(InputError) as exc, warnings.catch_warnings():
+        warnings.simplefilter("error")  # the message is the only output
         read_records(path)
     one_line(exc, str(path), *fragments)
 
@@ -433,3 +441,39 @@ def test_csv_fast_path_keeps_line_numbers(tmp_path):
     with pytest.raises(InputError) as exc:
         read_records(path)
     one_line(exc, "x.csv", "between line 3 and line 5")  # the blank line 4 counted
+
+
+def test_resampling_bridges_short_gaps_only(tmp_path):
+    """``resample="linear"`` bridges up to MAX_BRIDGE missing samples in a row; a longer
+    gap (or run of NaN) would hide an impact: an error naming it."""
+    from backlashkit.records import MAX_BRIDGE
+
+    cols = channels(200)
+    for gap in (MAX_BRIDGE, MAX_BRIDGE + 1):
+        keep = np.ones(200, bool)
+        keep[50 : 50 + gap] = False
+        path = write_csv(tmp_path / f"gap{gap}.csv", {k: v[keep] for k, v in cols.items()})
+        if gap <= MAX_BRIDGE:
+            (rec,) = read_records(path, resample="linear")
+            np.testing.assert_allclose(rec.t, cols["t"], atol=1e-12)
+        else:
+            with pytest.raises(InputError) as exc:
+                read_records(path, resample="linear")
+            one_line(exc, f"{MAX_BRIDGE + 1} missing samples", "crop the record")
+        missing = {("w_load", i) for i in range(50, 50 + gap)}
+        path = write_csv(tmp_path / f"nan{gap}.csv", cols, missing=missing)
+        if gap <= MAX_BRIDGE:
+            (rec,) = read_records(path, resample="linear")
+            assert np.isfinite(rec.w_load).all()
+        else:
+            with pytest.raises(InputError) as exc:
+                read_records(path, resample="linear")
+            one_line(exc, "line 52", "'w_load' is missing for 11 samples in a row")
+
+
+def test_wrong_delimiter_is_named(tmp_path):
+    path = tmp_path / "tab.csv"
+    path.write_text("t\ttorque\tw_motor\tw_load\n0\t1\t2\t3\n0.001\t1\t2\t3\n")
+    with pytest.raises(InputError) as exc:
+        read_records(path, delimiter=";")
+    one_line(exc, "separated by tab, not ';'", "pass delimiter='\\t'")

@@ -106,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
     plot = _check_out(args.plot, args.force, "--plot")
     if plot is not None and plot.suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
         raise InputError(f"--plot {plot}: extension must be .png, .pdf, .svg or .jpg")
+    if trace is not None and plot is not None and trace.resolve() == plot.resolve():
+        raise InputError("--plot and --trace must be different files")
     sc = load_scenario(args.scenario)
     resp = sc.run(inverse=sc.make_inverse(args.inverse))
     if trace is not None:

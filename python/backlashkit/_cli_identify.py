@@ -21,8 +21,10 @@ import sys
 import warnings
 from typing import Any
 
+import numpy as np
+
 from .cli import flag_names
-from .identify import Record, RegressionIdentifier, TwoStepIdentifier
+from .identify import Record, RegressionIdentifier, TwoStepIdentifier, find_step_down
 from .io import read_drive_toml, read_uncertainty_toml
 from .report_identify import add_report_option, maybe_write_report
 
@@ -219,16 +221,60 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     list of Record
         Every record of every file, in order.
     """
+    from .errors import InputError
     from .records import read_records
 
     columns = _parse_columns(args.columns)
     delimiter = "\t" if args.delimiter == "tab" else args.delimiter
     out: list[Record] = []
     for path in paths:
-        out += read_records(path, columns=columns, sample_time=args.sample_time,
-                            delimiter=delimiter, decimal=args.decimal,
-                            speed_unit=args.speed_unit, resample=args.resample)
+        try:
+            out += read_records(path, columns=columns, sample_time=args.sample_time,
+                                delimiter=delimiter, decimal=args.decimal,
+                                speed_unit=args.speed_unit, resample=args.resample)
+        except InputError as exc:  # the reader's advice, in the words of the command line
+            message = str(exc)
+            for python, flag in _READER_FLAGS:
+                message = message.replace(python, flag)
+            raise InputError(message) from exc
     return out
+
+
+#: The reader's advice (library keywords) -> the same advice as flags of ``identify``.
+_READER_FLAGS = (
+    ("resample='linear'", "--resample linear"),
+    ("columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}",
+     "--columns t=...,torque=...,w_motor=...,w_load=..."),
+    ("columns={...}", "--columns t=...,w_motor=..."),
+    ("pass sample_time=", "pass --sample-time TS"),
+    ("drop sample_time", "drop --sample-time"),
+    ("sample_time (got", "--sample-time (got"),
+    ("columns['t'] = ", "--columns t="),
+    ("columns: ", "--columns: "),
+    ("pass decimal=','", "pass --decimal ,"),
+    ("delimiter ';'", "--delimiter ';'"),
+    ("(delimiter=", "(--delimiter "),
+    ("sample_time = ", "--sample-time "),
+    ("pass delimiter='\\t'", "pass --delimiter tab"),
+    ("pass delimiter=", "pass --delimiter "),
+)
+
+
+def _refuse_duplicates(records: list[Record]) -> None:
+    """Refuse a record given twice: the joint fit would count its data twice and
+    report a standard error too small by sqrt(2)."""
+    from .errors import InputError
+
+    seen: dict[bytes, str] = {}
+    for rec in records:
+        key = b"".join(np.ascontiguousarray(x, float).tobytes()
+                       for x in (rec.t, rec.torque, rec.w_motor, rec.w_load))
+        if key in seen:
+            raise InputError(
+                f"{rec.name} holds the same data as {seen[key]}: give every record once "
+                "(the joint fit would count it twice and understate the uncertainty)"
+            )
+        seen[key] = rec.name
 
 
 def _num(x: float | None) -> float | None:
@@ -271,6 +317,11 @@ def _run(args: argparse.Namespace) -> int:
     prior = prior.with_theta(None) if prior.theta is not None else prior
     records = read_experiments(args, args.records)
     finals = None if not args.final else read_experiments(args, args.final)
+    from .identify_joint import check_speeds_vary
+
+    for rec in records + (finals or []):
+        find_step_down(rec)  # the contract: one torque step-down per record (else: says so)
+        check_speeds_vary(rec)
     per_record: list[dict[str, Any]] = []
     std: float | None = None
     ci95: list[float] | None = None
@@ -287,6 +338,7 @@ def _run(args: argparse.Namespace) -> int:
         else:
             rel = read_uncertainty_toml(args.drive) or None
         everything = records + (finals or [])
+        _refuse_duplicates(everything)
         from .errors import CorrelatedResidualsWarning
         from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
         from .noise_models import ARNoise, WhiteNoise

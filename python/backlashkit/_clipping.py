@@ -19,11 +19,11 @@ hold:
 * the sample before the first of them differs from it by more than
   :data:`ENTRY_STEP` of the channel's largest magnitude (a noise-free simulation can
   settle onto its fixed point to the last bit; a clipped signal arrives with a step);
-* the channel's noise (robust spread of its second difference) is at least its
-  quantisation step (the smallest change between two samples), so that it dithers
-  between levels. A quantised speed without that much noise that sits on its highest
-  level for a while (a steady state) cannot be told from a clipped one, and is not
-  flagged.
+* the channel's noise (robust spread of its second difference, away from the
+  extremes) is at least its quantisation step (the smallest change between two
+  samples), so that it dithers between levels. A quantised speed without that much
+  noise that sits on its highest level for a while (a steady state) cannot be told
+  from a clipped one, and is not flagged.
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .signals import _noise_hp
 
 #: Fewest samples at a channel's extreme counted as clipping.
 MIN_COUNT = 5
@@ -60,6 +59,11 @@ def _longest_run(mask: np.ndarray) -> int:
     return int(np.max(np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1), initial=0))
 
 
+def _noise_hp_d2(d2: np.ndarray) -> float:
+    """:func:`backlashkit.signals._noise_hp` from given second differences."""
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
 def find_clipping(y: np.ndarray) -> Clipping | None:
     """The samples of ``y`` clipped at its maximum or minimum, or None.
 
@@ -81,7 +85,12 @@ def find_clipping(y: np.ndarray) -> Clipping | None:
     scale = float(np.max(np.abs(y)))
     steps = np.abs(np.diff(y))
     quantum = float(np.min(steps[steps > 0.0], initial=np.inf))
-    if not _noise_hp(y) >= quantum:
+    # the noise off the extremes: a long plateau would make the median of the second
+    # differences 0 and hide the most heavily clipped channels
+    extreme = (y == np.max(y)) | (y == np.min(y))
+    free = ~(extreme[2:] | extreme[1:-1] | extreme[:-2])
+    d2 = np.diff(y, 2)[free]
+    if not (d2.size >= 3 and _noise_hp_d2(d2) >= quantum):
         return None
     found: Clipping | None = None
     for side, value in (("maximum", float(np.max(y))), ("minimum", float(np.min(y)))):

@@ -100,11 +100,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as exc:
         return fail(str(exc))
     except FileNotFoundError as exc:
-        return fail(f"file not found: {exc.filename}")
+        return fail(f"file not found: {exc.filename}" if exc.filename else str(exc))
     except IsADirectoryError as exc:
         return fail(f"expected a file, got a directory: {exc.filename}")
+    except NotADirectoryError as exc:
+        return fail(f"not a directory: a component of {exc.filename} is a file")
     except PermissionError as exc:
         return fail(f"permission denied: {exc.filename}")
+    except OSError as exc:
+        return fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+    except (ValueError, ArithmeticError) as exc:
+        # the compiled core and NumPy refuse what they cannot compute (a mode too fast
+        # for the sample time, a diverging simulation, an overflow): this input is out
+        # of the model's reach; say so on one line rather than with a traceback
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        return fail(f"cannot compute with this input: {text}")
     except KeyboardInterrupt:
         return fail("interrupted")
 

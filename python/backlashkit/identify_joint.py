@@ -145,6 +145,27 @@ class _Span:
     hold: float | None = None  # start: from rest after `level` held this long (s)
 
 
+def check_speeds_vary(rec: Record) -> None:
+    """Refuse a record with a constant speed: it cannot show the drive's response.
+
+    Parameters
+    ----------
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If ``w_motor`` or ``w_load`` takes one value only.
+    """
+    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
+        if not np.ptp(w) > 0:
+            raise InputError(
+                f"{rec.name}: {name} is constant ({float(w[0]):.6g} rad/s): the speeds "
+                "must respond to the torque; check the columns"
+            )
+
+
 def _starts_at_rest(rec: Record, s_m: float, s_l: float) -> bool:
     """Whether both speeds start at rest (``start="auto"``, module docstring)."""
     if abs(rec.w_motor[0]) <= 4 * s_m + 1e-12 and abs(rec.w_load[0]) <= 4 * s_l + 1e-12:
@@ -253,6 +274,9 @@ DISTINCT = 1e-2
 #: 1-2 units, and the refinement can stop on a bump next to a lower point.
 RECENTRE_MARGIN = 0.5
 RECENTRE_MAX = 2
+
+#: Fewest samples after each torque jump that ``final_horizon`` must span.
+MIN_FINAL_SAMPLES = 10
 
 #: Lag-1 autocorrelation of a residual above which (in magnitude) the fit warns that its
 #: interval is too narrow: white noise filtered to this correlation has an interval too
@@ -364,6 +388,8 @@ def _resplit(z: np.ndarray, free: Sequence[str], pair: tuple[str, str],
         omega2 = math.exp(z[1 + free.index("k_sh")]) * (1 / jm + 1 / jl)
     total = math.exp(z[ia]) + math.exp(z[ib])
     xa = total / (1.0 + math.exp(-(z[ia] - z[ib] + shift)))
+    if not (0.0 < xa < total and math.isfinite(total)):  # one of the pair dwarfs the other
+        return None
     z[ia], z[ib] = math.log(xa), math.log(total - xa)
     if omega2 is not None:
         jm, jl = math.exp(z[1 + free.index("J_M")]), math.exp(z[1 + free.index("J_L")])
@@ -417,7 +443,11 @@ def _lm(fun, jac, z0: np.ndarray, *, max_iter: int, state: _LMState | None = Non
             return state
     for _ in range(max_iter):
         if state.jac is None:
-            state.jac = jac(state.z, state.r)
+            try:
+                state.jac = jac(state.z, state.r)
+            except ValueError:  # a neighbour the model cannot simulate: stop here
+                state.done = True
+                break
         jz = state.jac
         g = jz.T @ state.r
         a = jz.T @ jz
@@ -608,7 +638,8 @@ class JointIdentifier:
     ci95_ : tuple of float
         95 % interval of ``theta`` in rad: the profile-likelihood interval (possibly
         asymmetric), ``theta_ -+ 1.96 std_`` (Fisher), or ``theta_ -+ q std_`` with
-        Student's ``q`` for the bootstrap's ``n_resamples - 1`` degrees of freedom.
+        Student's ``q`` for the bootstrap's ``n_resamples - 1`` degrees of freedom (the
+        last two cut at 0: ``theta`` is a half-width).
     ci95_bounded_ : tuple of bool
         Whether each end of the profile interval was reached: False for an end the
         profile did not rise to the 95 % level within ``max_factor`` of ``theta_``
@@ -832,7 +863,9 @@ class JointIdentifier:
         # one BLAS thread: the products J^T J (n_samples x 7) gain nothing from more,
         # and their rounding then does not depend on the machine's core count (the
         # multimodal fits of a rattling load can follow a different path on it)
-        with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="blas"):
+        # overflowing trial points cost inf and are rejected by the search: no warning
+        with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="blas"), \
+                np.errstate(over="ignore", invalid="ignore"):
             warnings.simplefilter("ignore", SensitivityWarning)
             self._fit(records)
         message = self.correlation_message()
@@ -870,6 +903,15 @@ class JointIdentifier:
     def _fit(self, records) -> JointIdentifier:
         prior = self.prior.with_theta(None)
         recs = _as_records(records)
+        for rec in recs:
+            check_speeds_vary(rec)
+        ts_max = max(r.ts for r in recs)
+        if self.final_horizon is not None and self.final_horizon < MIN_FINAL_SAMPLES * ts_max:
+            raise InputError(
+                f"final_horizon must span at least {MIN_FINAL_SAMPLES} samples "
+                f"({MIN_FINAL_SAMPLES * ts_max:.3g} s at Ts = {ts_max:.3g} s), got "
+                f"{self.final_horizon!r}"
+            )
         rel = _rel_std(self.prior_rel_std, LINEAR_PARAMS)
         free = [n for n in LINEAR_PARAMS if n in rel and getattr(prior, n) > 0]
         names = ("theta", *free)
@@ -1173,7 +1215,8 @@ class JointIdentifier:
             ])
         self.theta_ = float(values[0])
         self.std_ = float(std[0])
-        self.ci95_ = (self.theta_ - 1.96 * self.std_, self.theta_ + 1.96 * self.std_)
+        # a half-width is >= 0: Fisher's symmetric interval is cut there
+        self.ci95_ = (max(0.0, self.theta_ - 1.96 * self.std_), self.theta_ + 1.96 * self.std_)
         self.ci95_bounded_ = (True, True)
         self.params_ = {n_: float(getattr(drive, n_)) for n_ in LINEAR_PARAMS}
         self.drive_ = drive
@@ -1199,6 +1242,14 @@ class JointIdentifier:
             self.noise_std_ = np.array([[float(np.std(e)) for e in pair]
                                         for pair in self.residuals_])
         self.fit_percent_ = np.array(fits)
+        worst = np.unravel_index(int(np.argmin(self.fit_percent_)), self.fit_percent_.shape)
+        if not self.fit_percent_[worst] > 0:  # worse than the speed's mean: nothing fitted
+            raise InputError(
+                f"{recs[worst[0]].name}: the identified model does not explain "
+                f"{('w_motor', 'w_load')[worst[1]]} (fit {self.fit_percent_[worst]:.3g} %, "
+                "worse than its mean): these speeds do not show a two-mass drive responding "
+                "to this torque; check the columns, units and the prior"
+            )
         self.cost_ = float(best.cost)
         self.theta_starts_ = starts
         self.model_start_ = ["rest" if sp.level is None else "steady" for sp in spans]
@@ -1300,7 +1351,7 @@ class JointIdentifier:
         from scipy.stats import t as student_t
 
         half = float(student_t.ppf(0.975, boot.n_resamples - 1)) * self.std_
-        self.ci95_ = (self.theta_ - half, self.theta_ + half)
+        self.ci95_ = (max(0.0, self.theta_ - half), self.theta_ + half)
         self.interval_ = "bootstrap"
 
 

@@ -24,7 +24,9 @@ Conventions
 * **Resampling** (``resample="linear"``, only on request) puts every channel on the
   uniform grid ``t_0 + k Ts`` with ``Ts`` the median step of the file's time: speeds
   by linear interpolation, the torque as a zero-order hold (the value of the latest
-  sample at or before each grid instant), so a torque step stays a step.
+  sample at or before each grid instant), so a torque step stays a step. It bridges
+  at most :data:`MAX_BRIDGE` missing samples in a row (10): a longer gap would hide
+  the impacts the identification looks for, so it stays an error.
 * **Several records per file.** CSV: one record per file. ``.npz`` and ``.mat``:
   either variables with our (or mapped) names, one record; or the same names with a
   suffix ``_1``, ``_2``, ... (``w_motor_1``, ``w_load_1``, ``torque_1``, ...), one
@@ -42,10 +44,12 @@ naming the file, where (line, variable, sample) and what to do.
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import math
 import os
 import re
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -66,6 +70,9 @@ SPEED_UNITS = {"rad/s": 1.0, "rpm": 2.0 * math.pi / 60.0}
 DELIMITERS = (",", ";", "\t")
 #: Relative tolerance on the time steps for a grid to count as uniform.
 UNIFORM_RTOL = 1e-6
+#: Longest run of missing samples (a time gap or NaN) that ``resample="linear"``
+#: bridges; a longer one hides the drive's response (an impact lasts a few samples).
+MAX_BRIDGE = 10
 _SUFFIX = re.compile(r"^(.*)_(\d+)$")
 
 # (name of the record, raw channels (t may be absent), label of sample i, time precision)
@@ -105,8 +112,9 @@ def read_records(
         Unit of the speeds in the file; rpm are converted to rad/s (default rad/s).
     resample : {None, "linear"}, optional
         ``"linear"`` resamples onto a uniform grid at the median time step (speeds
-        linearly, torque as a zero-order hold) and bridges missing samples; default
-        None: non-uniform time, gaps and missing values are errors.
+        linearly, torque as a zero-order hold) and bridges runs of at most
+        :data:`MAX_BRIDGE` missing samples; default None: non-uniform time, gaps and
+        missing values are errors.
 
     Returns
     -------
@@ -150,7 +158,7 @@ def read_records(
     if not Path(path).is_file():
         if Path(path).is_dir():
             raise InputError(f"{name}: is a directory; give a .csv, .mat or .npz file")
-        raise FileNotFoundError(f"{name}: no such file")
+        raise FileNotFoundError(errno.ENOENT, "no such file", name)
     suffix = Path(path).suffix.lower()
     need = [f for f in FIELDS if not (f == "t" and sample_time is not None)]
     if suffix == ".npz":
@@ -241,6 +249,14 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
         if header.count(col) > 1:
             raise InputError(f"{name}: line {header_no}: column {col!r} appears twice")
     missing = [mapping[f] for f in need if mapping[f] not in header]
+    others = [d for d in DELIMITERS if d != delimiter and len(header) == 1 and d in header[0]]
+    if missing and others:  # one column holding another separator: the wrong delimiter
+        sep = {"\t": "tab", ",": "','", ";": "';'"}
+        raise InputError(
+            f"{name}: the header (line {header_no}) is one column {header[0]!r} with "
+            f"{sep[others[0]]} in it: the columns are separated by {sep[others[0]]}, not "
+            f"{sep[delimiter]}; pass delimiter={others[0]!r}"
+        )
     if missing:
         sep = {"\t": "tab", ",": "','", ";": "';'"}[delimiter]
         raise InputError(
@@ -300,9 +316,13 @@ def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], de
         return None
     if all(_is_number(c, decimal) for c in header):
         return None
+    if "_" in body or (decimal == "," and "." in body):
+        return None  # cells float() would misread: the checked reader says which
     try:
-        table = np.loadtxt(io.StringIO(body.replace(",", ".") if decimal == "," else body),
-                           delimiter=delimiter, comments=None, ndmin=2, dtype=float)
+        with warnings.catch_warnings():  # an empty body: the checked reader says so
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(io.StringIO(body.replace(",", ".") if decimal == "," else body),
+                               delimiter=delimiter, comments=None, ndmin=2, dtype=float)
     except ValueError:
         return None
     if table.shape[0] == 0 or table.shape[1] != len(header) or np.isinf(table).any():
@@ -339,6 +359,14 @@ def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
         if cell.lower() in _MISSING:
             out[r] = np.nan
             continue
+        bad = None
+        if "_" in cell:
+            bad = "has an underscore, which is no number format of a measurement file"
+        elif decimal == "," and "." in cell:
+            bad = ("has a '.' but the decimal mark is ','; thousands separators are not "
+                   "read: remove them (or pass --decimal . if '.' is the decimal mark)")
+        if bad is not None:
+            raise InputError(f"{name}: line {numbers[r]}, column {column!r}: {raw!r} {bad}")
         if decimal == ",":
             cell = cell.replace(",", ".")
         try:
@@ -592,6 +620,16 @@ def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample
                 f"{int(miss.sum())} missing in all); fill the samples, crop the record, or pass "
                 "resample='linear' to bridge them by linear interpolation"
             )
+        edges = np.diff(np.r_[0, miss.astype(np.int8), 0])
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        longest = int(np.argmax(stops - starts))
+        if stops[longest] - starts[longest] > MAX_BRIDGE:
+            raise InputError(
+                f"{rec_name}: {label(int(starts[longest]))}: {mapping[f]!r} is missing for "
+                f"{int(stops[longest] - starts[longest])} samples in a row, more than the "
+                f"{MAX_BRIDGE} that resample='linear' bridges; crop the record or split it "
+                "at the gap"
+            )
         if miss[0] or miss[-1]:
             j = 0 if miss[0] else size - 1
             raise InputError(
@@ -614,6 +652,14 @@ def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample
             "resample='linear' to resample onto a uniform grid, or fix the file"
         )
     else:
+        i = int(np.argmax(dt))
+        if dt[i] > (MAX_BRIDGE + 1) * ts:
+            raise InputError(
+                f"{rec_name}: a gap of {float(dt[i]):.6g} s in the time {mapping['t']!r} "
+                f"between {label(i)} and {label(i + 1)} ({dt[i] / ts - 1:.0f} missing samples "
+                f"at the median step {ts:.6g} s), more than the {MAX_BRIDGE} that "
+                "resample='linear' bridges; crop the record or split it at the gap"
+            )
         m = int(math.floor((t[-1] - t[0]) / ts + 1e-9)) + 1
         t_new = t[0] + np.arange(m) * ts
     if uniform and resample is None:

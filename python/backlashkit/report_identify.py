@@ -530,7 +530,8 @@ def write_identification_report(
     prior : TwoMassDrive
         Prior linear parameters used by the fit.
     force : bool, optional
-        Overwrite an existing ``index.html`` (default False: refuse).
+        Write into a directory that is not empty, overwriting the report's files
+        (default False: refuse).
     final_records : Record or sequence of Record, optional
         Experiments of the final least squares when they differ from ``records``
         (paper A's step 2); the fits, cost curve and residuals use them.
@@ -545,7 +546,7 @@ def write_identification_report(
     Raises
     ------
     InputError
-        If ``index.html`` exists and ``force`` is False, the directory cannot be
+        If the directory is not empty and ``force`` is False, the directory cannot be
         created, or the result lacks a finite ``theta_``.
     """
     if not isinstance(prior, TwoMassDrive):
@@ -564,10 +565,11 @@ def write_identification_report(
     index = out / "index.html"
     if out.exists() and not out.is_dir():
         raise InputError(f"cannot write the report into {out}: it is a file, not a directory")
-    if index.exists() and not force:
+    if out.is_dir() and any(out.iterdir()) and not force:  # the user's files stay theirs
+        what = f"{index} already exists" if index.exists() else f"{out} is not empty"
         raise InputError(
-            f"{index} already exists; pass --force (force=True from Python) to overwrite it, "
-            "or choose another directory"
+            f"{what}; pass --force (force=True from Python) to write the report there "
+            "anyway (its files are overwritten), or choose another directory"
         )
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -760,7 +762,8 @@ def add_report_option(parser: argparse.ArgumentParser) -> argparse.ArgumentParse
         help="write an HTML report (index.html and PNG/SVG figures) into DIR",
     )
     parser.add_argument(
-        "--force", action="store_true", help="overwrite an existing report in DIR"
+        "--force", action="store_true", help="write the report into DIR even if it is not "
+        "empty (the report's files are overwritten)"
     )
     return parser
 
