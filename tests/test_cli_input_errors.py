@@ -8,6 +8,7 @@ The experiment is the short one of ``tests/test_identify_joint.py`` (paper A's d
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -97,7 +98,12 @@ def test_a_prior_out_of_the_models_reach_is_one_line(exp_csv, tmp_path, capsys):
     prior.write_text(text.replace("J_M = 4.88e-3", "J_M = 1e-300"))
     assert "1e-300" in prior.read_text()
     err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", str(prior)])
-    assert "cannot compute with this input: sample time 0.001 s is far too long" in err
+    assert "exp.csv: the sample time 0.001 s cannot resolve the drive's ringing" in err
+    # what the compiled core refuses reaches the user as one line too
+    err = _one_line_error(capsys, ["simulate", DRIVE_TOML, "--experiment", "step-down",
+                                   "--amplitude", "1e308", "--hold", "1",
+                                   "--out", str(tmp_path / "big.csv")])
+    assert "cannot compute with this input: the simulation diverged" in err
 
 
 def test_report_never_writes_into_a_directory_that_is_not_empty(exp_csv, tmp_path, capsys):
@@ -118,7 +124,13 @@ def test_control_outputs_must_differ_and_parents_must_be_directories(tmp_path, c
     afile = tmp_path / "afile"
     afile.write_text("x")
     err = _one_line_error(capsys, ["control", scenario, "--trace", str(afile / "t.csv")])
-    assert "afile" in err and ("not a directory" in err or "is a file" in err)
+    assert f"{afile} is a file, not a directory" in err
+    err = _one_line_error(capsys, ["control", scenario, "--trace", str(tmp_path)])
+    assert "is a directory; give a file name" in err
+    bad = tmp_path / "bad.npz"
+    bad.write_text("garbage")
+    err = _one_line_error(capsys, ["identify", str(bad), "--drive", DRIVE_TOML])
+    assert "bad.npz: not a NumPy .npz archive (no zip file)" in err
 
 
 def test_lm_stops_where_the_model_cannot_be_simulated():
@@ -138,3 +150,76 @@ def test_lm_stops_where_the_model_cannot_be_simulated():
 
     st = _lm(lambda z: z - 1.0, jac_fails, np.zeros(2), max_iter=5)
     assert st.done and st.cost == pytest.approx(2.0) and np.all(st.z == 0.0)
+
+
+def test_snr_out_of_float_range_is_refused(tmp_path, capsys):
+    err = _one_line_error(capsys, ["simulate", DRIVE_TOML, "--experiment", "step-down",
+                                   "--amplitude", "0.157", "--hold", "1", "--snr-motor", "1e6",
+                                   "--seed", "1", "--out", str(tmp_path / "s.csv")])
+    assert "--snr-motor" in err and "between -300 and 300 dB" in err
+
+
+def test_columns_mapped_twice_are_refused(exp_csv, capsys):
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML,
+                                   "--columns", "w_motor=w_load"])
+    assert "'w_motor' and 'w_load' both read the file's column 'w_load'" in err
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML,
+                                   "--columns", "t=t,t=x"])
+    assert "--columns maps 't' twice" in err
+
+
+def test_uncertainty_of_theta_is_refused(exp_csv, tmp_path, capsys):
+    prior = tmp_path / "prior.toml"
+    prior.write_text(Path(DRIVE_TOML).read_text() + "\n[uncertainty]\ntheta = 0.1\n")
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", str(prior)])
+    assert "[uncertainty] theta: theta is what identify estimates" in err
+
+
+def test_time_in_ms_is_refused_for_every_method(exp_csv, tmp_path, capsys):
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / "ms.csv"
+    write_csv(path, {"t": 1000 * t, "torque": u, "w_motor": w_m, "w_load": w_l})
+    for method in ("joint", "two-step", "regression"):
+        err = _one_line_error(capsys, ["identify", str(path), "--drive", DRIVE_TOML,
+                                       "--method", method])
+        assert "ms.csv: the sample time 1 s cannot resolve the drive's ringing" in err
+        assert "a time column in ms reads as s" in err
+
+
+def test_speeds_in_rpm_read_as_rad_per_s_are_noted(exp_csv, tmp_path, capsys):
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / "rpm.csv"
+    rpm = 60 / (2 * np.pi)
+    write_csv(path, {"t": t, "torque": u, "w_motor": rpm * w_m, "w_load": rpm * w_l})
+    assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher"]) == 0
+    out, _ = capsys.readouterr()
+    assert "note: J_M x0.1" in out and "rpm read as rad/s?" in out
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--interval", "fisher",
+                 "--json"]) == 0
+    out, _ = capsys.readouterr()
+    assert '"far_from_prior": []' in out
+
+
+def test_two_step_at_the_edge_of_its_search_is_noted(exp_csv, capsys):
+    """On this short 0.942 N m record alone (paper A uses it for step 2 only) the eq. 6
+    pre-estimate is off and the least squares ends at an edge of its window."""
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method", "two-step"]) == 0
+    out, _ = capsys.readouterr()
+    assert re.search(r"note: theta is at the (lower|upper) end of the search interval: the "
+                     r"cost's minimum may lie beyond it \(widen --n-theta\)", out), out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seed", "3"], "--seed only applies with --bootstrap"),
+        (["--n-theta", "0.2"], "--n-theta only applies with --method two-step"),
+        (["--cutoff-load", "10", "--method", "regression"],
+         "--cutoff-load only applies with --method two-step"),
+        (["--prior-rel-std", "0.1", "--method", "two-step"],
+         "--prior-rel-std only applies with --method joint"),
+    ],
+)
+def test_options_of_another_method_are_refused(exp_csv, capsys, argv, message):
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML, *argv])
+    assert message in err

@@ -295,7 +295,7 @@ BAD = {
     "option of another experiment": (
         {}, [DRIVE, *PAPER_EXPERIMENT, "--frequency", "3"], "--frequency does not apply"),
     "experiment option with --torque": (
-        {}, [DRIVE, "--torque", TORQUE, "--snr-load", "20"], "--snr-load only apply"),
+        {}, [DRIVE, "--torque", TORQUE, "--snr-load", "20"], "--snr-load only applies"),
     "hold longer than record": (
         {}, [DRIVE, *PAPER_EXPERIMENT, "--duration", "30"], "--hold (40.0 s) must be shorter"),
     "step after the record": (

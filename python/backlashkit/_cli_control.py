@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cli import missing_directory
 from .errors import InputError
 
 __all__ = ["add_parser", "run"]
@@ -54,10 +55,12 @@ def _check_out(path: str | None, force: bool, flag: str) -> Path | None:
     if path is None:
         return None
     out = Path(path)
+    if out.is_dir():
+        raise InputError(f"{flag} {out} is a directory; give a file name")
     if out.exists() and not force:
         raise InputError(f"{flag} {out} already exists; pass --force to overwrite it")
-    if not out.parent.exists():
-        raise InputError(f"{flag} {out}: directory {out.parent} does not exist")
+    if not out.parent.is_dir():
+        raise InputError(missing_directory(flag, out))
     return out
 
 

@@ -114,15 +114,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "files. May be repeated",
     )
     p.add_argument(
-        "--n-theta", type=float, default=0.1, help="two-step: relative search half-width "
+        "--n-theta", type=float, default=None, help="two-step: relative search half-width "
         "around theta_ini (default 0.1)"
     )
     p.add_argument(
-        "--cutoff-motor", type=float, default=50.0, help="two-step: FIR cut-off for w_motor in "
+        "--cutoff-motor", type=float, default=None, help="two-step: FIR cut-off for w_motor in "
         "rad/s (default 50)"
     )
     p.add_argument(
-        "--cutoff-load", type=float, default=20.0, help="two-step: FIR cut-off for w_load in "
+        "--cutoff-load", type=float, default=None, help="two-step: FIR cut-off for w_load in "
         "rad/s (default 20)"
     )
     p.add_argument(
@@ -139,7 +139,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--bootstrap", type=int, default=None, metavar="N",
         help="joint: std and ci95 from N parametric-bootstrap refits instead (N + 1 fits)"
     )
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=int, default=None,
                    help="joint --bootstrap: seed of the resamples' noise (default 0)")
     p.add_argument(
         "--noise", choices=("white", "ar"), default=None,
@@ -202,7 +202,10 @@ def _parse_columns(text: str | None) -> dict[str, str] | None:
                 f"--columns must be OURS=THEIRS pairs separated by commas, e.g. "
                 f"'t=time,w_motor=n_mot'; got {text!r}"
             )
-        out[ours.strip()] = theirs.strip()
+        key, name = ours.strip(), theirs.strip()
+        if key in out:
+            raise InputError(f"--columns maps {key!r} twice ({out[key]!r} and {name!r})")
+        out[key] = name
     return out
 
 
@@ -277,6 +280,20 @@ def _refuse_duplicates(records: list[Record]) -> None:
         seen[key] = rec.name
 
 
+#: An estimated linear parameter this many times off its prior (either way) is noted.
+FAR_FROM_PRIOR = 3.0
+
+
+def _far_from_prior(est, prior) -> list[str]:
+    """The estimated linear parameters more than FAR_FROM_PRIOR times off the prior."""
+    out = []
+    for name in est.estimated_[1:]:
+        ratio = est.params_[name] / getattr(prior, name)
+        if not 1.0 / FAR_FROM_PRIOR <= ratio <= FAR_FROM_PRIOR:
+            out.append(name)
+    return out
+
+
 def _num(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
@@ -317,19 +334,27 @@ def _run(args: argparse.Namespace) -> int:
     prior = prior.with_theta(None) if prior.theta is not None else prior
     records = read_experiments(args, args.records)
     finals = None if not args.final else read_experiments(args, args.final)
-    from .identify_joint import check_speeds_vary
+    from .identify_joint import check_sampling, check_speeds_vary
 
     for rec in records + (finals or []):
         find_step_down(rec)  # the contract: one torque step-down per record (else: says so)
         check_speeds_vary(rec)
+        check_sampling(prior, rec)
     per_record: list[dict[str, Any]] = []
     std: float | None = None
     ci95: list[float] | None = None
     extra: dict[str, Any] = {}
     for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
-                          ("--final-horizon", args.final_horizon), ("--noise", args.noise)):
+                          ("--final-horizon", args.final_horizon), ("--noise", args.noise),
+                          ("--prior-rel-std", args.prior_rel_std)):
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")
+    for option, value in (("--n-theta", args.n_theta), ("--cutoff-motor", args.cutoff_motor),
+                          ("--cutoff-load", args.cutoff_load)):
+        if value is not None and args.method != "two-step":
+            raise InputError(f"{option} only applies with --method two-step")
+    if args.seed is not None and args.bootstrap is None:
+        raise InputError("--seed only applies with --bootstrap (the seed of its resamples)")
     if args.method == "joint":
         from .identify_joint import JointIdentifier
 
@@ -337,19 +362,25 @@ def _run(args: argparse.Namespace) -> int:
             rel: Any = args.prior_rel_std
         else:
             rel = read_uncertainty_toml(args.drive) or None
+            if rel is not None and "theta" in rel:
+                raise InputError(
+                    f"{args.drive}: [uncertainty] theta: theta is what identify estimates, "
+                    "without a prior; remove it (list the linear parameters only)"
+                )
         everything = records + (finals or [])
         _refuse_duplicates(everything)
         from .errors import CorrelatedResidualsWarning
         from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
         from .noise_models import ARNoise, WhiteNoise
 
-        if args.seed < 0:  # the library's message would offer a SeedSequence
-            raise InputError(f"--seed must be >= 0, got {args.seed}")
+        seed = 0 if args.seed is None else args.seed
+        if seed < 0:  # the library's message would offer a SeedSequence
+            raise InputError(f"--seed must be >= 0, got {seed}")
         if args.bootstrap is not None and args.interval is not None:
             raise InputError("give --interval or --bootstrap, not both")
         interval: Any = FisherInterval() if args.interval == "fisher" else ProfileLikelihood()
         if args.bootstrap is not None:
-            interval = ParametricBootstrap(args.bootstrap, seed=args.seed)
+            interval = ParametricBootstrap(args.bootstrap, seed=seed)
         if args.noise_order is not None and args.noise != "ar":
             raise InputError("--noise-order only applies with --noise ar")
         noise_model: Any = WhiteNoise()
@@ -388,13 +419,14 @@ def _run(args: argparse.Namespace) -> int:
             "estimated": list(est.estimated_),
             "param_std": est.param_std_,
             "prior_rel_std": rel,
+            "far_from_prior": _far_from_prior(est, prior),
         }
     elif args.method == "two-step":
         est = TwoStepIdentifier(
             prior,
-            n_theta=args.n_theta,
-            cutoff_motor=args.cutoff_motor,
-            cutoff_load=args.cutoff_load,
+            n_theta=0.1 if args.n_theta is None else args.n_theta,
+            cutoff_motor=50.0 if args.cutoff_motor is None else args.cutoff_motor,
+            cutoff_load=20.0 if args.cutoff_load is None else args.cutoff_load,
         ).fit(records, final_records=finals)
         theta_ini: float | None = est.theta_ini_
         rows = zip(records, est.commutations_, est.theta_ini_per_record_, strict=True)
@@ -448,6 +480,11 @@ def _run(args: argparse.Namespace) -> int:
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
               "method", file=out)
+        for end, edge in zip(("lower", "upper"), bounds, strict=True):
+            if abs(est.theta_ - edge) <= 1e-6 * max(bounds[1], 1e-300):
+                hint = " (widen --n-theta)" if args.method == "two-step" else ""
+                print(f"note: theta is at the {end} end of the search interval: the cost's "
+                      f"minimum may lie beyond it{hint}", file=out)
     else:
         how = {"fisher": " (Fisher)", "profile": " (profile likelihood)"}.get(est.interval_, "")
         if est.interval_ == "bootstrap":
@@ -462,6 +499,11 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"note: the likelihood does not rise to the 95% level on the {end} "
                       "side within the search range: the records hardly bound theta there "
                       "(longer or less noisy records help)", file=out)
+        far = _far_from_prior(est, prior)
+        if far:
+            ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in far)
+            print(f"note: {ratios} of the prior: check the units of the speeds (rpm read as "
+                  "rad/s?), of the time and of PRIOR.toml", file=out)
         message = est.correlation_message()
         if message is not None:
             message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")

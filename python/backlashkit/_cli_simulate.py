@@ -25,6 +25,7 @@ import numpy as np
 
 from . import _validate as v
 from . import signals
+from .cli import missing_directory
 from .errors import InputError, SensitivityWarning
 from .io import read_drive_toml, read_torque_csv, write_csv
 from .laws import ShaftLaw
@@ -199,7 +200,8 @@ def _check_source(args: argparse.Namespace) -> None:
     if args.torque is not None:
         if given:
             flags = ", ".join(_OPTIONS[d][0] for d in given)
-            raise InputError(f"{flags} only apply with --experiment, not with --torque")
+            verb = "applies" if len(given) == 1 else "apply"
+            raise InputError(f"{flags} only {verb} with --experiment, not with --torque")
         return
     for dest in given:
         flag, kinds = _OPTIONS[dest]
@@ -218,7 +220,7 @@ def _check_output(args: argparse.Namespace) -> Path:
     if out.is_dir():
         raise InputError(f"--out {out} is a directory; give a file name")
     if not out.parent.is_dir():
-        raise InputError(f"--out {out}: directory {out.parent} does not exist")
+        raise InputError(missing_directory("--out", out))
     if out.exists():
         if not args.force:
             raise InputError(f"--out {out} already exists; pass --force to overwrite it")
@@ -231,7 +233,7 @@ def _check_output(args: argparse.Namespace) -> Path:
         if plot.suffix.lower() not in (".png", ".svg", ".pdf"):
             raise InputError(f"--plot {plot}: the file name must end in .png, .svg or .pdf")
         if not plot.parent.is_dir():
-            raise InputError(f"--plot {plot}: directory {plot.parent} does not exist")
+            raise InputError(missing_directory("--plot", plot))
         if plot.exists() and not args.force:
             raise InputError(f"--plot {plot} already exists; pass --force to overwrite it")
         if plot.resolve() == out.resolve():

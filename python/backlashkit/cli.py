@@ -18,6 +18,7 @@ import importlib
 import sys
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 
 from .errors import InputError
 
@@ -80,6 +81,14 @@ def flag_names(flags: Mapping[str, str]) -> Iterator[None]:
             if message.startswith(name + " "):
                 raise InputError(flag + message[len(name):]) from exc
         raise
+
+
+def missing_directory(flag: str, out: Path) -> str:
+    """The message for an output file whose directory is missing (or is a file)."""
+    for parent in (out.parent, *out.parent.parents):
+        if parent.exists() and not parent.is_dir():
+            return f"{flag} {out}: {parent} is a file, not a directory"
+    return f"{flag} {out}: directory {out.parent} does not exist"
 
 
 def fail(message: str) -> int:

@@ -166,6 +166,35 @@ def check_speeds_vary(rec: Record) -> None:
             )
 
 
+def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
+    """Refuse a record sampled too slowly to show the drive's ringing.
+
+    The ringing frequency ``sqrt(k_sh (1 / J_M + 1 / J_L))`` of the prior must lie below
+    the Nyquist frequency ``pi / Ts``: otherwise no sample sees an impact, and a time
+    column in ms read as s is the likely cause.
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        The prior (its linear parameters).
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If ``Ts`` is longer than half the ringing period.
+    """
+    omega = math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    if rec.ts * omega > math.pi:
+        raise InputError(
+            f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "
+            f"at {omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s, from the prior's k_sh, "
+            f"J_M, J_L): sample faster than {math.pi / omega:.3g} s, or check the time unit "
+            "(a time column in ms reads as s)"
+        )
+
+
 def _starts_at_rest(rec: Record, s_m: float, s_l: float) -> bool:
     """Whether both speeds start at rest (``start="auto"``, module docstring)."""
     if abs(rec.w_motor[0]) <= 4 * s_m + 1e-12 and abs(rec.w_load[0]) <= 4 * s_l + 1e-12:
@@ -905,6 +934,7 @@ class JointIdentifier:
         recs = _as_records(records)
         for rec in recs:
             check_speeds_vary(rec)
+            check_sampling(prior, rec)
         ts_max = max(r.ts for r in recs)
         if self.final_horizon is not None and self.final_horizon < MIN_FINAL_SAMPLES * ts_max:
             raise InputError(

@@ -50,6 +50,7 @@ import math
 import os
 import re
 import warnings
+import zipfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -199,6 +200,12 @@ def _check_columns(columns: Mapping[str, str] | None) -> dict[str, str]:
         if not isinstance(value, str) or not value.strip():
             raise InputError(f"columns[{key!r}] must be a non-empty string, got {value!r}")
         out[key] = value.strip()
+    for a, b in ((a, b) for i, a in enumerate(FIELDS) for b in FIELDS[i + 1 :]):
+        if out[a] == out[b]:
+            raise InputError(
+                f"columns: {a!r} and {b!r} both read the file's column {out[a]!r}; map "
+                "each to its own column"
+            )
     return out
 
 
@@ -461,6 +468,9 @@ def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, 
 
 
 def _from_npz(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
+    if not zipfile.is_zipfile(name):  # else NumPy would talk of unpickling it
+        raise InputError(f"{name}: not a NumPy .npz archive (no zip file); save the arrays "
+                         "with numpy.savez, or give the file its real extension")
     try:
         with np.load(name, allow_pickle=False) as npz:
             variables = {k: npz[k] for k in npz.files}

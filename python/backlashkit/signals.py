@@ -379,6 +379,10 @@ def from_table(
     return vals[np.clip(j, 0, tt.size - 1)]
 
 
+#: Largest |SNR| in dB that :func:`add_noise` accepts (300 dB: noise 1e-15 of the signal).
+SNR_LIMIT_DB = 300.0
+
+
 def add_noise(signal: ArrayLike, snr_db: float, *, rng: Seed) -> np.ndarray:
     """Add white Gaussian measurement noise at a given signal-to-noise ratio.
 
@@ -393,7 +397,7 @@ def add_noise(signal: ArrayLike, snr_db: float, *, rng: Seed) -> np.ndarray:
     signal : array_like
         Noise-free signal, 1-D, finite, not identically zero.
     snr_db : float
-        Requested signal-to-noise ratio in dB (any finite value).
+        Requested signal-to-noise ratio in dB, between -300 and 300.
     rng : numpy.random.Generator, numpy.random.SeedSequence or int
         Source of the noise: a generator (its state advances) or a seed.
 
@@ -406,7 +410,8 @@ def add_noise(signal: ArrayLike, snr_db: float, *, rng: Seed) -> np.ndarray:
     ------
     InputError
         If ``signal`` is empty, non-finite or identically zero (its SNR is then
-        undefined), ``snr_db`` is not finite, or ``rng`` is not a generator or seed.
+        undefined), ``snr_db`` is not within +-300 dB, or ``rng`` is not a generator or
+        seed.
 
     Examples
     --------
@@ -418,6 +423,9 @@ def add_noise(signal: ArrayLike, snr_db: float, *, rng: Seed) -> np.ndarray:
     if s.size == 0:
         raise InputError("signal must have at least one sample, got none")
     snr = v.finite_scalar("snr_db", snr_db)
+    if not -SNR_LIMIT_DB <= snr <= SNR_LIMIT_DB:  # 10**(snr / 10) must stay a float
+        raise InputError(f"snr_db must be between -{SNR_LIMIT_DB:g} and {SNR_LIMIT_DB:g} dB, "
+                         f"got {snr_db!r}")
     gen = as_generator("rng", rng)
     power = float(np.mean(s**2))
     if power == 0.0:
