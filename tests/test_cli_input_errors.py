@@ -223,3 +223,17 @@ def test_two_step_at_the_edge_of_its_search_is_noted(exp_csv, capsys):
 def test_options_of_another_method_are_refused(exp_csv, capsys, argv, message):
     err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML, *argv])
     assert message in err
+
+
+def test_records_whose_speeds_ignore_the_step_down_are_noted(exp_csv, tmp_path, capsys):
+    """The torque of the file steps down 5 samples before its end, while its speeds
+    react 2 s earlier (a torque column from another run): the fit answers, with notes
+    that the model never loses contact and that its residuals are correlated."""
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / "late.csv"
+    write_csv(path, {"t": t, "torque": np.where(np.arange(t.size) < t.size - 5, 0.942, 0.0),
+                     "w_motor": w_m, "w_load": w_l})
+    assert main(["identify", str(path), "--drive", DRIVE_TOML]) == 0
+    out, _ = capsys.readouterr()
+    assert "note: in the identified model the shaft leaves its flank after no step-down" in out
+    assert "has lag-1 autocorrelation" in out

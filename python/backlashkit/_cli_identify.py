@@ -499,6 +499,10 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"note: the likelihood does not rise to the 95% level on the {end} "
                       "side within the search range: the records hardly bound theta there "
                       "(longer or less noisy records help)", file=out)
+        if all(t_c is None for (_, t_c, _) in est.commutations_):
+            print("note: in the identified model the shaft leaves its flank after no "
+                  "step-down: these records hardly show the backlash (theta rests on the "
+                  "model alone; a step-down to 0 that the speeds follow shows it)", file=out)
         far = _far_from_prior(est, prior)
         if far:
             ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in far)

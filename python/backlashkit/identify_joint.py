@@ -385,6 +385,31 @@ def _basins(ends: list[_LMState]) -> int:
     return len(found)
 
 
+def _residuals_and_fit(spans: list[_Span], sims: list[np.ndarray]):
+    """Residuals ``(w_M, w_L)`` per span and the NRMSE fit % array ``(n_spans, 2)``."""
+    residuals, fits = [], []
+    for sp, x in zip(spans, sims, strict=True):
+        em, el = sp.y_m - x[0, :, 0], sp.y_l - x[0, :, 1]
+        residuals.append((em, el))
+        fits.append([
+            100.0 * (1.0 - np.linalg.norm(e) / max(np.linalg.norm(y - y.mean()), 1e-300))
+            for e, y in ((em, sp.y_m), (el, sp.y_l))
+        ])
+    return residuals, np.array(fits)
+
+
+def _refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
+    """Raise when the model explains a speed worse than its mean (fit % <= 0)."""
+    worst = np.unravel_index(int(np.argmin(fits)), fits.shape)
+    if not fits[worst] > 0:
+        raise InputError(
+            f"{recs[worst[0]].name}: the identified model does not explain "
+            f"{('w_motor', 'w_load')[worst[1]]} (fit {fits[worst]:.3g} %, worse than its "
+            "mean): these speeds do not show a two-mass drive responding to this torque; "
+            "check the columns, units and the prior"
+        )
+
+
 def _lag1(e: np.ndarray) -> float:
     """Lag-1 autocorrelation of a residual (mean removed; 0 for a constant one)."""
     x = e - e.mean()
@@ -1207,6 +1232,10 @@ class JointIdentifier:
                         sig_now[sp.k, c] = math.sqrt(max(var, 1e-300))
                 best = lm_on(make_residual(final_spans, final_h, sig_now, ar), best.z,
                              self.max_iter)
+        # a model that explains a speed worse than its mean has fitted nothing: say so
+        # before the uncertainty (whose refits at such a point can take minutes)
+        _refuse_unexplained(recs, _residuals_and_fit(spans, model(best.z[np.newaxis, :],
+                                                                  spans))[1])
         sigma = sig_now
         rows_unc = make_residual(final_spans, final_h, sig_now, ar)
         profiled = None
@@ -1235,14 +1264,7 @@ class JointIdentifier:
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         drive = _drive(prior, names, values)
         sims = model(z[np.newaxis, :], spans)
-        self.residuals_, fits = [], []
-        for sp, x in zip(spans, sims, strict=True):
-            em, el = sp.y_m - x[0, :, 0], sp.y_l - x[0, :, 1]
-            self.residuals_.append((em, el))
-            fits.append([
-                100.0 * (1.0 - np.linalg.norm(e) / max(np.linalg.norm(y - y.mean()), 1e-300))
-                for e, y in ((em, sp.y_m), (el, sp.y_l))
-            ])
+        self.residuals_, fits = _residuals_and_fit(spans, sims)
         self.theta_ = float(values[0])
         self.std_ = float(std[0])
         # a half-width is >= 0: Fisher's symmetric interval is cut there
@@ -1271,15 +1293,7 @@ class JointIdentifier:
         if ar is not None:  # the noise's own std, not its innovation's
             self.noise_std_ = np.array([[float(np.std(e)) for e in pair]
                                         for pair in self.residuals_])
-        self.fit_percent_ = np.array(fits)
-        worst = np.unravel_index(int(np.argmin(self.fit_percent_)), self.fit_percent_.shape)
-        if not self.fit_percent_[worst] > 0:  # worse than the speed's mean: nothing fitted
-            raise InputError(
-                f"{recs[worst[0]].name}: the identified model does not explain "
-                f"{('w_motor', 'w_load')[worst[1]]} (fit {self.fit_percent_[worst]:.3g} %, "
-                "worse than its mean): these speeds do not show a two-mass drive responding "
-                "to this torque; check the columns, units and the prior"
-            )
+        self.fit_percent_ = fits
         self.cost_ = float(best.cost)
         self.theta_starts_ = starts
         self.model_start_ = ["rest" if sp.level is None else "steady" for sp in spans]
