@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_toeplitz
 
 from .errors import InputError
 
@@ -111,6 +110,8 @@ def fit_ar(e, order: int) -> tuple[np.ndarray, float]:
         )
     if not np.all(np.isfinite(x)):
         raise InputError("fit_ar: the sequence has NaN or inf samples")
+    from scipy.linalg import solve_toeplitz  # lazily: scipy.linalg takes 0.2 s to import
+
     x = x - x.mean()
     n = x.size
     r = np.array([x[: n - k] @ x[k:] for k in range(order + 1)]) / n
