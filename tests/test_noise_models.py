@@ -22,7 +22,7 @@ from backlashkit.errors import CorrelatedResidualsWarning, InputError
 from backlashkit.identify import Record
 from backlashkit.identify_joint import CORRELATED_LAG1, JointIdentifier
 from backlashkit.io import write_csv
-from backlashkit.noise_models import ARNoise, WhiteNoise, fit_ar, whiten
+from backlashkit.noise_models import ARNoise, WhiteNoise, fit_ar, innovation_ratio, whiten
 
 P_TRUE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 THETA = 3.49e-2
@@ -248,3 +248,50 @@ def test_cli_noise_errors(colored_csv, capsys, argv, message):
 
 def test_white_noise_is_the_default():
     assert JointIdentifier(PRIOR).noise_model == WhiteNoise()
+
+
+# --- the Cramér-Rao bound with autoregressive noise -------------------------------------
+
+
+def test_innovation_ratio():
+    assert innovation_ratio([-0.8]) == pytest.approx(1 - 0.8**2, rel=1e-9)
+    a = np.array([-1.2, 0.5])
+    e = lfilter([1.0], np.r_[1.0, a], np.random.default_rng(2).standard_normal(400_000))
+    assert innovation_ratio(a) == pytest.approx(1.0 / np.var(e), rel=0.02)
+    with pytest.raises(InputError, match="not stationary"):
+        innovation_ratio([-1.0])
+
+
+def test_crb_with_ar_noise_against_the_exact_gaussian_likelihood():
+    """AR(1) noise: the bound's information (conditional on the first sample) plus the
+    first sample's own term equals S^T Sigma^-1 S with the exact Toeplitz covariance
+    Sigma_ij = s^2 rho^|i - j|; the sensitivities are recomputed here with the drive's
+    own simulate."""
+    from scipy.linalg import toeplitz
+
+    t = signals.time_grid(0.4, 1e-3)
+    u = signals.step_down(t, 0.942, t_s=0.2)
+    sig, rho = (0.3, 0.2), 0.7
+    crb = bk.cramer_rao_bound(TRUE, t, u, noise_std=sig, noise_ar=[-rho])
+    h = 1e-6
+    up = bk.TwoMassDrive(**P_TRUE, theta=THETA * (1 + h)).simulate(t, u)
+    down = bk.TwoMassDrive(**P_TRUE, theta=THETA * (1 - h)).simulate(t, u)
+    exact = 0.0
+    first = 0.0
+    for ch, s in zip(("w_motor", "w_load"), sig, strict=True):
+        sens = (getattr(up, ch) - getattr(down, ch)) / (2 * h * THETA)
+        cov = toeplitz(s**2 * rho ** np.arange(t.size))
+        exact += float(sens @ np.linalg.solve(cov, sens))
+        first += sens[0] ** 2 / s**2
+    assert crb.fisher[0, 0] + first == pytest.approx(exact, rel=1e-6)
+    white = bk.cramer_rao_bound(TRUE, t, u, noise_std=sig)
+    # correlated noise of the same variance hides a slow signal: the bound is wider
+    assert crb.theta_std > white.theta_std
+    # a zero autoregression is white noise (the first sample dropped)
+    zero = bk.cramer_rao_bound(TRUE, t, u, noise_std=sig, noise_ar=[[0.0], [0.0]])
+    assert zero.theta_std == pytest.approx(white.theta_std, rel=1e-2)
+    with pytest.raises(InputError, match=r"noise_ar: the autoregression \[-1\.5\] is not "
+                       "stationary"):
+        bk.cramer_rao_bound(TRUE, t, u, noise_std=sig, noise_ar=[-1.5])
+    with pytest.raises(InputError, match="noise_ar must be the coefficients"):
+        bk.cramer_rao_bound(TRUE, t, u, noise_std=sig, noise_ar=np.zeros((3, 1)))

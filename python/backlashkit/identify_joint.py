@@ -109,7 +109,14 @@ from . import _validate as v
 from .errors import CorrelatedResidualsWarning, InputError, SensitivityWarning
 from .identify import Record, TwoStepIdentifier, _as_records, find_step_down
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, profile_crossing
-from .noise_models import ARNoise, WhiteNoise, fit_ar, whiten
+from .noise_models import (
+    ARNoise,
+    WhiteNoise,
+    _impulse_length,
+    fit_ar,
+    innovation_ratio,
+    whiten,
+)
 from .plants import TwoMassDrive
 from .signals import _noise_hp
 
@@ -1408,9 +1415,7 @@ class JointIdentifier:
 
         # start in the stationary regime: run in until the slowest pole decayed 1e-6
         a = self.noise_ar_[k, c]
-        radius = float(np.max(np.abs(np.roots(np.r_[1.0, a])))) if a.size else 0.0
-        burn = 100 if radius <= 0.0 else int(min(1e6, max(100, math.log(1e-6) / math.log(
-            min(radius, 1.0 - 1e-6)))))
+        burn = _impulse_length(a, 1e-6)
         eps = rng.normal(0.0, s, n + burn)
         return lfilter([1.0], np.r_[1.0, a], eps)[burn:]
 
@@ -1507,11 +1512,15 @@ def cramer_rao_bound(
     law: str = "paper",
     initial_state: ArrayLike | None = None,
     fd_step: float = 1e-6,
+    noise_ar: ArrayLike | None = None,
 ) -> CramerRaoBound:
-    """Cramér-Rao bound of ``theta`` from both measured speeds with white noise.
+    """Cramér-Rao bound of ``theta`` from both measured speeds with white or AR noise.
 
     ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the central-difference sensitivity of
-    speed ``c`` (motor, load) to the estimated parameters.
+    speed ``c`` (motor, load) to the estimated parameters; with autoregressive noise
+    (``noise_ar``) the sensitivities are whitened by ``A(q)`` first and ``s_c`` is the
+    innovation's standard deviation (the likelihood of
+    :class:`~backlashkit.noise_models.ARNoise`, conditional on the first ``p`` samples).
 
     Parameters
     ----------
@@ -1537,6 +1546,11 @@ def cramer_rao_bound(
         State at ``t[0]`` (default rest), known.
     fd_step : float, optional
         Relative central-difference step (default 1e-6).
+    noise_ar : array_like, optional
+        Coefficients ``a_1 .. a_p`` of ``A(q)`` of autoregressive noise (as
+        :class:`~backlashkit.noise_models.ARNoise` fits them, ``JointIdentifier.noise_ar_``):
+        one row for both speeds or rows ``(w_M, w_L)``. ``noise_std`` and ``snr_db``
+        then give the noise's own level, not its innovation's. Default: white noise.
 
     Returns
     -------
@@ -1547,7 +1561,8 @@ def cramer_rao_bound(
     ------
     InputError
         If the drive has no ``theta``, no or both noise levels are given, a name is
-        unknown, or a parameter to estimate is 0.
+        unknown, a parameter to estimate is 0, or ``noise_ar`` is not a stationary
+        autoregression.
     """
     from .simulate import simulate_batch
 
@@ -1598,12 +1613,29 @@ def cramer_rao_bound(
             math.sqrt(float(np.mean(w**2)) / 10.0 ** (v.finite_scalar("snr_db", s) / 10.0))
             for w, s in ((nominal.w_motor, snr[0]), (nominal.w_load, snr[1]))
         )
+    ar = None
+    if noise_ar is not None:
+        ar = np.atleast_2d(np.asarray(noise_ar, float))
+        if ar.shape[0] == 1:
+            ar = np.repeat(ar, 2, axis=0)
+        if ar.ndim != 2 or ar.shape[0] != 2 or ar.shape[1] < 1 or not np.isfinite(ar).all():
+            raise InputError(
+                "noise_ar must be the coefficients a_1 .. a_p of A(q), one row for both "
+                f"speeds or two rows (w_M, w_L), got {noise_ar!r}"
+            )
+        try:
+            ratios = [innovation_ratio(row) for row in ar]
+        except InputError as exc:
+            raise InputError(f"noise_ar: {exc}") from None
     fisher = np.zeros((n, n))
-    for ch, s in (("w_motor", sig[0]), ("w_load", sig[1])):
+    for c, (ch, s) in enumerate((("w_motor", sig[0]), ("w_load", sig[1]))):
         sens = np.column_stack([
             (getattr(runs[1 + 2 * i], ch) - getattr(runs[2 + 2 * i], ch)) / (2 * h * values[i])
             for i in range(n)
         ])
+        if ar is not None:  # whitened sensitivities, weighted by the innovation
+            s = s * math.sqrt(ratios[c])
+            sens = whiten(sens.T, ar[c]).T
         fisher += sens.T @ sens / s**2
     if prior_rel_std is not None:
         rel = _rel_std(prior_rel_std, LINEAR_PARAMS)

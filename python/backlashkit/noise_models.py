@@ -24,13 +24,14 @@ public because users may want to look at their residuals the same way.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import InputError
 
-__all__ = ["ARNoise", "WhiteNoise", "fit_ar", "whiten"]
+__all__ = ["ARNoise", "WhiteNoise", "fit_ar", "innovation_ratio", "whiten"]
 
 #: Highest order accepted (the whitening filter drops this many samples per record).
 MAX_ORDER = 50
@@ -147,3 +148,48 @@ def whiten(e, a) -> np.ndarray:
     for i, ai in enumerate(a, start=1):
         out += ai * x[..., p - i : n - i]
     return out
+
+
+def _impulse_length(a: np.ndarray, tol: float = 1e-12) -> int:
+    """Samples until the impulse response of ``1 / A(q)`` decays below ``tol``."""
+    if a.size == 0:
+        return 1
+    radius = float(np.max(np.abs(np.roots(np.r_[1.0, a]))))
+    if radius <= 0.0:
+        return a.size + 1
+    return int(min(1e7, max(100, math.log(tol) / math.log(min(radius, 1.0 - 1e-9)))))
+
+
+def innovation_ratio(a) -> float:
+    """Variance of the innovation of a stationary AR process over the process's own.
+
+    Parameters
+    ----------
+    a : array_like
+        Coefficients ``a_1 .. a_p`` of ``A(q)``, its roots inside the unit circle.
+
+    Returns
+    -------
+    float
+        ``var(eps) / var(e) = 1 / sum_k psi_k^2`` with ``psi`` the impulse response of
+        ``1 / A(q)`` (``1 - rho^2`` for a first-order process of lag-1 correlation
+        ``rho``).
+
+    Raises
+    ------
+    InputError
+        If ``A(q)`` has a root on or outside the unit circle (no stationary process).
+    """
+    from scipy.signal import lfilter
+
+    a = np.asarray(a, float).ravel()
+    if a.size and not float(np.max(np.abs(np.roots(np.r_[1.0, a])))) < 1.0:
+        raise InputError(
+            f"the autoregression {a.tolist()} is not stationary (a root of A(q) on or "
+            "outside the unit circle)"
+        )
+    n = _impulse_length(a)
+    impulse = np.zeros(n)
+    impulse[0] = 1.0
+    psi = lfilter([1.0], np.r_[1.0, a], impulse)
+    return float(1.0 / (psi @ psi))

@@ -735,6 +735,17 @@ def write_identification_report(
             "±1.96/sqrt(N) the residual is compatible with white noise",
         ),
     ]
+    if hasattr(result, "correlation_message"):  # the joint estimator's noise model
+        ar = getattr(result, "noise_ar_", None)
+        model = "white" if ar is None else f"autoregressive of order {ar.shape[-1]}"
+        message = result.correlation_message()
+        sections.append(
+            f'<p class="note">Noise model: {model}. '
+            + (f"<b>Note:</b> {html.escape(message)}." if message else
+               "The residuals the likelihood treats as white are, to lag-1 correlation "
+               f"0.2 (largest: {float(np.max(np.abs(result.residual_lag1_))):.3f}).")
+            + "</p>"
+        )
     index.write_text(page(title, sections), encoding="utf-8")
     return index
 
