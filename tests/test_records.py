@@ -477,3 +477,27 @@ def test_wrong_delimiter_is_named(tmp_path):
     with pytest.raises(InputError) as exc:
         read_records(path, delimiter=";")
     one_line(exc, "separated by tab, not ';'", "pass delimiter='\\t'")
+
+
+def test_mat_structs_missing_a_field_and_complex_v73(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    t = np.arange(10) * 1e-3
+    sio.savemat(tmp_path / "s5.mat", {"exp": {"t": t, "torque": t, "w_motor": t}})
+    with pytest.raises(InputError) as exc:
+        read_records(tmp_path / "s5.mat")
+    one_line(exc, "struct 'exp' has no field 'w_load' (it has 't', 'torque', 'w_motor')")
+    with h5py.File(tmp_path / "g73.mat", "w") as fh:  # the same struct in HDF5 (v7.3)
+        group = fh.create_group("exp")
+        for key in ("t", "torque", "w_motor"):
+            group[key] = t
+    with pytest.raises(InputError) as exc:
+        read_records(tmp_path / "g73.mat")
+    one_line(exc, "struct 'exp' has no field 'w_load'")
+    dtype = np.dtype([("real", float), ("imag", float)])  # how MATLAB stores complex
+    with h5py.File(tmp_path / "c73.mat", "w") as fh:
+        for key in ("t", "torque", "w_load"):
+            fh[key] = t
+        fh["w_motor"] = np.zeros(10, dtype)
+    with pytest.raises(InputError) as exc:
+        read_records(tmp_path / "c73.mat")
+    one_line(exc, "variable 'w_motor' holds complex numbers, not real numbers")

@@ -521,7 +521,25 @@ def _from_mat(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]
                 recs = _from_variables(rec_name, fields, mapping, need, f"field of {var!r}")
                 out.extend(recs)
         return out
+    _refuse_partial_struct(name, {k: set(v.dtype.names) for k, v in structs.items()}, flat,
+                           mapping, need)
     return _from_variables(name, flat, mapping, need, "variable")
+
+
+def _refuse_partial_struct(name: str, structs: dict[str, set[str]], flat, mapping,
+                           need: list[str]) -> None:
+    """A struct holding some of the channels but not all: name the missing fields."""
+    if all(mapping[f] in flat for f in need):
+        return
+    for var, fields in sorted(structs.items()):
+        have = [mapping[f] for f in need if mapping[f] in fields]
+        if have:
+            missing = [mapping[f] for f in need if mapping[f] not in fields]
+            raise InputError(
+                f"{name}: struct {var!r} has no field {', '.join(map(repr, missing))} (it has "
+                f"{', '.join(map(repr, sorted(fields)))}); add the channel or map the names "
+                "with columns={...}"
+            )
 
 
 def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
@@ -538,6 +556,8 @@ def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Ra
         raise InputError(f"{name}: not a readable MATLAB v7.3 (HDF5) file ({exc})") from None
     with fh:
         flat: dict[str, np.ndarray] = {}
+        odd: dict[str, str] = {}  # datasets that are no real numeric arrays -> what they are
+        groups: dict[str, set[str]] = {}
         structs: dict[str, list[dict[str, np.ndarray]]] = {}
         for key, obj in fh.items():
             if key.startswith("#"):
@@ -545,7 +565,14 @@ def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Ra
             if isinstance(obj, h5py.Dataset):
                 if obj.dtype.kind in "iuf":
                     flat[key] = obj[()]
+                elif obj.dtype.kind == "c" or (obj.dtype.names is not None
+                                               and {"real", "imag"} <= set(obj.dtype.names)):
+                    odd[key] = "complex numbers"  # MATLAB stores them as (real, imag)
+                else:
+                    odd[key] = ("a cell array" if obj.dtype == h5py.ref_dtype
+                                else f"data of type {obj.dtype}")
             elif isinstance(obj, h5py.Group):
+                groups[key] = set(obj.keys())
                 elems = _h5_struct(fh, obj)
                 if elems:
                     structs[key] = elems
@@ -559,6 +586,13 @@ def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Ra
                 rec_name = f"{name}:{var}({i + 1})" if len(elems) > 1 or len(usable) > 1 else name
                 out.extend(_from_variables(rec_name, fields, mapping, need, f"field of {var!r}"))
         return out
+    for f in need:
+        if mapping[f] not in flat and mapping[f] in odd:
+            raise InputError(
+                f"{name}: variable {mapping[f]!r} holds {odd[mapping[f]]}, not real numbers; "
+                "save it as a real numeric array"
+            )
+    _refuse_partial_struct(name, groups, flat, mapping, need)
     return _from_variables(name, flat, mapping, need, "variable")
 
 
