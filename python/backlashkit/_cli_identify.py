@@ -19,6 +19,7 @@ import json
 import math
 import sys
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,7 @@ import numpy as np
 from .cli import flag_names
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier, find_step_down
 from .io import read_drive_toml, read_uncertainty_toml
-from .report_identify import add_report_option, maybe_write_report
+from .report_identify import add_report_option, check_report_directory, maybe_write_report
 
 __all__ = ["add_parser", "run"]
 
@@ -330,6 +331,8 @@ _FLAGS = {
 def _run(args: argparse.Namespace) -> int:
     from .errors import InputError
 
+    if args.report is not None:  # before the fit, not after it
+        check_report_directory(Path(args.report), force=bool(args.force))
     prior = read_drive_toml(args.drive, require_theta=False)
     prior = prior.with_theta(None) if prior.theta is not None else prior
     records = read_experiments(args, args.records)

@@ -502,6 +502,32 @@ def _deg(x: Any) -> str:
     return _fmt(math.degrees(float(x)), ".4g")
 
 
+def check_report_directory(out: Path, *, force: bool) -> None:
+    """Refuse a report directory that is a file, or holds files, unless ``force``.
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        The report directory (it may not exist yet).
+    force : bool
+        Write into a directory that is not empty.
+
+    Raises
+    ------
+    InputError
+        If ``out`` is a file, or a directory that is not empty and ``force`` is False.
+    """
+    if out.exists() and not out.is_dir():
+        raise InputError(f"cannot write the report into {out}: it is a file, not a directory")
+    if out.is_dir() and any(out.iterdir()) and not force:  # the user's files stay theirs
+        index = out / "index.html"
+        what = f"{index} already exists" if index.exists() else f"{out} is not empty"
+        raise InputError(
+            f"{what}; pass --force (force=True from Python) to write the report there "
+            "anyway (its files are overwritten), or choose another directory"
+        )
+
+
 def write_identification_report(
     directory: PathLike,
     records: Any,
@@ -563,14 +589,7 @@ def write_identification_report(
         )
     out = Path(directory)
     index = out / "index.html"
-    if out.exists() and not out.is_dir():
-        raise InputError(f"cannot write the report into {out}: it is a file, not a directory")
-    if out.is_dir() and any(out.iterdir()) and not force:  # the user's files stay theirs
-        what = f"{index} already exists" if index.exists() else f"{out} is not empty"
-        raise InputError(
-            f"{what}; pass --force (force=True from Python) to write the report there "
-            "anyway (its files are overwritten), or choose another directory"
-        )
+    check_report_directory(out, force=force)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
