@@ -510,7 +510,8 @@ def _run(args: argparse.Namespace) -> int:
         if far:
             ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in far)
             print(f"note: {ratios} of the prior: check the units of the speeds (rpm read as "
-                  "rad/s?), of the time and of PRIOR.toml", file=out)
+                  "rad/s?) and of the time, the columns (w_motor and w_load swapped?) and "
+                  "PRIOR.toml", file=out)
         message = est.correlation_message()
         if message is not None:
             message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
