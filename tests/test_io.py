@@ -164,10 +164,18 @@ def test_columns_are_found_by_name_and_extras_ignored(tmp_path):
     np.testing.assert_array_equal(u, [0.5, 0.25, -1e-3])
 
 
+def test_semicolon_and_tab_separated_torque_files(tmp_path):
+    for sep in (";", "\t"):
+        path = csv_file(tmp_path, f"t{sep}torque\n0{sep}1\n0.1{sep}0.5\n")
+        t, u = read_torque_csv(path)
+        np.testing.assert_array_equal(t, [0.0, 0.1])
+        np.testing.assert_array_equal(u, [1.0, 0.5])
+
+
 BAD_CSV = {
     "missing column": ("t,tau\n0,1\n0.1,1\n", r"no column 'torque'.*expected columns 't,torque'"),
     "missing t": ("time,torque\n0,1\n0.1,1\n", "no column 't'"),
-    "semicolons": ("t;torque\n0;1\n0.1;1\n", "separated by commas"),
+    "no separator": ("t torque\n0 1\n0.1 1\n", "separated by commas, semicolons or tabs"),
     "empty": ("", "the file is empty"),
     "header only": ("t,torque\n", r"too few samples: 0"),
     "one sample": ("t,torque\n0,1\n", r"too few samples: 1 data line"),

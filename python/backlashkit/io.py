@@ -19,7 +19,8 @@ parameters, e.g. ``J_L = 0.1`` for +-10 %, read by :func:`read_uncertainty_toml`
 :func:`read_drive_toml` accepts and ignores it. Any other table or key is an error
 (a misspelt key would otherwise be silently dropped).
 
-**Data files (CSV).** Comma-separated, one header line of column names, then one
+**Data files (CSV).** Comma-separated (or semicolon- or tab-separated when the header
+line holds no comma; the decimal mark is '.'), one header line of column names, then one
 line of numbers per sample; blank lines and lines starting with ``#`` are skipped.
 Columns are found by name (their order and any extra columns do not matter). A
 column ``t`` holds the time in s and must be finite, strictly increasing and
@@ -30,6 +31,7 @@ that reads back to the same float, so a write/read round trip is exact.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import sys
@@ -275,14 +277,19 @@ def read_csv_columns(
     rows: list[list[str]] = []
     try:
         with open(path, encoding="utf-8-sig", newline="") as fh:
-            reader = csv.reader(fh)
-            for row in reader:
-                if not row or row[0].lstrip().startswith("#"):
-                    continue  # blank line or comment
-                if len(row) == 1 and not row[0].strip():
-                    continue  # whitespace only
-                numbers.append(reader.line_num)
-                rows.append(row)
+            text = fh.read()
+        # the separator of the header line: ',' unless it has none and ';' or a tab
+        head = next((ln for ln in text.splitlines()
+                     if ln.strip() and not ln.lstrip().startswith("#")), "")
+        delimiter = next((d for d in (";", "\t") if "," not in head and d in head), ",")
+        reader = csv.reader(io.StringIO(text), delimiter=delimiter)
+        for row in reader:
+            if not row or row[0].lstrip().startswith("#"):
+                continue  # blank line or comment
+            if len(row) == 1 and not row[0].strip():
+                continue  # whitespace only
+            numbers.append(reader.line_num)
+            rows.append(row)
     except UnicodeDecodeError as exc:
         raise InputError(
             f"{name}: not a UTF-8 text file ({exc.reason} at byte {exc.start})"
@@ -302,7 +309,8 @@ def read_csv_columns(
         seen.add(col)
     missing = [c for c in columns if c not in header]
     if missing:
-        hint = " (columns must be separated by commas)" if len(header) == 1 else ""
+        hint = (" (columns must be separated by commas, semicolons or tabs)"
+                if len(header) == 1 else "")
         raise InputError(
             f"{name}: no column {', '.join(repr(c) for c in missing)} in the header "
             f"(line {header_line}: {','.join(header)!r}){hint}; expected columns '{expected}'"
