@@ -94,6 +94,7 @@ def test_whiten_is_the_fir_filter_a_of_q():
     ("call", "pattern"),
     [
         (lambda: fit_ar(np.ones(3), 2), r"at least 6 samples for order 2"),
+        (lambda: fit_ar(np.arange(9.0), 0), r"order must be an integer >= 1, got 0"),
         (lambda: fit_ar(np.r_[np.zeros(9), np.nan], 1), r"NaN or inf"),
         (lambda: fit_ar(np.ones(20), 1), r"constant"),
         (lambda: whiten(np.ones(2), [0.1, 0.2]), r"more than 2 samples"),

@@ -102,8 +102,10 @@ def fit_ar(e, order: int) -> tuple[np.ndarray, float]:
     InputError
         If ``e`` is too short, not finite, or constant.
     """
+    from .identify import _check_int
+
     x = np.asarray(e, float)
-    order = int(order)
+    order = _check_int("order", order, 1)
     if x.ndim != 1 or x.size < 2 * order + 2:
         raise InputError(
             f"fit_ar needs a 1-D sequence of at least {2 * order + 2} samples for order "
