@@ -256,6 +256,7 @@ _READER_FLAGS = (
     ("columns['t'] = ", "--columns t="),
     ("columns: ", "--columns: "),
     ("pass decimal=','", "pass --decimal ,"),
+    ("pass decimal='.'", "pass --decimal ."),
     ("delimiter ';'", "--delimiter ';'"),
     ("(delimiter=", "(--delimiter "),
     ("sample_time = ", "--sample-time "),

@@ -371,7 +371,7 @@ def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
             bad = "has an underscore, which is no number format of a measurement file"
         elif decimal == "," and "." in cell:
             bad = ("has a '.' but the decimal mark is ','; thousands separators are not "
-                   "read: remove them (or pass --decimal . if '.' is the decimal mark)")
+                   "read: remove them (or pass decimal='.' if '.' is the decimal mark)")
         if bad is not None:
             raise InputError(f"{name}: line {numbers[r]}, column {column!r}: {raw!r} {bad}")
         if decimal == ",":
