@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from threadpoolctl import threadpool_limits
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -13,3 +17,16 @@ def _one_blas_thread():
     same reason as :mod:`backlashkit._parallel`)."""
     with threadpool_limits(limits=1, user_api="blas"):
         yield
+
+
+@pytest.fixture(scope="session")
+def short_csv(tmp_path_factory):
+    """The short experiment as a CSV file: paper A's drive, 0.942 N m from rest for 2 s,
+    then 0; 4 s at Ts = 1 ms, 30 dB on both speeds (``backlashkit simulate``)."""
+    from backlashkit.cli import main
+
+    path = tmp_path_factory.mktemp("short") / "exp.csv"
+    assert main(["simulate", str(EXAMPLES / "paper_drive.toml"), "--experiment", "step-down",
+                 "--amplitude", "0.942", "--hold", "2", "--snr-motor", "30", "--snr-load",
+                 "30", "--seed", "1", "--out", str(path)]) == 0
+    return path

@@ -25,12 +25,8 @@ DRIVE_TOML = str(EXAMPLES / "paper_drive.toml")
 
 
 @pytest.fixture(scope="module")
-def exp_csv(tmp_path_factory):
-    path = tmp_path_factory.mktemp("qa") / "exp.csv"
-    assert main(["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.942",
-                 "--hold", "2", "--snr-motor", "30", "--snr-load", "30", "--seed", "1",
-                 "--out", str(path)]) == 0
-    return path
+def exp_csv(short_csv):
+    return short_csv  # tests/conftest.py
 
 
 @pytest.fixture(scope="module")

@@ -583,15 +583,6 @@ def test_prior_type_validated(short):
 # --- CLI --------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def short_csv(tmp_path_factory):
-    path = tmp_path_factory.mktemp("joint") / "exp.csv"
-    assert main(["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.942",
-                 "--hold", "2", "--snr-motor", "30", "--snr-load", "30", "--seed", "1",
-                 "--out", str(path)]) == 0
-    return path
-
-
 def test_cli_joint_json_with_uncertainty_table(short_csv, tmp_path, capsys):
     prior = tmp_path / "prior.toml"
     text = Path(DRIVE_TOML).read_text().replace("k_sh = 78.0", "k_sh = 85.0")
