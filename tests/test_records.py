@@ -314,6 +314,8 @@ def test_nan_in_npz(tmp_path):
         ("t,torque,w_motor,w_load\n0,0_942,2,3\n0.001,1,2,3\n0.002,1,2,3\n",
          ["line 2", "'0_942' has an underscore"]),
         ("t,torque,w_motor,w_load\n", ["too few samples"]),  # header only: no numpy warning
+        ("t,torque,w_motor,w_load\n2024-01-01 00:00:00.000,1,2,3\n",
+         ["line 2", "a date or clock time is no time in s", "sample_time="]),
     ],
 )
 def test_malformed_csv(tmp_path, text, fragments):
@@ -501,3 +503,20 @@ def test_mat_structs_missing_a_field_and_complex_v73(tmp_path):
     with pytest.raises(InputError) as exc:
         read_records(tmp_path / "c73.mat")
     one_line(exc, "variable 'w_motor' holds complex numbers, not real numbers")
+
+
+def test_mat_v5_cells_and_sparse_are_named(tmp_path):
+    import scipy.sparse
+
+    t = np.arange(10) * 1e-3
+    cell = np.empty((1, 2), dtype=object)
+    cell[0, 0], cell[0, 1] = t, t
+    sio.savemat(tmp_path / "cell.mat", {"t": t, "torque": t, "w_motor": cell, "w_load": t})
+    with pytest.raises(InputError) as exc:
+        read_records(tmp_path / "cell.mat")
+    one_line(exc, "variable 'w_motor' holds a cell array or other objects, not numbers")
+    sparse = scipy.sparse.csc_matrix(t.reshape(-1, 1))
+    sio.savemat(tmp_path / "sp.mat", {"t": t, "torque": t, "w_motor": sparse, "w_load": t})
+    with pytest.raises(InputError) as exc:
+        read_records(tmp_path / "sp.mat")
+    one_line(exc, "variable 'w_motor' is a sparse matrix", "full(x) in MATLAB")

@@ -348,6 +348,8 @@ def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], de
     return name, cols, label, 0.0
 
 
+#: A date (2024-01-31, 31/01/2024, 31.01.2024) or a clock time (12:30:05).
+_DATE_TIME = re.compile(r"\d{1,4}[-/.]\d{1,2}[-/.]\d{1,4}|\d{1,2}:\d{2}")
 _MISSING = {"", "nan", "na", "n/a", "null"}
 
 
@@ -384,6 +386,9 @@ def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
                 if "," in raw and decimal == "."
                 else ""
             )
+            if _DATE_TIME.search(cell):
+                hint = ("; a date or clock time is no time in s: convert the column to "
+                        "seconds, or remove it and pass sample_time=")
             raise InputError(
                 f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number{hint}"
             ) from None
@@ -398,8 +403,14 @@ def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
 
 
 def _vector(name: str, var: str, value: Any) -> np.ndarray:
+    if hasattr(value, "toarray"):  # a scipy.sparse matrix (MATLAB's sparse)
+        raise InputError(f"{name}: variable {var!r} is a sparse matrix; save it as a full "
+                         "numeric vector (full(x) in MATLAB)")
     arr = np.asarray(value)
-    if arr.dtype == object or not (
+    if arr.dtype == object:
+        raise InputError(f"{name}: variable {var!r} holds a cell array or other objects, not "
+                         "numbers; save it as a numeric vector")
+    if not (
         np.issubdtype(arr.dtype, np.number) or arr.dtype == bool
     ) or np.iscomplexobj(arr):
         raise InputError(f"{name}: variable {var!r} must hold real numbers, got {arr.dtype}")
