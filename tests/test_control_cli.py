@@ -52,6 +52,11 @@ def test_control_json_trace_plot(tmp_path, capsys):
         (("ts = 0.01", "tss = 0.01"), "unknown key"),
         (('kind = "exact"', 'kind = "magic"'), "[inverse] inverse must be one of"),
         (("[plant]", "[plant\n"), "not valid TOML"),
+        (("theta_b0 = [1.51, 0.2, -0.55]", "theta_b0 = [1.51, 0.2, -0.55, 1.0]"),
+         "[adaptation] theta_b0 must be a list of exactly 3 numbers"),
+        (("theta_b0 = [1.51, 0.2, -0.55]", "theta_b0 = [1.51, 0.2]"),
+         "[adaptation] theta_b0 must be a list of exactly 3 numbers"),
+        (("num = [1.0]", "num = [0.0]"), "must not be the zero polynomial, got [0.0]"),
     ],
 )
 def test_bad_scenarios_one_line_errors(tmp_path, capsys, edit, needle):

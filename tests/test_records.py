@@ -520,3 +520,12 @@ def test_mat_v5_cells_and_sparse_are_named(tmp_path):
     with pytest.raises(InputError) as exc:
         read_records(tmp_path / "sp.mat")
     one_line(exc, "variable 'w_motor' is a sparse matrix", "full(x) in MATLAB")
+
+
+def test_npz_with_plain_and_numbered_channels_is_refused(tmp_path):
+    cols = channels()
+    np.savez(tmp_path / "both.npz", **cols, w_motor_1=cols["w_motor"], w_load_1=cols["w_load"],
+             torque_1=cols["torque"])
+    with pytest.raises(InputError) as exc:
+        read_records(tmp_path / "both.npz")
+    one_line(exc, "holds both plain arrays", "'w_motor_1'", "keep one naming scheme")

@@ -47,7 +47,7 @@ def _poly(name: str, coeffs: Any) -> np.ndarray:
         raise InputError(f"{name} must have at least one coefficient, got none")
     nz = np.flatnonzero(arr)
     if nz.size == 0:
-        raise InputError(f"{name} must not be the zero polynomial, got {list(arr)!r}")
+        raise InputError(f"{name} must not be the zero polynomial, got {arr.tolist()!r}")
     return arr[nz[0] :]
 
 

@@ -438,7 +438,16 @@ def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, 
                     need: list[str], what: str) -> list[_Raw]:
     """Records from a flat set of named arrays (plain or suffixed names)."""
     want = {mapping[f]: f for f in FIELDS}
+    # numbered channels (a shared plain time is allowed beside them)
+    suffixed = sorted(v for v in variables if (m := _SUFFIX.match(v))
+                      and m.group(1) in want and m.group(1) != mapping["t"])
     if all(mapping[f] in variables for f in need):
+        if suffixed:  # one plain record and numbered ones: which did the user mean?
+            raise InputError(
+                f"{name}: holds both plain {what}s ({', '.join(mapping[f] for f in need)}) "
+                f"and numbered ones ({', '.join(map(repr, suffixed[:4]))}"
+                f"{', ...' if len(suffixed) > 4 else ''}); keep one naming scheme"
+            )
         present = [f for f in FIELDS if mapping[f] in variables]
         cols = {f: _vector(name, mapping[f], variables[mapping[f]]) for f in present}
         prec = _precision(cols["t"]) if "t" in cols else 0.0

@@ -222,7 +222,7 @@ def _hurwitz_poly(name: str, coeffs: Any) -> np.ndarray:
     arr = _v.finite_array(name, arr)
     nz = np.flatnonzero(arr)
     if nz.size == 0:
-        raise InputError(f"{name} must not be the zero polynomial, got {list(arr)!r}")
+        raise InputError(f"{name} must not be the zero polynomial, got {arr.tolist()!r}")
     arr = arr[nz[0] :]
     bad = _unstable_roots(arr)
     if bad.size:

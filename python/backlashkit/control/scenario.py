@@ -169,12 +169,14 @@ def _num(
     return x
 
 
-def _list(src: str, table: str, key: str, value: Any, *, min_len: int = 1) -> list[float]:
+def _list(src: str, table: str, key: str, value: Any, *, min_len: int = 1,
+          exact: bool = False) -> list[float]:
     where = f"{src}: [{table}] {key}"
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = [value]
-    if not isinstance(value, list) or len(value) < min_len:
-        raise InputError(f"{where} must be a list of at least {min_len} numbers, got {value!r}")
+    if not isinstance(value, list) or len(value) < min_len or (exact and len(value) != min_len):
+        size = f"exactly {min_len}" if exact else f"at least {min_len}"
+        raise InputError(f"{where} must be a list of {size} numbers, got {value!r}")
     return [_num(src, table, key, x) for x in value]
 
 
@@ -278,7 +280,8 @@ def parse_scenario(
             else _num(src, "adaptation", "gamma", g, cond=">0")
         )
     if "theta_b0" in ad:
-        kw["theta_b0"] = _list(src, "adaptation", "theta_b0", ad["theta_b0"], min_len=3)
+        kw["theta_b0"] = _list(src, "adaptation", "theta_b0", ad["theta_b0"], min_len=3,
+                               exact=True)
     if "m0" in ad:
         kw["m0"] = _num(src, "adaptation", "m0", ad["m0"], cond=">0")
     if "sigma" in ad:
