@@ -142,7 +142,9 @@ def test_step_down_located_and_required(clean):
 def test_record_without_passage_is_refused(grid):
     """A step-down after which the speeds show no impact: an error naming the record."""
     torque = signals.step_down(grid, A1, t_s=T_S)
-    flat = np.full(grid.size, 15.7)
+    # held, then a smooth decay without the rebound of an impact (constant speeds are
+    # refused earlier, by every identifier)
+    flat = np.where(grid < T_S, 15.7, 15.7 * np.exp(-np.clip(grid - T_S, 0.0, None)))
     rec = Record(grid, torque, flat, flat, name="flat.csv")
     with pytest.raises(InputError, match=r"^flat\.csv: .*no impact"):
         TwoStepIdentifier(PRIOR).fit(rec)

@@ -169,7 +169,58 @@ def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
     return Record(t, torque, w_motor, w_load, name=f"records[{i}]")
 
 
-def _as_records(records, what: str = "records") -> list[Record]:
+def check_speeds_vary(rec: Record) -> None:
+    """Refuse a record with a constant speed: it cannot show the drive's response.
+
+    Parameters
+    ----------
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If ``w_motor`` or ``w_load`` takes one value only.
+    """
+    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
+        if not np.ptp(w) > 0:
+            raise InputError(
+                f"{rec.name}: {name} is constant ({float(w[0]):.6g} rad/s): the speeds "
+                "must respond to the torque; check the columns"
+            )
+
+
+def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
+    """Refuse a record sampled too slowly to show the drive's ringing.
+
+    The ringing frequency ``sqrt(k_sh (1 / J_M + 1 / J_L))`` of the prior must lie below
+    the Nyquist frequency ``pi / Ts``: otherwise no sample sees an impact, and a time
+    column in ms read as s is the likely cause.
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        The prior (its linear parameters).
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If ``Ts`` is longer than half the ringing period.
+    """
+    omega = math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    if rec.ts * omega > math.pi:
+        raise InputError(
+            f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "
+            f"at {omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s, from the prior's k_sh, "
+            f"J_M, J_L): sample faster than {math.pi / omega:.3g} s, or check the time unit "
+            "(a time column in ms reads as s)"
+        )
+
+
+def _as_records(records, what: str = "records", *, prior=None) -> list[Record]:
+    """Records of ``records``, each checked usable (and resolving ``prior``'s ringing)."""
     if isinstance(records, Record) or (
         isinstance(records, tuple)
         and len(records) == 4
@@ -180,8 +231,11 @@ def _as_records(records, what: str = "records") -> list[Record]:
     if not recs:
         raise InputError(f"{what} must hold at least one record, got none")
     out = [_as_record(r, i) for i, r in enumerate(recs)]
-    for rec in out:  # a clipped speed cannot be fitted: refuse it rather than answer
+    for rec in out:  # what no model can fit is refused rather than answered
         check_not_clipped(rec)
+        check_speeds_vary(rec)
+        if prior is not None:
+            check_sampling(prior, rec)
     return out
 
 
@@ -668,8 +722,9 @@ class TwoStepIdentifier:
         # named here: the filter would only say "cutoff", not which one
         v.positive("cutoff_motor", self.cutoff_motor)
         v.positive("cutoff_load", self.cutoff_load)
-        recs = _as_records(records)
-        finals = recs if final_records is None else _as_records(final_records, "final_records")
+        recs = _as_records(records, prior=prior)
+        finals = recs if final_records is None else _as_records(final_records, "final_records",
+                                                                prior=prior)
         alpha = prior.f_L / prior.J_L
         comms, inis = [], []
         for rec in recs:
@@ -782,7 +837,7 @@ class RegressionIdentifier:
         dt4 = v.positive("dt4", self.dt4)
         level_window = v.positive("level_window", self.level_window)
         n_grid = _check_int("n_grid", self.n_grid, 2)
-        recs = _as_records(records)
+        recs = _as_records(records, prior=prior)
         segments = [_segment(r, dt4, level_window) for r in recs]
         self.theta_, self.cost_ = _search(prior, segments, 0.0, theta_max, n_grid, self.workers)
         self.t_s_ = [find_step_down(r)[1] for r in recs]

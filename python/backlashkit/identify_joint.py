@@ -152,56 +152,6 @@ class _Span:
     hold: float | None = None  # start: from rest after `level` held this long (s)
 
 
-def check_speeds_vary(rec: Record) -> None:
-    """Refuse a record with a constant speed: it cannot show the drive's response.
-
-    Parameters
-    ----------
-    rec : Record
-        The record (its ``name`` goes into the message).
-
-    Raises
-    ------
-    InputError
-        If ``w_motor`` or ``w_load`` takes one value only.
-    """
-    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
-        if not np.ptp(w) > 0:
-            raise InputError(
-                f"{rec.name}: {name} is constant ({float(w[0]):.6g} rad/s): the speeds "
-                "must respond to the torque; check the columns"
-            )
-
-
-def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
-    """Refuse a record sampled too slowly to show the drive's ringing.
-
-    The ringing frequency ``sqrt(k_sh (1 / J_M + 1 / J_L))`` of the prior must lie below
-    the Nyquist frequency ``pi / Ts``: otherwise no sample sees an impact, and a time
-    column in ms read as s is the likely cause.
-
-    Parameters
-    ----------
-    prior : TwoMassDrive
-        The prior (its linear parameters).
-    rec : Record
-        The record (its ``name`` goes into the message).
-
-    Raises
-    ------
-    InputError
-        If ``Ts`` is longer than half the ringing period.
-    """
-    omega = math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
-    if rec.ts * omega > math.pi:
-        raise InputError(
-            f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "
-            f"at {omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s, from the prior's k_sh, "
-            f"J_M, J_L): sample faster than {math.pi / omega:.3g} s, or check the time unit "
-            "(a time column in ms reads as s)"
-        )
-
-
 def _starts_at_rest(rec: Record, s_m: float, s_l: float) -> bool:
     """Whether both speeds start at rest (``start="auto"``, module docstring)."""
     if abs(rec.w_motor[0]) <= 4 * s_m + 1e-12 and abs(rec.w_load[0]) <= 4 * s_l + 1e-12:
@@ -963,10 +913,7 @@ class JointIdentifier:
 
     def _fit(self, records) -> JointIdentifier:
         prior = self.prior.with_theta(None)
-        recs = _as_records(records)
-        for rec in recs:
-            check_speeds_vary(rec)
-            check_sampling(prior, rec)
+        recs = _as_records(records, prior=prior)
         ts_max = max(r.ts for r in recs)
         if self.final_horizon is not None and self.final_horizon < MIN_FINAL_SAMPLES * ts_max:
             raise InputError(
@@ -1241,8 +1188,8 @@ class JointIdentifier:
                              self.max_iter)
         # a model that explains a speed worse than its mean has fitted nothing: say so
         # before the uncertainty (whose refits at such a point can take minutes)
-        _refuse_unexplained(recs, _residuals_and_fit(spans, model(best.z[np.newaxis, :],
-                                                                  spans))[1])
+        checked_z, sims = best.z, model(best.z[np.newaxis, :], spans)
+        _refuse_unexplained(recs, _residuals_and_fit(spans, sims)[1])
         sigma = sig_now
         rows_unc = make_residual(final_spans, final_h, sig_now, ar)
         profiled = None
@@ -1270,7 +1217,8 @@ class JointIdentifier:
         cov = cov_z * np.outer(values, values)  # delta method: dp = p dz
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         drive = _drive(prior, names, values)
-        sims = model(z[np.newaxis, :], spans)
+        if z is not checked_z:  # the profile search re-centred the estimate
+            sims = model(z[np.newaxis, :], spans)
         self.residuals_, fits = _residuals_and_fit(spans, sims)
         self.theta_ = float(values[0])
         self.std_ = float(std[0])
