@@ -137,10 +137,12 @@ def main() -> None:
     for a in (A1, A2):
         r = truth.simulate(t, signals.step_down(t, a, t_s=T_S))
         lost, made = [e.time for e in r.events if e.time > T_S][:2]
-        com = commutation_instants(Record(r.t, r.torque, r.w_motor, r.w_load),
-                                   P_TRUE["f_L"] / P_TRUE["J_L"])
-        print(f"eq. 9 on noise-free data, a = {a:.3f} N m: t_c {(com.t_c - lost) / TS:+.2f}, "
-              f"t_b {(com.t_b - made) / TS:+.2f} samples from the true contact changes")
+        for onset in ("constant", "unloading"):
+            com = commutation_instants(Record(r.t, r.torque, r.w_motor, r.w_load),
+                                       P_TRUE["f_L"] / P_TRUE["J_L"], onset=onset)
+            print(f"eq. 9 (onset={onset}) on noise-free data, a = {a:.3f} N m: "
+                  f"t_c {(com.t_c - lost) / TS:+.2f}, t_b {(com.t_b - made) / TS:+.2f} "
+                  "samples from the true contact changes")
         clean.append((Record(r.t, r.torque, r.w_motor, r.w_load), lost, made))
     with warnings.catch_warnings():  # noise-free: the residual is model error, not white
         warnings.simplefilter("ignore", CorrelatedResidualsWarning)

@@ -212,6 +212,7 @@ def test_two_step_at_the_edge_of_its_search_is_noted(exp_csv, capsys):
         (["--n-theta", "0.2"], "--n-theta only applies with --method two-step"),
         (["--cutoff-load", "10", "--method", "regression"],
          "--cutoff-load only applies with --method two-step"),
+        (["--onset", "unloading"], "--onset only applies with --method two-step"),
         (["--prior-rel-std", "0.1", "--method", "two-step"],
          "--prior-rel-std only applies with --method joint"),
     ],

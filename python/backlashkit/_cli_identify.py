@@ -127,6 +127,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "rad/s (default 20)"
     )
     p.add_argument(
+        "--onset", choices=("constant", "unloading"), default=None,
+        help="two-step: load speed before t_c in eq. 9: constant (paper, default) or the "
+        "unloading shaft's cubic fall (exact t_c on noise-free data; no better with noise)"
+    )
+    p.add_argument(
         "--prior-rel-std", type=float, default=None, metavar="REL",
         help="joint: relative std of every linear parameter of the prior (overrides the "
         "[uncertainty] table; 0 = known exactly)"
@@ -350,7 +355,7 @@ def _run(args: argparse.Namespace) -> int:
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")
     for option, value in (("--n-theta", args.n_theta), ("--cutoff-motor", args.cutoff_motor),
-                          ("--cutoff-load", args.cutoff_load)):
+                          ("--cutoff-load", args.cutoff_load), ("--onset", args.onset)):
         if value is not None and args.method != "two-step":
             raise InputError(f"{option} only applies with --method two-step")
     if args.seed is not None and args.bootstrap is None:
@@ -427,6 +432,7 @@ def _run(args: argparse.Namespace) -> int:
             n_theta=0.1 if args.n_theta is None else args.n_theta,
             cutoff_motor=50.0 if args.cutoff_motor is None else args.cutoff_motor,
             cutoff_load=20.0 if args.cutoff_load is None else args.cutoff_load,
+            onset="constant" if args.onset is None else args.onset,
         ).fit(records, final_records=finals)
         theta_ini: float | None = est.theta_ini_
         rows = zip(records, est.commutations_, est.theta_ini_per_record_, strict=True)
@@ -435,6 +441,7 @@ def _run(args: argparse.Namespace) -> int:
                 {"file": rec.name, "t_s": com.t_s, "t_c": com.t_c, "t_b": com.t_b, "theta_ini": ini}
             )
         bounds = list(est.bounds_)
+        extra["onset"] = est.onset
     else:
         if args.final:
             raise InputError("--final only applies with --method two-step")
