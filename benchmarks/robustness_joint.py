@@ -25,7 +25,8 @@ in 95 % of the trials, so the summary also gives the worst error over the other
 scenarios and the count of trials beyond ``max(5 %, 3 CRB)``.
 
 Run: ``python benchmarks/robustness_joint.py [--trials 20] [--seed 5] [--jobs 2]
-[--stiffness-grid 9] [--split-shifts 0.5] [--stiffness-restarts 0.15] [--search-factor 3]
+[--stiffness-grid 9] [--split-shifts 0.5] [--stiffness-restarts 0.15,0.4,0.8]
+[--search-factor 3]
 [--final-horizon H]
 [--fine-horizons 0.25,0.6,1.6] [--ambiguity-starts 4] [--interval profile|fisher]
 [--bootstrap N] [--scenarios 0,1,...] [--dump FILE]``. ``--interval`` chooses the
@@ -131,7 +132,7 @@ def main() -> None:
                     help="JointIdentifier(stiffness_grid=...) (default 1, its default)")
     ap.add_argument("--split-shifts", default="0.5",
                     help="JointIdentifier(split_shifts=...), comma-separated ('' for none)")
-    ap.add_argument("--stiffness-restarts", default="0.15",
+    ap.add_argument("--stiffness-restarts", default="0.15,0.4,0.8",
                     help="JointIdentifier(stiffness_restarts=...), log-shifts of k_sh, "
                     "comma-separated ('' for none)")
     ap.add_argument("--search-factor", default="3",

@@ -7,6 +7,7 @@ The experiment is the short one of ``tests/test_identify_joint.py`` (paper A's d
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from pathlib import Path
@@ -222,15 +223,83 @@ def test_options_of_another_method_are_refused(exp_csv, capsys, argv, message):
     assert message in err
 
 
-def test_records_whose_speeds_ignore_the_step_down_are_noted(exp_csv, tmp_path, capsys):
-    """The torque of the file steps down 5 samples before its end, while its speeds
-    react 2 s earlier (a torque column from another run): the fit answers, with notes
-    that the model never loses contact and that its residuals are correlated."""
+def test_records_ending_at_the_step_down_are_refused(exp_csv, tmp_path, capsys):
+    """The torque of the file steps down 5 samples before its end (while its speeds
+    react 2 s earlier: a torque column from another run): no passage through the
+    backlash can follow; refused for every method, before any fit (the fit used to
+    answer, with a note that its model never lost contact)."""
     t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
     path = tmp_path / "late.csv"
     write_csv(path, {"t": t, "torque": np.where(np.arange(t.size) < t.size - 5, 0.942, 0.0),
                      "w_motor": w_m, "w_load": w_l})
-    assert main(["identify", str(path), "--drive", DRIVE_TOML]) == 0
-    out, _ = capsys.readouterr()
-    assert "note: in the identified model the shaft leaves its flank after no step-down" in out
-    assert "has lag-1 autocorrelation" in out
+    for method in ("joint", "two-step", "regression"):
+        err = _one_line_error(capsys, ["identify", str(path), "--drive", DRIVE_TOML,
+                                       "--method", method])
+        assert re.search(r"late\.csv: the record ends 0\.004 s after the step-down at "
+                         r"t = 3\.996 s: record at least 0\.096 s after it \(two periods of "
+                         r"the prior's ringing\)", err), err
+
+
+# --- the second QA pass ---------------------------------------------------------------
+
+
+def test_unix_time_stamps_are_uniform_within_their_rounding(exp_csv, tmp_path, capsys):
+    """Time stamps of 1.7e9 s are stored to 2.4e-7 s in float64: the steps of a file
+    written uniformly to the microsecond differ by that much, which is no non-uniform
+    sampling; the answer is the one of the same file with t from 0."""
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / "epoch.csv"
+    lines = ["t,torque,w_motor,w_load"] + [f"{1.7e9 + a:.6f},{b:.17g},{c:.17g},{d:.17g}"
+                                          for a, b, c, d in zip(t, u, w_m, w_l, strict=True)]
+    path.write_text("\n".join(lines) + "\n")
+    runs = []
+    for f in (exp_csv, path):
+        assert main(["identify", str(f), "--drive", DRIVE_TOML, "--interval", "fisher",
+                     "--json"]) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+    assert runs[1]["records"][0]["t_s"] == pytest.approx(1.7e9 + 2.0)
+    assert runs[1]["theta"] == pytest.approx(runs[0]["theta"], rel=1e-4)
+
+
+def test_outputs_the_system_refuses_are_refused_before_computing(exp_csv, tmp_path, capsys):
+    if not Path("/proc/self").is_dir():
+        pytest.skip("needs /proc (Linux)")
+    for argv, flag in (
+        (["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.157",
+          "--hold", "1", "--out", "/proc/x.csv"], "--out"),
+        (["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.157",
+          "--hold", "1", "--out", str(tmp_path / "ok.csv"), "--plot", "/proc/p.png"], "--plot"),
+        (["control", str(EXAMPLES / "tao1995.toml"), "--trace", "/proc/x.csv"], "--trace"),
+        (["reproduce", "ravanbod2002", "--runs", "2", "--json", "/proc/x.json"], "--json"),
+        (["identify", str(exp_csv), "--drive", DRIVE_TOML, "--report", "/proc/rep"],
+         "the report into"),
+    ):
+        err = _one_line_error(capsys, argv)
+        assert f"cannot write {flag} /proc/" in err, err
+    assert not (tmp_path / "ok.csv").exists()  # --out is not written when --plot cannot be
+
+
+def test_parameters_held_by_the_uncertainty_table_are_noted(exp_csv, tmp_path, capsys):
+    drive = tmp_path / "prior.toml"
+    drive.write_text(Path(DRIVE_TOML).read_text().replace("theta", "# theta")
+                     + "\n[uncertainty]\nJ_L = 0.1\n")
+    assert main(["identify", str(exp_csv), "--drive", str(drive), "--interval", "fisher",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["estimated"] == ["theta", "J_L"]
+    assert ("J_M, k_sh, f_M, f_L, f_sh held at the prior's values: [uncertainty] lists J_L "
+            "only") in " ".join(doc["notes"])
+
+
+def test_report_of_a_record_ending_soon_after_the_step_down(exp_csv, tmp_path, capsys):
+    """The joint fit needs two ringing periods after the step-down; its report shows
+    what was recorded (it used to fail on the two-step method's 1 s window)."""
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    keep = t <= 2.3  # the step-down is at 2 s
+    path = tmp_path / "soon.csv"
+    write_csv(path, {"t": t[keep], "torque": u[keep], "w_motor": w_m[keep],
+                     "w_load": w_l[keep]})
+    rep = tmp_path / "rep"
+    assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
+                 "--report", str(rep)]) == 0, capsys.readouterr().err
+    assert (rep / "index.html").is_file()

@@ -44,6 +44,7 @@ from .simulate import (
     simulate_batch,
     simulate_drive,
 )
+from .torque import torque_levels
 
 __version__ = "0.1.0"
 
@@ -86,4 +87,5 @@ __all__ = [
     "cramer_rao_bound",
     "simulate_batch",
     "simulate_drive",
+    "torque_levels",
 ]

@@ -11,6 +11,7 @@ import numpy as np
 
 from .cli import missing_directory
 from .errors import InputError
+from .io import check_writable
 
 __all__ = ["add_parser", "run"]
 
@@ -61,6 +62,7 @@ def _check_out(path: str | None, force: bool, flag: str) -> Path | None:
         raise InputError(f"{flag} {out} already exists; pass --force to overwrite it")
     if not out.parent.is_dir():
         raise InputError(missing_directory(flag, out))
+    check_writable(out, flag)
     return out
 
 

@@ -193,6 +193,10 @@ def add_reader_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--resample", choices=("linear",), default=None,
                    help="resample non-uniform time onto a uniform grid and bridge missing "
                    "samples (default: they are errors)")
+    g.add_argument("--torque-levels", action="store_true",
+                   help="replace a noisy measured torque by its piecewise-constant levels "
+                   "(the model takes the torque as its exact input; default: a noisy torque "
+                   "is an error)")
 
 
 def _parse_columns(text: str | None) -> dict[str, str] | None:
@@ -270,6 +274,23 @@ _READER_FLAGS = (
 )
 
 
+def _check_after_step_down(rec: Record, prior: Any) -> None:
+    """The contract: a torque step-down, and at least two periods of the prior's ringing
+    recorded after it (the passage through the backlash takes about one; a record that
+    ends at the step-down shows none)."""
+    from .errors import InputError
+
+    i_s, t_s, _, _ = find_step_down(rec)
+    period = 2.0 * math.pi / math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    need = max(2.0 * period, 10 * rec.ts)
+    if rec.t[-1] - t_s < need:
+        raise InputError(
+            f"{rec.name}: the record ends {rec.t[-1] - t_s:.3g} s after the step-down at "
+            f"t = {t_s:.6g} s: record at least {need:.3g} s after it (two periods of the "
+            "prior's ringing), so that the passage through the backlash is seen"
+        )
+
+
 def _refuse_duplicates(records: list[Record]) -> None:
     """Refuse a record given twice: the joint fit would count its data twice and
     report a standard error too small by sqrt(2)."""
@@ -298,6 +319,49 @@ def _far_from_prior(est, prior) -> list[str]:
         ratio = est.params_[name] / getattr(prior, name)
         if not 1.0 / FAR_FROM_PRIOR <= ratio <= FAR_FROM_PRIOR:
             out.append(name)
+    return out
+
+
+def _notes(args: argparse.Namespace, est: Any, prior: Any, bounds: list[float],
+           rel: Any) -> list[str]:
+    """What the reader of the result must know, in the words of the command line (printed
+    after theta, and the ``notes`` of ``--json``)."""
+    out = []
+    if getattr(est, "std_", None) is None:  # two-step, regression: a bounded search
+        for end, edge in zip(("lower", "upper"), bounds, strict=True):
+            if abs(est.theta_ - edge) <= 1e-6 * max(bounds[1], 1e-300):
+                hint = " (widen --n-theta)" if args.method == "two-step" else ""
+                out.append(f"theta is at the {end} end of the search interval: the cost's "
+                           f"minimum may lie beyond it{hint}")
+        return out
+    for end, bounded in zip(("lower", "upper"), est.ci95_bounded_, strict=True):
+        if not bounded:
+            out.append(f"the likelihood does not rise to the 95% level on the {end} side "
+                       "within the search range: the records hardly bound theta there "
+                       "(longer or less noisy records help)")
+    if all(t_c is None for (_, t_c, _) in est.commutations_):
+        out.append("in the identified model the shaft leaves its flank after no step-down: "
+                   "these records hardly show the backlash (theta rests on the model alone; "
+                   "a step-down to 0 that the speeds follow shows it)")
+    held = [n for n in est.params_ if n not in est.estimated_]
+    if isinstance(rel, dict) and held:
+        out.append(f"{', '.join(held)} held at the prior's values: [uncertainty] lists "
+                   f"{', '.join(sorted(rel)) or 'none'} only (list the others with their "
+                   "relative std to estimate them, or remove the table to estimate all)")
+    far = _far_from_prior(est, prior)
+    if far:
+        ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in far)
+        out.append(f"{ratios} of the prior: check the units of the speeds (rpm read as "
+                   "rad/s?) and of the time, the columns (w_motor and w_load swapped?) and "
+                   "PRIOR.toml")
+    message = est.correlation_message()
+    if message is not None:
+        message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
+        out.append(message.replace("raise the order", "raise --noise-order"))
+    if est.ambiguous_:
+        out.append("the search ended in distinct minima of nearly equal cost (the likelihood "
+                   "is multimodal on these records); the interval describes the best one "
+                   "only: try --bootstrap N or longer records")
     return out
 
 
@@ -343,8 +407,19 @@ def _run(args: argparse.Namespace) -> int:
     prior = prior.with_theta(None) if prior.theta is not None else prior
     records = read_experiments(args, args.records)
     finals = None if not args.final else read_experiments(args, args.final)
+    read_notes: list[str] = []
+    if args.torque_levels:
+        from .torque import torque_levels, torque_noise_std
+
+        for group in (records, finals or []):
+            for k, rec in enumerate(group):
+                group[k] = torque_levels(rec)
+                levels = np.unique(group[k].torque).size
+                read_notes.append(
+                    f"{rec.name}: torque replaced by its {levels} piecewise-constant levels "
+                    f"(noise std about {torque_noise_std(rec.torque):.3g} N m removed)")
     for rec in records + (finals or []):  # the identifiers check the rest
-        find_step_down(rec)  # the contract: one torque step-down per record (else: says so)
+        _check_after_step_down(rec, prior)  # the contract: one step-down per record
     per_record: list[dict[str, Any]] = []
     std: float | None = None
     ci95: list[float] | None = None
@@ -453,6 +528,7 @@ def _run(args: argparse.Namespace) -> int:
             )
         bounds = [0.0, float(RegressionIdentifier(prior).theta_max)]
     report = maybe_write_report(args, records, est, prior, final_records=finals)
+    notes = read_notes + _notes(args, est, prior, bounds, rel if args.method == "joint" else None)
     result = {
         "command": "identify",
         "method": args.method,
@@ -468,6 +544,7 @@ def _run(args: argparse.Namespace) -> int:
         "final_records": [r.name for r in finals] if finals else None,
         "report": str(report) if report else None,
         **extra,
+        "notes": notes,
     }
     if args.json:
         print(json.dumps(result, allow_nan=False))
@@ -487,11 +564,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
               "method", file=out)
-        for end, edge in zip(("lower", "upper"), bounds, strict=True):
-            if abs(est.theta_ - edge) <= 1e-6 * max(bounds[1], 1e-300):
-                hint = " (widen --n-theta)" if args.method == "two-step" else ""
-                print(f"note: theta is at the {end} end of the search interval: the cost's "
-                      f"minimum may lie beyond it{hint}", file=out)
+        for note in notes:
+            print(f"note: {note}", file=out)
     else:
         how = {"fisher": " (Fisher)", "profile": " (profile likelihood)"}.get(est.interval_, "")
         if est.interval_ == "bootstrap":
@@ -501,30 +575,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"std {std:.3g} rad, 95% interval [{ci95[0]:.5g}, {ci95[1]:.5g}] rad{how}",
               file=out)
-        for end, bounded in zip(("lower", "upper"), est.ci95_bounded_, strict=True):
-            if not bounded:
-                print(f"note: the likelihood does not rise to the 95% level on the {end} "
-                      "side within the search range: the records hardly bound theta there "
-                      "(longer or less noisy records help)", file=out)
-        if all(t_c is None for (_, t_c, _) in est.commutations_):
-            print("note: in the identified model the shaft leaves its flank after no "
-                  "step-down: these records hardly show the backlash (theta rests on the "
-                  "model alone; a step-down to 0 that the speeds follow shows it)", file=out)
-        far = _far_from_prior(est, prior)
-        if far:
-            ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in far)
-            print(f"note: {ratios} of the prior: check the units of the speeds (rpm read as "
-                  "rad/s?) and of the time, the columns (w_motor and w_load swapped?) and "
-                  "PRIOR.toml", file=out)
-        message = est.correlation_message()
-        if message is not None:
-            message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
-            print(f"note: {message.replace('raise the order', 'raise --noise-order')}",
-                  file=out)
-        if est.ambiguous_:
-            print("note: the search ended in distinct minima of nearly equal cost (the "
-                  "likelihood is multimodal on these records); the interval describes the "
-                  "best one only: try --bootstrap N or longer records", file=out)
+        for note in notes:
+            print(f"note: {note}", file=out)
         for name in est.estimated_[1:]:
             print(f"{name:<9} = {est.params_[name]:.5g} (std {est.param_std_[name]:.3g})",
                   file=out)

@@ -27,7 +27,7 @@ from . import _validate as v
 from . import signals
 from .cli import missing_directory
 from .errors import InputError, SensitivityWarning
-from .io import read_drive_toml, read_torque_csv, write_csv
+from .io import check_writable, read_drive_toml, read_torque_csv, write_csv
 from .laws import ShaftLaw
 
 __all__ = ["add_parser", "run"]
@@ -238,6 +238,8 @@ def _check_output(args: argparse.Namespace) -> Path:
             raise InputError(f"--plot {plot} already exists; pass --force to overwrite it")
         if plot.resolve() == out.resolve():
             raise InputError("--plot and --out must be different files")
+        check_writable(plot, "--plot")
+    check_writable(out, "--out")
     return out
 
 

@@ -35,7 +35,7 @@ def nonnegative(name: str, value: float) -> float:
 
 def finite_scalar(name: str, value: float) -> float:
     """Return ``value`` as a float, or raise if it is not a finite real number."""
-    if isinstance(value, bool):
+    if isinstance(value, (bool, str, bytes)):  # float("1") works, but "1" is no number
         raise InputError(f"{name} must be a real number, got {value!r}")
     try:
         v = float(value)
@@ -70,6 +70,14 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, *, ndim: int =
     return arr
 
 
+def uniform_tolerance(t: np.ndarray, ts: float) -> float:
+    """Largest deviation of a step from ``ts`` that still counts as uniform sampling:
+    ``UNIFORM_RTOL`` of the step, or the rounding of the time values themselves (time
+    stamps of 1.7e9 s, Unix time, are stored to 2.4e-7 s in float64)."""
+    resolution = 4.0 * float(np.finfo(np.float64).eps) * float(np.max(np.abs(t[[0, -1]])))
+    return max(UNIFORM_RTOL * ts, resolution)
+
+
 def time_grid(
     t: Sequence[float] | np.ndarray, *, name: str = "t", min_samples: int = 2
 ) -> tuple[np.ndarray, float]:
@@ -79,8 +87,9 @@ def time_grid(
         raise InputError(f"{name} must have at least {min_samples} samples, got {arr.size}")
     dt = np.diff(arr)
     ts = (arr[-1] - arr[0]) / (arr.size - 1)
+    tol = uniform_tolerance(arr, ts)
     lo, hi = dt.min(), dt.max()
-    if lo > 0 and hi - ts <= UNIFORM_RTOL * ts and ts - lo <= UNIFORM_RTOL * ts:
+    if lo > 0 and hi - ts <= tol and ts - lo <= tol:
         return arr, float(ts)
     if not (dt > 0).all():
         i = int(np.argmax(~(dt > 0)))
@@ -89,7 +98,7 @@ def time_grid(
             f"follows {name}[{i}] = {float(arr[i])!r}"
         )
     dev = np.abs(dt - ts)
-    if dev.max() > UNIFORM_RTOL * ts:
+    if dev.max() > tol:
         i = int(np.argmax(dev))
         raise InputError(
             f"{name} must be uniformly sampled; step {i} is {float(dt[i])!r} s but the mean "

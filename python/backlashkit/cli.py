@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -91,6 +92,11 @@ def missing_directory(flag: str, out: Path) -> str:
     return f"{flag} {out}: directory {out.parent} does not exist"
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A library warning as the command line's notes are: one line on stderr."""
+    print(f"backlashkit: note: {' '.join(str(message).split())}", file=sys.stderr)
+
+
 def fail(message: str) -> int:
     """Print a one-line error on stderr and return exit status 2."""
     print(f"backlashkit: error: {message}", file=sys.stderr)
@@ -105,7 +111,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a usage error already printed
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():  # one line on stderr, not Python's two
+            warnings.showwarning = _one_line_warning
+            return int(args.func(args) or 0)
     except InputError as exc:
         return fail(str(exc))
     except FileNotFoundError as exc:

@@ -81,6 +81,7 @@ from . import _validate as v
 from ._clipping import check_not_clipped
 from .errors import InputError
 from .plants import TwoMassDrive
+from .torque import JUMP_THRESHOLD, check_torque_noise, torque_noise_std
 
 __all__ = [
     "Commutation",
@@ -221,6 +222,13 @@ def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
 
 def _as_records(records, what: str = "records", *, prior=None) -> list[Record]:
     """Records of ``records``, each checked usable (and resolving ``prior``'s ringing)."""
+    if records is None or isinstance(records, (str, bytes, os.PathLike)):
+        hint = (" (a file? read it with backlashkit.records.read_records)"
+                if records is not None else "")
+        raise InputError(
+            f"{what} must be a Record or a sequence of Records, got "
+            f"{type(records).__name__}{hint}"
+        )
     if isinstance(records, Record) or (
         isinstance(records, tuple)
         and len(records) == 4
@@ -234,6 +242,7 @@ def _as_records(records, what: str = "records", *, prior=None) -> list[Record]:
     for rec in out:  # what no model can fit is refused rather than answered
         check_not_clipped(rec)
         check_speeds_vary(rec)
+        check_torque_noise(rec)
         if prior is not None:
             check_sampling(prior, rec)
     return out
@@ -260,7 +269,7 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
     ------
     InputError
         If the torque has no drop from a positive level (the method needs the shaft
-        to leave its positive flank).
+        to leave its positive flank), or none beyond the torque's noise.
     """
     u = record.torque
     du = np.diff(u)
@@ -269,6 +278,13 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
     if scale == 0.0 or not du[k] < -1e-9 * scale or not u[k] > 0:
         raise InputError(
             f"{record.name}: the torque has no step-down (a drop from a positive level); "
+            "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
+        )
+    noise = torque_noise_std(u)
+    if -du[k] <= JUMP_THRESHOLD * math.sqrt(2.0) * noise:
+        raise InputError(
+            f"{record.name}: the torque has no step-down beyond its noise (largest drop "
+            f"{-du[k]:.3g} N m at t = {record.t[k + 1]:.6g} s, noise std about {noise:.3g} N m); "
             "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
         )
     i_s = k + 1

@@ -368,7 +368,7 @@ def _check_time(name: str, t: np.ndarray, lines: Sequence[int]) -> None:
         )
     ts = float((t[-1] - t[0]) / (t.size - 1))
     dev = np.abs(dt - ts)
-    if dev.max() > v.UNIFORM_RTOL * ts:
+    if dev.max() > v.uniform_tolerance(t, ts):
         i = int(np.argmax(dev))
         raise InputError(
             f"{name}: column 't' must be uniformly sampled; the step from line {lines[i]} to "
@@ -472,3 +472,45 @@ def write_csv(
         raise InputError(
             f"{target} already exists; pass --force (force=True from Python) to overwrite it"
         ) from None
+
+
+def check_writable(path: PathLike, what: str, *, directory: bool = False) -> None:
+    """Refuse, before any computation, an output the system will not let us write.
+
+    A file that does not exist is created and removed again; one that exists is opened
+    for appending (its content stays); for a directory, a probe file is created in it or
+    in its nearest existing parent (where it would be created). Permission bits alone
+    do not tell (a root user may not create files under ``/proc`` either).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file or directory.
+    what : str
+        How the message names it (e.g. ``"--out"``).
+    directory : bool, optional
+        ``path`` is a directory to write files into.
+
+    Raises
+    ------
+    InputError
+        If the system refuses to write there (the message gives its reason).
+    """
+    import tempfile
+
+    target = Path(path)
+    try:
+        if directory:
+            home = next((p for p in (target, *target.parents) if p.exists()), Path("."))
+            if home.is_dir():  # else the writer says what is in the way
+                with tempfile.TemporaryFile(dir=home):
+                    pass
+        elif target.exists():
+            with open(target, "a", encoding="utf-8"):
+                pass
+        else:
+            with open(target, "x", encoding="utf-8"):
+                pass
+            target.unlink()
+    except OSError as exc:
+        raise InputError(f"cannot write {what} {target}: {exc.strerror or exc}") from None

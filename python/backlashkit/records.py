@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as v
 from .errors import InputError
 from .identify import Record
 
@@ -702,7 +703,7 @@ def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample
                 "interpolated; crop the record to the samples where every channel is known"
             )
     ts = float(np.median(dt))
-    tol = max(UNIFORM_RTOL * ts, precision)
+    tol = max(UNIFORM_RTOL * ts, precision, v.uniform_tolerance(t, ts))
     dev = np.abs(dt - ts)
     uniform = float(dev.max()) <= tol
     if uniform:

@@ -52,6 +52,7 @@ from .identify import (
     find_step_down,
     fir_lowpass,
 )
+from .io import check_writable
 from .plants import TwoMassDrive
 
 if TYPE_CHECKING:
@@ -526,6 +527,7 @@ def check_report_directory(out: Path, *, force: bool) -> None:
             f"{what}; pass --force (force=True from Python) to write the report there "
             "anyway (its files are overwritten), or choose another directory"
         )
+    check_writable(out, "the report into", directory=True)
 
 
 def write_identification_report(
@@ -598,6 +600,8 @@ def write_identification_report(
     recs = _as_records(records)
     finals = recs if final_records is None else _as_records(final_records, "final_records")
     dt4 = float(getattr(result, "dt4", DEFAULT_DT4))
+    if not hasattr(result, "dt4"):  # the joint fit has no window: show what was recorded
+        dt4 = min([dt4] + [r.t[-1] - find_step_down(r)[1] - r.ts for r in finals])
     level_window = float(getattr(result, "level_window", 1.0))
     cut_m = float(getattr(result, "cutoff_motor", 50.0))
     cut_l = float(getattr(result, "cutoff_load", 20.0))
