@@ -347,6 +347,16 @@ def test_not_utf8(tmp_path):
     one_line(exc, str(path), "UTF-8")
 
 
+def test_utf16_with_a_byte_order_mark(tmp_path):
+    """Excel's "Unicode text" export: UTF-16 with a BOM, tab-separated."""
+    cols = channels()
+    path = write_csv(tmp_path / "excel.txt", cols, sep="\t")
+    path.write_text(path.read_text(encoding="utf-8"), encoding="utf-16")
+    assert path.read_bytes()[:2] in (b"\xff\xfe", b"\xfe\xff")
+    (rec,) = read_records(path)
+    assert_record(rec, cols)
+
+
 def test_malformed_binary_files(tmp_path):
     bad_mat = tmp_path / "bad.mat"
     bad_mat.write_bytes(b"this is not a mat file at all" * 10)

@@ -132,6 +132,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "unloading shaft's cubic fall (exact t_c on noise-free data; no better with noise)"
     )
     p.add_argument(
+        "--allow-far-from-prior", action="store_true",
+        help="joint: answer even when a linear parameter ends more than 5 times off the "
+        "prior (default: refused, a unit or column mistake being likelier)"
+    )
+    p.add_argument(
         "--prior-rel-std", type=float, default=None, metavar="REL",
         help="joint: relative std of every linear parameter of the prior (overrides the "
         "[uncertainty] table; 0 = known exactly)"
@@ -241,6 +246,9 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     delimiter = "\t" if args.delimiter == "tab" else args.delimiter
     out: list[Record] = []
     for path in paths:
+        if path == "-":
+            raise InputError("'-': identify reads files, not the standard input; give a "
+                             "file name (or /dev/stdin)")
         try:
             out += read_records(path, columns=columns, sample_time=args.sample_time,
                                 delimiter=delimiter, decimal=args.decimal,
@@ -310,14 +318,18 @@ def _refuse_duplicates(records: list[Record]) -> None:
 
 #: An estimated linear parameter this many times off its prior (either way) is noted.
 FAR_FROM_PRIOR = 3.0
+#: ... and this many times off refuses the answer, unless --allow-far-from-prior: a
+#: prior that far off is rarer than a unit or column mistake (rpm read as rad/s moves
+#: J_M x0.1, swapped speeds J_M x6 and k_sh x6), whose theta means nothing.
+REFUSE_FROM_PRIOR = 5.0
 
 
-def _far_from_prior(est, prior) -> list[str]:
-    """The estimated linear parameters more than FAR_FROM_PRIOR times off the prior."""
+def _far_from_prior(est, prior, factor: float = FAR_FROM_PRIOR) -> list[str]:
+    """The estimated linear parameters more than ``factor`` times off the prior."""
     out = []
     for name in est.estimated_[1:]:
         ratio = est.params_[name] / getattr(prior, name)
-        if not 1.0 / FAR_FROM_PRIOR <= ratio <= FAR_FROM_PRIOR:
+        if not 1.0 / factor <= ratio <= factor:
             out.append(name)
     return out
 
@@ -402,6 +414,8 @@ def _run(args: argparse.Namespace) -> int:
     from .errors import InputError
 
     if args.report is not None:  # before the fit, not after it
+        if not args.report.strip():
+            raise InputError("--report needs a directory name, got an empty one")
         check_report_directory(Path(args.report), force=bool(args.force))
     prior = read_drive_toml(args.drive, require_theta=False)
     prior = prior.with_theta(None) if prior.theta is not None else prior
@@ -420,13 +434,22 @@ def _run(args: argparse.Namespace) -> int:
                     f"(noise std about {torque_noise_std(rec.torque):.3g} N m removed)")
     for rec in records + (finals or []):  # the identifiers check the rest
         _check_after_step_down(rec, prior)  # the contract: one step-down per record
+        drops = np.diff(rec.torque)
+        big = np.flatnonzero(drops < 0.1 * drops.min())
+        if big.size and np.any(np.diff(big) > 1):  # separate jumps, not one ramp
+            t_s = find_step_down(rec)[1]
+            read_notes.append(
+                f"{rec.name}: the torque steps down more than once; t_s, t_c, t_b and the "
+                f"pre-estimate (eq. 6) use the largest step-down, at t = {t_s:.6g} s (the "
+                "contract is one step-down per record: split the record to use the others)")
     per_record: list[dict[str, Any]] = []
     std: float | None = None
     ci95: list[float] | None = None
     extra: dict[str, Any] = {}
     for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
                           ("--final-horizon", args.final_horizon), ("--noise", args.noise),
-                          ("--prior-rel-std", args.prior_rel_std)):
+                          ("--prior-rel-std", args.prior_rel_std),
+                          ("--allow-far-from-prior", args.allow_far_from_prior or None)):
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")
     for option, value in (("--n-theta", args.n_theta), ("--cutoff-motor", args.cutoff_motor),
@@ -471,6 +494,15 @@ def _run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # said below, as a note, or in the JSON
             warnings.simplefilter("ignore", CorrelatedResidualsWarning)
             est.fit(everything)
+        very_far = _far_from_prior(est, prior, REFUSE_FROM_PRIOR)
+        if very_far and not args.allow_far_from_prior:
+            ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}"
+                               for n in very_far)
+            raise InputError(
+                f"the fit moved {ratios} from the prior: check the units of the speeds (rpm "
+                "read as rad/s?) and of the time, the columns (w_motor and w_load swapped?) "
+                "and PRIOR.toml; if the prior is that far off, pass --allow-far-from-prior"
+            )
         theta_ini = est.theta_ini_
         rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_,
                    est.commutations_, est.residual_lag1_, strict=True)

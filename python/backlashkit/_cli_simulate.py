@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import secrets
 import sys
 import warnings
@@ -277,6 +278,12 @@ def _experiment(args: argparse.Namespace, seeds: list[np.random.SeedSequence]):
                 "or the step-down is not recorded"
             )
         b = 0.0 if args.level_after is None else v.finite_scalar("--level-after", args.level_after)
+        if not amplitude > b:
+            raise InputError(
+                f"--experiment step-down steps down from --amplitude to --level-after: the "
+                f"amplitude ({amplitude!r} N m) must be above the level after "
+                f"({b!r} N m)"
+            )
         torque = signals.step_down(t, amplitude, t_s=hold, b=b)
         info.update(hold=hold, level_after=b)
     elif kind == "step":
@@ -385,6 +392,14 @@ def run(args: argparse.Namespace) -> int:
         response.plot().savefig(args.plot)
         _note(f"wrote {args.plot}")
 
+    omega = math.sqrt(drive.k_sh * (1.0 / drive.J_M + 1.0 / drive.J_L))
+    ts_out = float(response.t[1] - response.t[0])
+    if ts_out * omega > math.pi:  # exact at the samples, but no sample shows it
+        _note(
+            f"note: the sample time {ts_out:.6g} s cannot resolve the drive's ringing at "
+            f"{omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s): identify refuses such "
+            "records (a time column in ms reads as s)"
+        )
     grazes = response.near_grazing
     if grazes:
         first = grazes[0]

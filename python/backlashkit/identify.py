@@ -191,6 +191,49 @@ def check_speeds_vary(rec: Record) -> None:
             )
 
 
+#: A speed sample farther than this many noise std (and than SPIKE_RANGE of the
+#: speed's range) from the median of itself and its two neighbours is a spike.
+SPIKE_SIGMAS = 30.0
+SPIKE_RANGE = 0.05
+
+
+def check_spikes(rec: Record) -> None:
+    """Refuse a record with a single-sample spike in a speed (a glitch of the sensor).
+
+    The median of three consecutive samples follows steps and the drive's impacts but
+    not a lone sample off the curve; least squares would chase such a glitch.
+
+    Parameters
+    ----------
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If a sample of ``w_motor`` or ``w_load`` is off the median of itself and its
+        neighbours by more than :data:`SPIKE_SIGMAS` noise std and :data:`SPIKE_RANGE`
+        of the speed's range (robust: median absolute deviations).
+    """
+    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
+        if w.size < 3:
+            continue
+        with np.errstate(over="ignore", invalid="ignore"):
+            mid = np.median(np.stack([w[:-2], w[1:-1], w[2:]]), axis=0)
+            off = np.abs(w[1:-1] - mid)
+            sigma = 1.4826 * float(np.median(off))
+            span = float(np.percentile(w, 99.9) - np.percentile(w, 0.1))
+            bad = (off > SPIKE_SIGMAS * sigma) & (off > SPIKE_RANGE * span)
+        if bad.any():
+            k = int(np.argmax(off)) + 1
+            raise InputError(
+                f"{rec.name}: {name} has {int(bad.sum())} single-sample spike(s), the largest "
+                f"at t = {rec.t[k]:.6g} s (sample {k}: {w[k]:.6g} rad/s, its neighbours "
+                f"{w[k - 1]:.6g} and {w[k + 1]:.6g}): a sensor glitch; remove those samples "
+                "(empty cells, then --resample linear bridges them)"
+            )
+
+
 def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
     """Refuse a record sampled too slowly to show the drive's ringing.
 
@@ -242,6 +285,7 @@ def _as_records(records, what: str = "records", *, prior=None) -> list[Record]:
     for rec in out:  # what no model can fit is refused rather than answered
         check_not_clipped(rec)
         check_speeds_vary(rec)
+        check_spikes(rec)
         check_torque_noise(rec)
         if prior is not None:
             check_sampling(prior, rec)
@@ -276,9 +320,13 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
     k = int(np.argmin(du))
     scale = float(np.max(np.abs(u)))
     if scale == 0.0 or not du[k] < -1e-9 * scale or not u[k] > 0:
+        j = int(np.argmax(du))
+        mirror = scale > 0.0 and du[j] > 1e-9 * scale and u[j] < 0
         raise InputError(
             f"{record.name}: the torque has no step-down (a drop from a positive level); "
             "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
+            + ("; this one rises from a negative level: negate the torque and both speeds "
+               "(the mirror experiment)" if mirror else "")
         )
     noise = torque_noise_std(u)
     if -du[k] <= JUMP_THRESHOLD * math.sqrt(2.0) * noise:

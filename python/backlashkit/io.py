@@ -108,9 +108,12 @@ def load_toml(path: PathLike) -> dict[str, Any]:
 def _check_top_level(doc: Mapping[str, Any], path: PathLike) -> None:
     unknown = [k for k in doc if k not in TOP_LEVEL_TABLES]
     if unknown:
+        hint = ""
+        if set(unknown) & set(DRIVE_KEYS):  # the parameters without their table header
+            hint = " (the drive's parameters belong under a [drive] line)"
         raise InputError(
             f"{path}: unknown top-level key(s) {_fmt_keys(unknown)}; allowed tables: "
-            f"[{'], ['.join(TOP_LEVEL_TABLES)}]"
+            f"[{'], ['.join(TOP_LEVEL_TABLES)}]{hint}"
         )
 
 

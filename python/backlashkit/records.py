@@ -214,8 +214,12 @@ def _check_columns(columns: Mapping[str, str] | None) -> dict[str, str]:
 
 
 def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, decimal) -> _Raw:
+    with open(name, "rb") as fh:
+        head = fh.read(2)
+    # Excel's "Unicode text" export is UTF-16 with a byte-order mark
+    encoding = "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
     try:
-        with open(name, encoding="utf-8-sig", newline="") as fh:
+        with open(name, encoding=encoding, newline="") as fh:
             text = fh.read()
     except UnicodeDecodeError as exc:
         raise InputError(

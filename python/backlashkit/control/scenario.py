@@ -176,7 +176,10 @@ def _list(src: str, table: str, key: str, value: Any, *, min_len: int = 1,
         value = [value]
     if not isinstance(value, list) or len(value) < min_len or (exact and len(value) != min_len):
         size = f"exactly {min_len}" if exact else f"at least {min_len}"
-        raise InputError(f"{where} must be a list of {size} numbers, got {value!r}")
+        what = f"a list of {size} numbers"
+        if min_len == 1:
+            what = "a list of exactly one number" if exact else "a non-empty list of numbers"
+        raise InputError(f"{where} must be {what}, got {value!r}")
     return [_num(src, table, key, x) for x in value]
 
 
@@ -236,8 +239,8 @@ def parse_scenario(
         extra = set(val) - _ALLOWED[table]
         if extra:
             raise InputError(
-                f"{src}: [{table}] has unknown key(s) {sorted(extra)}; "
-                f"allowed: {sorted(_ALLOWED[table])}"
+                f"{src}: [{table}] has unknown key(s) {', '.join(sorted(extra))}; "
+                f"allowed: {', '.join(sorted(_ALLOWED[table]))}"
             )
     for table in _REQUIRED_TABLES:
         if table not in doc:
@@ -342,6 +345,15 @@ def parse_scenario(
         )
     step = sim.get("step")
     step = None if step is None else _num(src, "simulation", "step", step, cond=">0")
+    if isinstance(reference, SumOfSines):  # the integrator would alias it silently
+        h = min(ts, 1e-3) if step is None else step  # the integration step of closed_loop
+        fastest = float(max(np.abs(reference.frequency)))
+        if fastest * h >= math.pi:
+            raise InputError(
+                f"{src}: [reference] frequency {fastest:.6g} rad/s is at or above the Nyquist "
+                f"frequency pi/step = {math.pi / h:.6g} rad/s of the integration step "
+                f"{h:.3g} s: lower the frequency or set a shorter [simulation] step"
+            )
     return ControlScenario(
         plant=plant,
         reference_model=rm,
