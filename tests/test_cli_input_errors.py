@@ -331,6 +331,8 @@ def test_report_of_a_record_ending_soon_after_the_step_down(exp_csv, tmp_path, c
          "[reference] frequency 1e+06 rad/s is at or above the Nyquist frequency"),
         (["identify", "{tmp}/mirror.csv", "--drive", DRIVE_TOML],
          "this one rises from a negative level: negate the torque and both speeds"),
+        (["reproduce", "ravanbod2002", "--err-p", "0.1,0.1", "--runs", "2"],
+         "--err-p lists a value twice ('0.1,0.1')"),
     ],
 )
 def test_second_qa_pass_errors(exp_csv, tmp_path, capsys, argv, message):

@@ -128,3 +128,16 @@ def test_cli_refuses_a_noisy_torque_and_levels_it_on_request(step1, tmp_path, ca
     assert doc["notes"][0] == (f"{path}: torque replaced by its 2 piecewise-constant levels "
                                "(noise std about 0.003 N m removed)")
     assert abs(doc["theta"] - THETA) < 3 * doc["std"]
+
+
+def test_levels_of_a_slow_noisy_ramp_are_refused(step1, tmp_path, capsys):
+    """A 50 ms ramp through 3 mN m of noise changes less per sample than the noise:
+    --torque-levels cannot see the step and says so."""
+    t = step1.t
+    ramp = np.clip(0.157 * (40.05 - t) / 0.05, 0.0, 0.157)
+    u = ramp + 3e-3 * np.random.default_rng(0).standard_normal(t.size)
+    path = tmp_path / "ramp.csv"
+    write_csv(path, {"t": t, "torque": u, "w_motor": step1.w_motor, "w_load": step1.w_load})
+    assert main(["identify", str(path), "--drive", DRIVE_TOML, "--torque-levels"]) == 2
+    err = capsys.readouterr().err
+    assert "--torque-levels found one level only" in err and err.count("\n") == 1

@@ -334,6 +334,15 @@ def _far_from_prior(est, prior, factor: float = FAR_FROM_PRIOR) -> list[str]:
     return out
 
 
+_CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
+                "columns (w_motor and w_load swapped?) and PRIOR.toml")
+
+
+def _ratios(est, prior, names: list[str]) -> str:
+    """``J_M x0.103, k_sh x6.4``: the estimates of ``names`` over the prior's values."""
+    return ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in names)
+
+
 def _notes(args: argparse.Namespace, est: Any, prior: Any, bounds: list[float],
            rel: Any) -> list[str]:
     """What the reader of the result must know, in the words of the command line (printed
@@ -362,10 +371,7 @@ def _notes(args: argparse.Namespace, est: Any, prior: Any, bounds: list[float],
                    "relative std to estimate them, or remove the table to estimate all)")
     far = _far_from_prior(est, prior)
     if far:
-        ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}" for n in far)
-        out.append(f"{ratios} of the prior: check the units of the speeds (rpm read as "
-                   "rad/s?) and of the time, the columns (w_motor and w_load swapped?) and "
-                   "PRIOR.toml")
+        out.append(f"{_ratios(est, prior, far)} of the prior: {_CHECK_UNITS}")
     message = est.correlation_message()
     if message is not None:
         message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
@@ -429,6 +435,11 @@ def _run(args: argparse.Namespace) -> int:
             for k, rec in enumerate(group):
                 group[k] = torque_levels(rec)
                 levels = np.unique(group[k].torque).size
+                if levels == 1:
+                    raise InputError(
+                        f"{rec.name}: --torque-levels found one level only: the torque never "
+                        "changes by more than 8 noise std from one sample to the next (a slow "
+                        "ramp?); give the torque command (the set-point) instead")
                 read_notes.append(
                     f"{rec.name}: torque replaced by its {levels} piecewise-constant levels "
                     f"(noise std about {torque_noise_std(rec.torque):.3g} N m removed)")
@@ -496,12 +507,9 @@ def _run(args: argparse.Namespace) -> int:
             est.fit(everything)
         very_far = _far_from_prior(est, prior, REFUSE_FROM_PRIOR)
         if very_far and not args.allow_far_from_prior:
-            ratios = ", ".join(f"{n} x{est.params_[n] / getattr(prior, n):.3g}"
-                               for n in very_far)
             raise InputError(
-                f"the fit moved {ratios} from the prior: check the units of the speeds (rpm "
-                "read as rad/s?) and of the time, the columns (w_motor and w_load swapped?) "
-                "and PRIOR.toml; if the prior is that far off, pass --allow-far-from-prior"
+                f"the fit moved {_ratios(est, prior, very_far)} from the prior: "
+                f"{_CHECK_UNITS}; if the prior is that far off, pass --allow-far-from-prior"
             )
         theta_ini = est.theta_ini_
         rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_,

@@ -389,7 +389,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The parser of the ``ravanbod2002`` target (extended in place).
     """
-    parser.add_argument("--runs", type=int, default=10, help="runs per Err_p (default 10)")
+    parser.add_argument("--runs", type=int, default=10,
+                        help="runs per Err_p, >= 2 (a spread needs two; default 10)")
     parser.add_argument("--seed", type=int, default=2002, help="root seed (default 2002)")
     parser.add_argument("--jobs", type=int, default=1,
                         help="worker processes (default 1); results do not depend on it")
@@ -448,9 +449,12 @@ def run_cli(args: argparse.Namespace) -> int:
         raise InputError(f"--snr-step1 must be two finite numbers SNR_M,SNR_L in dB, got "
                          f"{args.snr_step1!r}")
     flags = {"runs": "--runs", "seed": "--seed", "jobs": "--jobs", "err_p": "--err-p"}
+    err_p = _numbers("--err-p", args.err_p)
+    if len(set(err_p)) != len(err_p):
+        raise InputError(f"--err-p lists a value twice ({args.err_p!r}): each row is run once")
     with flag_names(flags):
         doc = run_ravanbod2002(runs=args.runs, seed=args.seed,
-                               err_p=_numbers("--err-p", args.err_p), jobs=args.jobs,
+                               err_p=err_p, jobs=args.jobs,
                                snr1=(snr1[0], snr1[1]),
                                progress=lambda m: print(m, file=sys.stderr))
     bars = checks(doc)
