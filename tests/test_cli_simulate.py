@@ -257,7 +257,7 @@ BAD = {
         {}, ["{d}/nope.toml", "--torque", TORQUE], "nope.toml"),
     "NaN in torque": (
         torque_with(GOOD_CSV.replace("0.001,0.1", "0.001,nan")),
-        [DRIVE, "--torque", "{d}/torque.csv"], "line 3, column 'torque'"),
+        [DRIVE, "--torque", "{d}/torque.csv"], "line 3: 'torque' is missing"),
     "inf in torque": (
         torque_with(GOOD_CSV.replace("0.002,0.1", "0.002,inf")),
         [DRIVE, "--torque", "{d}/torque.csv"], "line 4, column 'torque'"),
@@ -266,10 +266,10 @@ BAD = {
         [DRIVE, "--torque", "{d}/torque.csv"], "line 5, column 't'"),
     "non-monotonic t": (
         torque_with("t,torque\n0,1\n0.002,1\n0.001,1\n"),
-        [DRIVE, "--torque", "{d}/torque.csv"], "strictly increasing"),
+        [DRIVE, "--torque", "{d}/torque.csv"], "the time 't' = 0.001 does not increase"),
     "non-uniform t": (
         torque_with("t,torque\n0,1\n0.001,1\n0.003,1\n"),
-        [DRIVE, "--torque", "{d}/torque.csv"], "uniformly sampled"),
+        [DRIVE, "--torque", "{d}/torque.csv"], "a non-uniform step in the time 't'"),
     "too few samples": (
         torque_with("t,torque\n0,1\n"),
         [DRIVE, "--torque", "{d}/torque.csv"], "too few samples"),
@@ -377,3 +377,23 @@ def test_python_dash_m_entry_point(tmp_path):
     assert again.returncode == 2 and again.stdout == ""
     assert again.stderr.count("\n") == 1 and "--force" in again.stderr
     assert "Traceback" not in again.stderr
+
+
+def test_torque_files_are_read_as_identify_reads_experiments(tmp_path, capsys):
+    """A European export (';', decimal commas, other names) with --columns, and .npz:
+    the same response as the plain CSV; reader options without --torque are refused."""
+    t, u = read_torque_csv(TORQUE)
+    ref = read_drive_toml(DRIVE).simulate(t, u)
+    eu = tmp_path / "eu.csv"
+    eu.write_text("Zeit;Moment\n" + "".join(f"{a:.17g};{b:.17g}\n".replace(".", ",")
+                                           for a, b in zip(t, u, strict=True)))
+    npz = tmp_path / "torque.npz"
+    np.savez(npz, t=t, torque=u)
+    for source, extra in ((eu, ["--columns", "t=Zeit,torque=Moment"]), (npz, [])):
+        out = tmp_path / f"{source.stem}.out.csv"
+        code, _, err = run([DRIVE, "--torque", str(source), *extra, "--out", str(out)], capsys)
+        assert code == 0, err
+        np.testing.assert_allclose(read(out)["w_motor"], ref.w_motor, rtol=1e-12, atol=1e-12)
+    code, _, err = run([DRIVE, *PAPER_EXPERIMENT, "--decimal", ",", "--out",
+                        str(tmp_path / "x.csv")], capsys)
+    assert code == 2 and "--decimal only apply with --torque" in err

@@ -204,7 +204,7 @@ def add_reader_options(p: argparse.ArgumentParser) -> None:
                    "is an error)")
 
 
-def _parse_columns(text: str | None) -> dict[str, str] | None:
+def parse_columns(text: str | None) -> dict[str, str] | None:
     from .errors import InputError
 
     if text is None:
@@ -242,7 +242,7 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     from .errors import InputError
     from .records import read_records
 
-    columns = _parse_columns(args.columns)
+    columns = parse_columns(args.columns)
     delimiter = "\t" if args.delimiter == "tab" else args.delimiter
     out: list[Record] = []
     for path in paths:
@@ -255,17 +255,18 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
                                 speed_unit=args.speed_unit, resample=args.resample)
         except InputError as exc:  # the reader's advice, in the words of the command line
             message = str(exc)
-            for python, flag in _READER_FLAGS:
+            for python, flag in READER_FLAGS:
                 message = message.replace(python, flag)
             raise InputError(message) from exc
     return out
 
 
 #: The reader's advice (library keywords) -> the same advice as flags of ``identify``.
-_READER_FLAGS = (
+READER_FLAGS = (
     ("resample='linear'", "--resample linear"),
     ("columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}",
      "--columns t=...,torque=...,w_motor=...,w_load=..."),
+    ("columns={'t': ..., 'torque': ...}", "--columns t=...,torque=..."),
     ("columns={...}", "--columns t=...,w_motor=..."),
     ("pass sample_time=", "pass --sample-time TS"),
     ("drop sample_time", "drop --sample-time"),

@@ -28,7 +28,7 @@ from . import _validate as v
 from . import signals
 from .cli import missing_directory
 from .errors import InputError, SensitivityWarning
-from .io import check_writable, read_drive_toml, read_torque_csv, write_csv
+from .io import check_writable, read_drive_toml, write_csv
 from .laws import ShaftLaw
 
 __all__ = ["add_parser", "run"]
@@ -108,8 +108,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     src = p.add_argument_group("input (give exactly one)")
     src.add_argument(
-        "--torque", metavar="TORQUE.csv", help="motor torque record, columns t (s), torque (N m)"
+        "--torque", metavar="TORQUE.csv", help="motor torque record, columns t (s), torque "
+        "(N m): CSV (';', decimal commas), .mat or .npz, read as identify reads experiments"
     )
+    rd = p.add_argument_group("reading the torque file (with --torque)")
+    rd.add_argument("--columns", metavar="OURS=THEIRS,...", default=None,
+                    help="the file's names of our columns t, torque, e.g. 't=time,torque=M'")
+    rd.add_argument("--sample-time", type=float, default=None, metavar="TS",
+                    help="sample time in s when the file has no time column (t = 0 first)")
+    rd.add_argument("--delimiter", choices=(",", ";", "tab"), default=None,
+                    help="CSV separator (default: detected from the header)")
+    rd.add_argument("--decimal", choices=(".", ","), default=None,
+                    help="CSV decimal mark (default: detected)")
+    rd.add_argument("--resample", choices=("linear",), default=None,
+                    help="resample non-uniform time onto a uniform grid (zero-order hold) "
+                    "and bridge missing samples (default: they are errors)")
     src.add_argument(
         "--experiment",
         choices=EXPERIMENTS,
@@ -191,12 +204,35 @@ def _note(message: str) -> None:
     print(f"backlashkit: {message}", file=sys.stderr)
 
 
+def _read_torque(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]:
+    """The --torque file, read as identify reads experiments (its advice as flags)."""
+    from ._cli_identify import READER_FLAGS, parse_columns
+    from .records import read_torque
+
+    try:
+        return read_torque(args.torque, columns=parse_columns(args.columns),
+                           sample_time=args.sample_time,
+                           delimiter="\t" if args.delimiter == "tab" else args.delimiter,
+                           decimal=args.decimal, resample=args.resample)
+    except InputError as exc:
+        message = str(exc)
+        for python, flag in READER_FLAGS:
+            message = message.replace(python, flag)
+        raise InputError(message) from exc
+
+
 def _check_source(args: argparse.Namespace) -> None:
     if (args.torque is None) == (args.experiment is None):
         which = "both were given" if args.torque is not None else "neither was given"
         raise InputError(
             f"give exactly one of --torque TORQUE.csv or --experiment KIND ({which})"
         )
+    readers = [flag for flag, dest in (("--columns", "columns"), ("--sample-time", "sample_time"),
+                                       ("--delimiter", "delimiter"), ("--decimal", "decimal"),
+                                       ("--resample", "resample"))
+               if getattr(args, dest) is not None]
+    if readers and args.torque is None:
+        raise InputError(f"{', '.join(readers)} only apply with --torque (reading its file)")
     given = [dest for dest in _OPTIONS if getattr(args, dest) is not None]
     if args.torque is not None:
         if given:
@@ -355,7 +391,7 @@ def run(args: argparse.Namespace) -> int:
     seeds = np.random.SeedSequence(seed).spawn(3) if needs_seed else []
 
     if args.torque is not None:
-        t, torque = read_torque_csv(args.torque)
+        t, torque = _read_torque(args)
         source: dict[str, Any] = {"torque_file": str(args.torque)}
     else:
         t, torque, source = _experiment(args, seeds)

@@ -61,7 +61,7 @@ from . import _validate as v
 from .errors import InputError
 from .identify import Record
 
-__all__ = ["FIELDS", "read_records"]
+__all__ = ["FIELDS", "read_records", "read_torque"]
 
 PathLike = str | os.PathLike[str]
 
@@ -132,6 +132,68 @@ def read_records(
     FileNotFoundError
         If the file does not exist.
     """
+    if speed_unit not in SPEED_UNITS:
+        raise InputError(f"speed_unit must be 'rad/s' or 'rpm', got {speed_unit!r}")
+    factor = SPEED_UNITS[speed_unit]
+    return [Record(t, data["torque"], data["w_motor"] * factor, data["w_load"] * factor,
+                   name=rec_name)
+            for rec_name, t, data in _read(path, FIELDS, columns, sample_time, delimiter,
+                                           decimal, resample)]
+
+
+def read_torque(
+    path: PathLike,
+    *,
+    columns: Mapping[str, str] | None = None,
+    sample_time: float | None = None,
+    delimiter: str | None = None,
+    decimal: str | None = None,
+    resample: str | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Read a torque record (time and torque) with the readers of :func:`read_records`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.csv`` (any other suffix but ``.mat`` and ``.npz`` is read as CSV text),
+        ``.mat`` or ``.npz`` file holding one record.
+    columns : mapping of str to str, optional
+        Our names ``t``, ``torque`` to the file's names (other columns are ignored).
+    sample_time, delimiter, decimal, resample : optional
+        As for :func:`read_records`.
+
+    Returns
+    -------
+    t : numpy.ndarray
+        Uniform, strictly increasing time grid in s.
+    torque : numpy.ndarray
+        Motor torque in N m, one per sample.
+
+    Raises
+    ------
+    InputError
+        As for :func:`read_records`, or if the file holds several records.
+    FileNotFoundError
+        If the file does not exist.
+    """
+    if columns is not None and isinstance(columns, Mapping):
+        extra = [k for k in columns if k in ("w_motor", "w_load")]
+        if extra:
+            raise InputError(f"columns: {', '.join(extra)} is not read with the torque; map "
+                             "t and torque only")
+    recs = _read(path, ("t", "torque"), columns, sample_time, delimiter, decimal, resample,
+                 keep_time=True)
+    if len(recs) != 1:
+        raise InputError(f"{path}: holds {len(recs)} records; give a file with one torque "
+                         "record")
+    _, t, data = recs[0]
+    return t, data["torque"]
+
+
+def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
+          keep_time=False):
+    """(name, t, {channel: values}) of every record of a file, channels ``fields``
+    (``keep_time``: a uniform time column as written, not recomputed from its ends)."""
     name = str(path)
     mapping = _check_columns(columns)
     if sample_time is not None:
@@ -153,8 +215,6 @@ def read_records(
         raise InputError(f"decimal must be '.' or ',', got {decimal!r}")
     if decimal == "," and delimiter == ",":
         raise InputError("decimal ',' needs another delimiter (';' or a tab), got delimiter ','")
-    if speed_unit not in SPEED_UNITS:
-        raise InputError(f"speed_unit must be 'rad/s' or 'rpm', got {speed_unit!r}")
     if resample not in (None, "linear"):
         raise InputError(f"resample must be None or 'linear', got {resample!r}")
     if not Path(path).is_file():
@@ -162,7 +222,7 @@ def read_records(
             raise InputError(f"{name}: is a directory; give a .csv, .mat or .npz file")
         raise FileNotFoundError(errno.ENOENT, "no such file", name)
     suffix = Path(path).suffix.lower()
-    need = [f for f in FIELDS if not (f == "t" and sample_time is not None)]
+    need = [f for f in fields if not (f == "t" and sample_time is not None)]
     if suffix == ".npz":
         raws = _from_npz(name, mapping, need)
     elif suffix == ".mat":
@@ -177,11 +237,9 @@ def read_records(
                     f"{name}: the file has a time column {file_t!r} and sample_time = "
                     f"{sample_time!r} was given; drop sample_time (or the column)"
                 )
-    return [
-        _build(rec_name, cols, label, precision, sample_time, SPEED_UNITS[speed_unit], resample,
-               mapping)
-        for rec_name, cols, label, precision in raws
-    ]
+    return [(rec_name, *_build(rec_name, cols, label, precision, sample_time, resample, mapping,
+                               keep_time))
+            for rec_name, cols, label, precision in raws]
 
 
 def _check_columns(columns: Mapping[str, str] | None) -> dict[str, str]:
@@ -274,7 +332,8 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
         raise InputError(
             f"{name}: no column {', '.join(map(repr, missing))} in the header (line "
             f"{header_no}, separator {sep}: {header!r}); map the file's names with "
-            "columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}"
+            "columns={" + ", ".join(f"{f!r}: ..." for f in FIELDS if f in need or f == "t")
+            + "}"
             + (" or pass sample_time= if there is no time column" if "t" in need else "")
         )
     if "t" not in need and mapping["t"] in header:
@@ -642,8 +701,9 @@ def _h5_struct(fh, group) -> list[dict[str, np.ndarray]]:
 # --- checks, snapping and resampling ----------------------------------------------
 
 
-def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample,
-           mapping) -> Record:
+def _build(rec_name, cols, label, precision, sample_time, resample,
+           mapping, keep_time=False) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The uniform time grid and the channels on it (checked, resampled on request)."""
     n = {f: c.size for f, c in cols.items()}
     if len(set(n.values())) != 1:
         sizes = ", ".join(f"{mapping[f]}: {k}" for f, k in n.items())
@@ -672,7 +732,7 @@ def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample
             f"{rec_name}: {label(i + 1)}: the time {mapping['t']!r} = {float(t[i + 1])!r} does "
             f"not increase (previous {float(t[i])!r}); sort the samples and remove duplicates"
         )
-    data = {f: cols[f] for f in ("torque", "w_motor", "w_load")}
+    data = {f: x for f, x in cols.items() if f != "t"}
     for f, x in data.items():
         if np.isinf(x).any():
             i = int(np.argmax(np.isinf(x)))
@@ -711,7 +771,7 @@ def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample
     dev = np.abs(dt - ts)
     uniform = float(dev.max()) <= tol
     if uniform:
-        t_new = t[0] + np.arange(size) * ((t[-1] - t[0]) / (size - 1))
+        t_new = t if keep_time else t[0] + np.arange(size) * ((t[-1] - t[0]) / (size - 1))
     elif resample is None:
         i = int(np.argmax(dev > tol))  # the first offending step
         kind = "a gap" if dt[i] > 1.5 * ts else "a non-uniform step"
@@ -743,10 +803,4 @@ def _build(rec_name, cols, label, precision, sample_time, speed_factor, resample
                 out[f] = xv[np.clip(k, 0, xv.size - 1)]
             else:
                 out[f] = np.interp(t_new, t[ok], x[ok])
-    return Record(
-        t_new,
-        out["torque"],
-        out["w_motor"] * speed_factor,
-        out["w_load"] * speed_factor,
-        name=rec_name,
-    )
+    return t_new, out
