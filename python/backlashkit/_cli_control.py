@@ -133,6 +133,8 @@ def run(args: argparse.Namespace) -> int:
         print(
             "theta_b final (mc_r, m, mc_l): "
             + ", ".join(f"{x:.6g}" for x in summary["theta_b_final"])
+            + (" (the initial values: without an inverse nothing adapts)"
+               if summary["inverse"] == "none" else "")
         )
         print(f"RMS tracking error over the last third: {summary['rms_error_last']:.3e}")
         print(f"max |e| over the last third: {summary['max_abs_error_last']:.3e}")

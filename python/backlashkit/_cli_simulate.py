@@ -385,9 +385,9 @@ def run(args: argparse.Namespace) -> int:
     seed = args.seed
     if seed is not None and seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
-    if needs_seed and seed is None:
+    fresh_seed = needs_seed and seed is None
+    if fresh_seed:
         seed = secrets.randbits(63)
-        _note(f"note: no --seed given; using --seed {seed}")
     seeds = np.random.SeedSequence(seed).spawn(3) if needs_seed else []
 
     if args.torque is not None:
@@ -396,6 +396,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         t, torque, source = _experiment(args, seeds)
         source = {"experiment": source}
+    if fresh_seed:  # after the options are checked: a refused run has no seed to repeat
+        _note(f"note: no --seed given; using --seed {seed}")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)

@@ -294,9 +294,12 @@ def _initial_state(chain: DriveChain, initial_state) -> np.ndarray:
         return np.zeros(chain.n_states)
     x0 = v.finite_array("initial_state", initial_state)
     if x0.size != chain.n_states:
+        n = chain.n_inertias
+        names = ([f"w_{i}" for i in range(1, n + 1)] + [f"phi_{i}" for i in range(1, n)]
+                 if n <= 3 else [f"w_1..w_{n}", f"phi_1..phi_{n - 1}"])
         raise InputError(
-            f"initial_state must have {chain.n_states} entries "
-            f"[w_1..w_{chain.n_inertias}, phi_1..phi_{chain.n_inertias - 1}], got {x0.size}"
+            f"initial_state must have {chain.n_states} entries [{', '.join(names)}], "
+            f"got {x0.size}"
         )
     return x0
 
