@@ -259,7 +259,7 @@ def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
             f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "
             f"at {omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s, from the prior's k_sh, "
             f"J_M, J_L): sample faster than {math.pi / omega:.3g} s, or check the time unit "
-            "(a time column in ms reads as s)"
+            "(a time column in ms reads as s) and the prior's units"
         )
 
 
