@@ -35,6 +35,7 @@ from .nonlinearities import (
     SmoothRampInverse,
 )
 from .plants import DriveChain, TwoMassDrive
+from .records import read_records, read_torque
 from .simulate import (
     ContactEvent,
     DriveResponse,
@@ -85,6 +86,8 @@ __all__ = [
     "__version__",
     "assess_sensitivity",
     "cramer_rao_bound",
+    "read_records",
+    "read_torque",
     "simulate_batch",
     "simulate_drive",
     "torque_levels",

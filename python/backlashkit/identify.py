@@ -266,7 +266,7 @@ def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
 def _as_records(records, what: str = "records", *, prior=None) -> list[Record]:
     """Records of ``records``, each checked usable (and resolving ``prior``'s ringing)."""
     if records is None or isinstance(records, (str, bytes, os.PathLike)):
-        hint = (" (a file? read it with backlashkit.records.read_records)"
+        hint = (" (a file? read it with backlashkit.read_records)"
                 if records is not None else "")
         raise InputError(
             f"{what} must be a Record or a sequence of Records, got "
