@@ -376,3 +376,19 @@ def test_a_speed_glitch_is_refused(exp):
     w[100] = exp.w_motor[100] + 0.5 * np.ptp(exp.w_motor)  # a glitch of half the range
     with pytest.raises(InputError, match="single-sample spike"):
         JointIdentifier(prior).fit(Record(exp.t, exp.torque, w, exp.w_load, name="exp.csv"))
+
+
+def test_wrong_types_in_the_python_api_are_named(exp):
+    import backlashkit as bk
+
+    prior = read_drive_toml(DRIVE_TOML, require_theta=False).with_theta(None)
+    with pytest.raises(InputError, match="^records must be a Record or a sequence of "
+                                         "Records, got NoneType$"):
+        JointIdentifier(prior).fit(None)
+    with pytest.raises(InputError, match=r"got str \(a file\? read it with "
+                                         r"backlashkit\.read_records\)"):
+        JointIdentifier(prior).fit("exp.csv")
+    with pytest.raises(InputError, match="^final_horizon must be a real number, got '1'$"):
+        JointIdentifier(prior, final_horizon="1").fit(exp)
+    with pytest.raises(InputError, match="^J_M must be a real number, got '0.1'$"):
+        bk.TwoMassDrive(J_M="0.1", J_L=1.0, k_sh=1.0, f_M=0.0, f_L=0.0, f_sh=0.0)
