@@ -392,3 +392,22 @@ def test_wrong_types_in_the_python_api_are_named(exp):
         JointIdentifier(prior, final_horizon="1").fit(exp)
     with pytest.raises(InputError, match="^J_M must be a real number, got '0.1'$"):
         bk.TwoMassDrive(J_M="0.1", J_L=1.0, k_sh=1.0, f_M=0.0, f_L=0.0, f_sh=0.0)
+
+
+def test_a_torque_without_a_held_level_is_refused(exp, tmp_path, capsys):
+    """A sine has a largest drop too, but no level held before it; a step-down along a
+    50 ms ramp is paper A's experiment all the same."""
+    t = exp.t
+    for name, torque, refused in (
+        ("sine.csv", 0.5 + 0.4 * np.sin(2.0 * t), True),
+        ("ramp.csv", np.clip(0.942 * (2.05 - t) / 0.05, 0.0, 0.942), False),
+    ):
+        write_csv(tmp_path / name, {"t": t, "torque": torque, "w_motor": exp.w_motor,
+                                    "w_load": exp.w_load})
+        argv = ["identify", str(tmp_path / name), "--drive", DRIVE_TOML, "--interval", "fisher"]
+        if refused:
+            err = _one_line_error(capsys, argv)
+            assert "sine.csv: the torque is not held before its largest drop" in err
+        else:
+            assert main(argv) == 0, capsys.readouterr().err
+            capsys.readouterr()

@@ -283,11 +283,12 @@ READER_FLAGS = (
 )
 
 
-def _check_after_step_down(rec: Record, prior: Any) -> None:
-    """The contract: a torque step-down, and at least two periods of the prior's ringing
-    recorded after it (the passage through the backlash takes about one; a record that
-    ends at the step-down shows none)."""
+def _check_step_down_experiment(rec: Record, prior: Any) -> None:
+    """The contract: a held torque stepped down, and at least two periods of the prior's
+    ringing recorded after the step-down (the passage through the backlash takes about
+    one; a record that ends at the step-down shows none)."""
     from .errors import InputError
+    from .torque import torque_noise_std
 
     i_s, t_s, _, _ = find_step_down(rec)
     period = 2.0 * math.pi / math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
@@ -298,6 +299,21 @@ def _check_after_step_down(rec: Record, prior: Any) -> None:
             f"t = {t_s:.6g} s: record at least {need:.3g} s after it (two periods of the "
             "prior's ringing), so that the passage through the backlash is seen"
         )
+    # a step-down drops from a held level (perhaps along a short ramp): a sine or a
+    # random input also has a largest drop, but no level the shaft rests on before it
+    n = int(round(need / rec.ts))
+    u = rec.torque
+    held = u[max(0, i_s - 2 * n) : max(0, i_s - n)]
+    if held.size >= 2:
+        drop = float(u[max(0, i_s - n)] - u[min(u.size - 1, i_s + n)])
+        wobble = float(np.ptp(held))
+        if wobble > 0.05 * abs(drop) + 8.0 * torque_noise_std(u):
+            raise InputError(
+                f"{rec.name}: the torque is not held before its largest drop at "
+                f"t = {t_s:.6g} s (it varies by {wobble:.3g} N m between {2 * need:.3g} s and "
+                f"{need:.3g} s before it): the identification needs paper A's experiment, a "
+                "held torque stepped down"
+            )
 
 
 def _refuse_duplicates(records: list[Record]) -> None:
@@ -445,7 +461,7 @@ def _run(args: argparse.Namespace) -> int:
                     f"{rec.name}: torque replaced by its {levels} piecewise-constant levels "
                     f"(noise std about {torque_noise_std(rec.torque):.3g} N m removed)")
     for rec in records + (finals or []):  # the identifiers check the rest
-        _check_after_step_down(rec, prior)  # the contract: one step-down per record
+        _check_step_down_experiment(rec, prior)  # the contract: one step-down per record
         drops = np.diff(rec.torque)
         big = np.flatnonzero(drops < 0.1 * drops.min())
         if big.size and np.any(np.diff(big) > 1):  # separate jumps, not one ramp
