@@ -37,15 +37,48 @@ impl fmt::Display for Error {
             Error::InvalidArgument(m) => write!(f, "{m}"),
             Error::Diverged { time } => write!(
                 f,
-                "the simulation diverged (non-finite state) at t = {time} s; check the parameters' units and magnitudes"
+                "the simulation diverged (non-finite state) at t = {} s; check the parameters' units and magnitudes",
+                Seconds(*time)
             ),
             Error::Zeno { time } => write!(
                 f,
-                "contact chatter at t = {time} s: too many contact changes inside one sample; \
-                 use a shorter sample time or check the parameters"
+                "contact chatter at t = {} s: too many contact changes inside one sample; \
+                 use a shorter sample time or check the parameters and the input's magnitude",
+                Seconds(*time)
             ),
         }
     }
 }
 
 impl std::error::Error for Error {}
+
+/// A time in a message: plain decimals where they are short, else an exponent (the
+/// default formatting prints 1e-28 s with 44 decimals).
+struct Seconds(f64);
+
+impl fmt::Display for Seconds {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let t = self.0;
+        if t == 0.0 || (1e-3..1e7).contains(&t.abs()) {
+            write!(f, "{t}")
+        } else {
+            write!(f, "{t:.6e}")
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_in_messages_are_short() {
+        let tiny = Error::Zeno {
+            time: 1.0339757656912846e-28,
+        }
+        .to_string();
+        assert!(tiny.contains("t = 1.033976e-28 s"), "{tiny}");
+        let plain = Error::Zeno { time: 40.008 }.to_string();
+        assert!(plain.contains("t = 40.008 s"), "{plain}");
+    }
+}
