@@ -376,6 +376,13 @@ def test_a_speed_glitch_is_refused(exp):
     w[100] = exp.w_motor[100] + 0.5 * np.ptp(exp.w_motor)  # a glitch of half the range
     with pytest.raises(InputError, match="single-sample spike"):
         JointIdentifier(prior).fit(Record(exp.t, exp.torque, w, exp.w_load, name="exp.csv"))
+    # an encoder's counts (4096 per turn at 1 kHz: 1.53 rad/s steps) dither by a count or
+    # two with most samples equal to their neighbours: no spike
+    from backlashkit.identify import check_spikes
+
+    q = 2 * np.pi * 1000 / 4096
+    check_spikes(Record(exp.t, exp.torque, np.round(exp.w_motor / q) * q,
+                        np.round(exp.w_load / q) * q, name="encoder.csv"))
 
 
 def test_wrong_types_in_the_python_api_are_named(exp):

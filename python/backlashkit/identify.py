@@ -212,8 +212,9 @@ def check_spikes(rec: Record) -> None:
     ------
     InputError
         If a sample of ``w_motor`` or ``w_load`` is off the median of itself and its
-        neighbours by more than :data:`SPIKE_SIGMAS` noise std and :data:`SPIKE_RANGE`
-        of the speed's range (robust: median absolute deviations).
+        neighbours by more than :data:`SPIKE_SIGMAS` noise std (robust: median absolute
+        deviations; at least the quantum of quantised speeds) and :data:`SPIKE_RANGE`
+        of the speed's range.
     """
     for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
         if w.size < 3:
@@ -222,7 +223,12 @@ def check_spikes(rec: Record) -> None:
             a, b, c = w[:-2], w[1:-1], w[2:]  # median of three, elementwise
             mid = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
             off = np.abs(w[1:-1] - mid)
-            sigma = 1.4826 * float(np.median(off))
+            # quantised speeds (an encoder's counts) may hold most samples equal to their
+            # neighbours, so that the median deviation is 0: the quantum is the floor
+            steps = np.abs(np.diff(w))
+            moves = steps[steps > 0]
+            quantum = float(moves.min()) if moves.size else 0.0
+            sigma = max(1.4826 * float(np.median(off)), quantum)
             lo, hi = np.percentile(w, [0.1, 99.9])
             span = float(hi - lo)
             bad = (off > SPIKE_SIGMAS * sigma) & (off > SPIKE_RANGE * span)
