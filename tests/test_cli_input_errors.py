@@ -383,6 +383,13 @@ def test_a_speed_glitch_is_refused(exp):
     q = 2 * np.pi * 1000 / 4096
     check_spikes(Record(exp.t, exp.torque, np.round(exp.w_motor / q) * q,
                         np.round(exp.w_load / q) * q, name="encoder.csv"))
+    # nor does a drive resting at exactly 0 (an encoder at standstill) for 60 % of the
+    # record, with little noise elsewhere: its noise is judged where it moves
+    n = exp.t.size
+    rest = np.zeros(int(1.5 * n))
+    t = np.arange(n + rest.size) * exp.ts
+    check_spikes(Record(t, np.r_[rest, exp.torque], np.r_[rest, exp.w_motor],
+                        np.r_[rest, exp.w_load], name="rest.csv"))
 
 
 def test_wrong_types_in_the_python_api_are_named(exp):
@@ -418,3 +425,49 @@ def test_a_torque_without_a_held_level_is_refused(exp, tmp_path, capsys):
         else:
             assert main(argv) == 0, capsys.readouterr().err
             capsys.readouterr()
+
+
+def test_third_qa_pass(exp, exp_csv, tmp_path, capsys):
+    """A step-down in two stages 0.15 s apart is one experiment (noted); a PRBS is not;
+    a float32 .mat torque simulates; reproduce tao1995 probes its outputs first; an
+    all-zero [uncertainty] says why the parameters are held; a broken symbolic link and
+    UTF-16 without its mark are named."""
+    import scipy.io
+
+    t = exp.t
+    two = np.where(t < 1.85, 0.942, np.where(t < 2.0, 0.6, 0.0))
+    write_csv(tmp_path / "two.csv", {"t": t, "torque": two, "w_motor": exp.w_motor,
+                                     "w_load": exp.w_load})
+    assert main(["identify", str(tmp_path / "two.csv"), "--drive", DRIVE_TOML, "--interval",
+                 "fisher", "--json", "--allow-far-from-prior"]) == 0
+    assert any("steps down more than once" in n
+               for n in json.loads(capsys.readouterr().out)["notes"])
+    prbs = np.where(np.sin(7.0 * t) > 0, 0.5, -0.5)
+    write_csv(tmp_path / "prbs.csv", {"t": t, "torque": prbs, "w_motor": exp.w_motor,
+                                      "w_load": exp.w_load})
+    err = _one_line_error(capsys, ["identify", str(tmp_path / "prbs.csv"), "--drive", DRIVE_TOML])
+    assert "the torque steps down 4 times" in err
+    scipy.io.savemat(tmp_path / "tq.mat", {"t": t.astype(np.float32),
+                                           "torque": exp.torque.astype(np.float32)})
+    assert main(["simulate", DRIVE_TOML, "--torque", str(tmp_path / "tq.mat"), "--out",
+                 str(tmp_path / "s.csv")]) == 0
+    capsys.readouterr()
+    if Path("/proc/self").is_dir():
+        err = _one_line_error(capsys, ["reproduce", "tao1995", "--json", "/proc/x.json"])
+        assert "cannot write --json /proc/x.json" in err
+    zero = tmp_path / "zero.toml"
+    zero.write_text(Path(DRIVE_TOML).read_text() + "\n[uncertainty]\n" + "".join(
+        f"{n} = 0\n" for n in ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")))
+    assert main(["identify", str(exp_csv), "--drive", str(zero), "--interval", "fisher",
+                 "--json"]) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert notes == ["J_M, J_L, k_sh, f_M, f_L, f_sh held at the prior's values: "
+                     "[uncertainty] gives them a relative std of 0 (known exactly)"]
+    (tmp_path / "dangling.csv").symlink_to(tmp_path / "nowhere.csv")
+    err = _one_line_error(capsys, ["simulate", DRIVE_TOML, "--experiment", "step-down",
+                                   "--amplitude", "0.157", "--hold", "1", "--out",
+                                   str(tmp_path / "dangling.csv")])
+    assert "a broken symbolic link" in err
+    (tmp_path / "u16.csv").write_bytes(Path(exp_csv).read_text().encode("utf-16-le"))
+    err = _one_line_error(capsys, ["identify", str(tmp_path / "u16.csv"), "--drive", DRIVE_TOML])
+    assert "UTF-16 text without a byte-order mark?" in err

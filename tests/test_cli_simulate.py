@@ -396,4 +396,4 @@ def test_torque_files_are_read_as_identify_reads_experiments(tmp_path, capsys):
         np.testing.assert_allclose(read(out)["w_motor"], ref.w_motor, rtol=1e-12, atol=1e-12)
     code, _, err = run([DRIVE, *PAPER_EXPERIMENT, "--decimal", ",", "--out",
                         str(tmp_path / "x.csv")], capsys)
-    assert code == 2 and "--decimal only apply with --torque" in err
+    assert code == 2 and "--decimal only applies with --torque" in err

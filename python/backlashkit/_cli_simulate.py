@@ -232,7 +232,8 @@ def _check_source(args: argparse.Namespace) -> None:
                                        ("--resample", "resample"))
                if getattr(args, dest) is not None]
     if readers and args.torque is None:
-        raise InputError(f"{', '.join(readers)} only apply with --torque (reading its file)")
+        verb = "applies" if len(readers) == 1 else "apply"
+        raise InputError(f"{', '.join(readers)} only {verb} with --torque (reading its file)")
     given = [dest for dest in _OPTIONS if getattr(args, dest) is not None]
     if args.torque is not None:
         if given:

@@ -194,7 +194,7 @@ def check_speeds_vary(rec: Record) -> None:
 #: A speed sample farther than this many noise std (and than SPIKE_RANGE of the
 #: speed's range) from the median of itself and its two neighbours is a spike.
 SPIKE_SIGMAS = 30.0
-SPIKE_RANGE = 0.05
+SPIKE_RANGE = 0.2
 
 
 def check_spikes(rec: Record) -> None:
@@ -223,12 +223,15 @@ def check_spikes(rec: Record) -> None:
             a, b, c = w[:-2], w[1:-1], w[2:]  # median of three, elementwise
             mid = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
             off = np.abs(w[1:-1] - mid)
-            # quantised speeds (an encoder's counts) may hold most samples equal to their
-            # neighbours, so that the median deviation is 0: the quantum is the floor
+            # the noise from where the speed moves: a drive resting at exactly 0 (an
+            # encoder at standstill) would pull the median deviation to 0; quantised
+            # speeds (an encoder's counts) have their quantum as the floor
+            moving = ~((a == b) & (b == c))
+            sigma = 1.4826 * float(np.median(off[moving])) if moving.any() else 0.0
             steps = np.abs(np.diff(w))
             moves = steps[steps > 0]
             quantum = float(moves.min()) if moves.size else 0.0
-            sigma = max(1.4826 * float(np.median(off)), quantum)
+            sigma = max(sigma, quantum)
             lo, hi = np.percentile(w, [0.1, 99.9])
             span = float(hi - lo)
             bad = (off > SPIKE_SIGMAS * sigma) & (off > SPIKE_RANGE * span)

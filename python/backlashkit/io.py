@@ -502,6 +502,9 @@ def check_writable(path: PathLike, what: str, *, directory: bool = False) -> Non
     import tempfile
 
     target = Path(path)
+    if target.is_symlink() and not target.exists():
+        raise InputError(f"cannot write {what} {target}: a broken symbolic link (to "
+                         f"{os.readlink(target)}); remove it or give another name")
     try:
         if directory:
             home = next((p for p in (target, *target.parents) if p.exists()), Path("."))
@@ -509,8 +512,9 @@ def check_writable(path: PathLike, what: str, *, directory: bool = False) -> Non
                 with tempfile.TemporaryFile(dir=home):
                     pass
         elif target.exists():
-            with open(target, "a", encoding="utf-8"):
-                pass
+            if target.is_file():  # not a FIFO or a device: opening those may block
+                with open(target, "a", encoding="utf-8"):
+                    pass
         else:
             with open(target, "x", encoding="utf-8"):
                 pass

@@ -51,7 +51,7 @@ import os
 import re
 import warnings
 import zipfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -195,7 +195,7 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
     """(name, t, {channel: values}) of every record of a file, channels ``fields``
     (``keep_time``: a uniform time column as written, not recomputed from its ends)."""
     name = str(path)
-    mapping = _check_columns(columns)
+    mapping = _check_columns(columns, fields)
     if sample_time is not None:
         try:
             st = float(sample_time)
@@ -242,7 +242,8 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
             for rec_name, cols, label, precision in raws]
 
 
-def _check_columns(columns: Mapping[str, str] | None) -> dict[str, str]:
+def _check_columns(columns: Mapping[str, str] | None,
+                   fields: Sequence[str] = FIELDS) -> dict[str, str]:
     out = {f: f for f in FIELDS}
     if columns is None:
         return out
@@ -259,7 +260,7 @@ def _check_columns(columns: Mapping[str, str] | None) -> dict[str, str]:
         if not isinstance(value, str) or not value.strip():
             raise InputError(f"columns[{key!r}] must be a non-empty string, got {value!r}")
         out[key] = value.strip()
-    for a, b in ((a, b) for i, a in enumerate(FIELDS) for b in FIELDS[i + 1 :]):
+    for a, b in ((a, b) for i, a in enumerate(fields) for b in fields[i + 1 :]):
         if out[a] == out[b]:
             raise InputError(
                 f"columns: {a!r} and {b!r} both read the file's column {out[a]!r}; map "
@@ -276,6 +277,11 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
         head = fh.read(2)
     # Excel's "Unicode text" export is UTF-16 with a byte-order mark
     encoding = "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
+    if encoding != "utf-16" and b"\x00" in head:
+        raise InputError(
+            f"{name}: holds NUL bytes: UTF-16 text without a byte-order mark? save it as "
+            "UTF-8 CSV (or UTF-16 with its mark)"
+        )
     try:
         with open(name, encoding=encoding, newline="") as fh:
             text = fh.read()
@@ -771,7 +777,9 @@ def _build(rec_name, cols, label, precision, sample_time, resample,
     dev = np.abs(dt - ts)
     uniform = float(dev.max()) <= tol
     if uniform:
-        t_new = t if keep_time else t[0] + np.arange(size) * ((t[-1] - t[0]) / (size - 1))
+        # kept as written only at full precision: float32 times are snapped to the grid
+        t_new = (t if keep_time and precision == 0.0
+                 else t[0] + np.arange(size) * ((t[-1] - t[0]) / (size - 1)))
     elif resample is None:
         i = int(np.argmax(dev > tol))  # the first offending step
         kind = "a gap" if dt[i] > 1.5 * ts else "a non-uniform step"

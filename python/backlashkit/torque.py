@@ -36,15 +36,23 @@ TORQUE_NOISE_LIMIT = 5e-4
 #: differences starts a new level in :func:`torque_levels`.
 JUMP_THRESHOLD = 8.0
 _MAD = 1.4826  # median absolute deviation -> std of a Gaussian
+#: A torque that changes on at most this fraction of its samples is already piecewise
+#: constant (its jumps and short ramps): :func:`torque_levels` leaves it alone.
+PIECEWISE_CONSTANT = 0.01
+#: Samples of the held level before the largest drop that measure the torque's noise.
+PLATEAU_SAMPLES = 5000
 
 
 def torque_noise_std(torque: np.ndarray) -> float:
-    """Noise std of a torque signal in N m, from its second differences.
+    """Noise std of a torque signal in N m.
 
-    Second differences vanish on steps' plateaus and ramps and are tiny on slow
-    signals (a 2 rad/s sine at 1 ms: 4e-6 of its amplitude), while white noise of
-    std ``s`` gives them std ``s sqrt(6)``; their median absolute value ignores the
-    few samples at the jumps.
+    The larger of two robust estimates: from the second differences, which vanish on
+    steps' plateaus and ramps and are tiny on slow signals (a 2 rad/s sine at 1 ms: 4e-6
+    of its amplitude) while white noise of std ``s`` gives them std ``s sqrt(6)``; and
+    from the spread of the level held before the largest drop (up to 5000 samples since
+    the previous jump), which also sees low-pass-filtered noise (the second differences
+    of noise filtered over 40 samples understate it 7 times). Medians of absolute
+    deviations ignore the few samples at jumps.
 
     Parameters
     ----------
@@ -59,7 +67,23 @@ def torque_noise_std(torque: np.ndarray) -> float:
     u = np.asarray(torque, float)
     if u.size < 3:
         return 0.0
-    return float(_MAD * np.median(np.abs(np.diff(u, 2))) / math.sqrt(6.0))
+    local = float(_MAD * np.median(np.abs(np.diff(u, 2))) / math.sqrt(6.0))
+    return max(local, _plateau_std(u))
+
+
+def _plateau_std(u: np.ndarray) -> float:
+    """Robust std of the level held before the largest drop (0 if there is none)."""
+    du = np.diff(u)
+    k = int(np.argmin(du))
+    drop = -float(du[k])
+    if not drop > 0:
+        return 0.0
+    jumps = np.flatnonzero(np.abs(du[:k]) > 0.1 * drop)
+    start = int(jumps[-1]) + 1 if jumps.size else 0
+    level = u[max(start, k + 1 - PLATEAU_SAMPLES) : k + 1]
+    if level.size < 50:  # a ramp, or a level too short to tell
+        return 0.0
+    return float(_MAD * np.median(np.abs(level - np.median(level))))
 
 
 def check_torque_noise(rec: Record) -> None:
@@ -107,7 +131,13 @@ def torque_levels(rec: Record) -> Record:
     -------
     Record
         The same record (same name) with the levels as its torque; ``rec`` itself
-        when the torque is already piecewise constant.
+        when the torque is already piecewise constant (it changes on at most 1 % of its
+        samples).
+
+    Raises
+    ------
+    InputError
+        If ``rec`` is not a record.
 
     Examples
     --------
@@ -119,12 +149,19 @@ def torque_levels(rec: Record) -> Record:
     >>> sorted({round(float(x), 2) for x in rec.torque})
     [0.0, 0.16]
     """
+    if not hasattr(rec, "torque") or not hasattr(rec, "t"):
+        raise InputError(
+            f"torque_levels needs a Record, got {type(rec).__name__} (a file? read it with "
+            "backlashkit.read_records)"
+        )
     u = rec.torque
-    d = np.diff(u)
-    noise_d = _MAD * float(np.median(np.abs(d)))
-    if noise_d == 0.0:
+    d = np.abs(np.diff(u))
+    moves = d[d > 0]
+    if moves.size <= PIECEWISE_CONSTANT * d.size:  # the jumps alone: nothing to remove
         return rec
-    starts = np.flatnonzero(np.abs(d) > JUMP_THRESHOLD * noise_d) + 1
+    # quantised noise (an ADC's counts) may leave most differences 0: then the count
+    noise_d = max(_MAD * float(np.median(d)), float(moves.min()))
+    starts = np.flatnonzero(d > JUMP_THRESHOLD * noise_d) + 1
     levels = np.empty_like(u)
     for seg in np.split(np.arange(u.size), starts):
         levels[seg] = np.median(u[seg])

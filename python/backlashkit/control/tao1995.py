@@ -152,6 +152,9 @@ def run_cli(args: argparse.Namespace) -> int:
     int
         0 when every bar of the reproduction is met, 1 otherwise.
     """
+    from ..cli import missing_directory
+    from ..io import check_writable
+
     force = bool(getattr(args, "force", False))
     json_path = getattr(args, "json", None)
     report = getattr(args, "report", None)
@@ -164,6 +167,11 @@ def run_cli(args: argparse.Namespace) -> int:
             raise InputError(f"--report {rep} exists and is not a directory")
         if rep.exists() and any(rep.iterdir()) and not force:
             raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
+        check_writable(rep, "--report", directory=True)
+    if json_path not in (None, "-"):
+        if not Path(json_path).parent.is_dir():
+            raise InputError(missing_directory("--json", Path(json_path)))
+        check_writable(json_path, "--json")
     runs = run_tao1995()
     doc = {
         "controller": runs["exact"].summary()["controller"],
