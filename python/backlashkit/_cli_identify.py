@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from ._cli_files import add_file_options, file_options, reader_errors
 from .cli import flag_names
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier, find_step_down
 from .io import read_drive_toml, read_uncertainty_toml
@@ -166,62 +167,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "jump of each record instead of the whole record (where the shaft rattles: "
         "better calibrated intervals, larger std)"
     )
-    add_reader_options(p)
-    p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
-    add_report_option(p)
-    p.set_defaults(func=run)
-    return p
-
-
-def add_reader_options(p: argparse.ArgumentParser) -> None:
-    """Options of :func:`backlashkit.records.read_records` for every experiment file.
-
-    Parameters
-    ----------
-    p : argparse.ArgumentParser
-        The parser to extend.
-    """
     g = p.add_argument_group("reading the experiment files (all files alike)")
-    g.add_argument(
-        "--columns", metavar="OURS=THEIRS,...", default=None,
-        help="the file's names of our columns t, torque, w_motor, w_load, e.g. "
-        "'t=time,w_motor=n_mot,w_load=n_load' (unmapped ones keep our names)",
-    )
-    g.add_argument("--sample-time", type=float, default=None, metavar="TS",
-                   help="sample time in s when the files have no time column (t = 0 first)")
-    g.add_argument("--delimiter", choices=(",", ";", "tab"), default=None,
-                   help="CSV separator (default: detected from the header)")
-    g.add_argument("--decimal", choices=(".", ","), default=None,
-                   help="CSV decimal mark (default: detected)")
+    add_file_options(g, columns_help="the file's names of our columns t, torque, w_motor, "
+                     "w_load, e.g. 't=time,w_motor=n_mot,w_load=n_load' (unmapped ones keep "
+                     "our names)")
     g.add_argument("--speed-unit", choices=("rad/s", "rpm"), default="rad/s",
                    help="unit of the speeds in the files; rpm are converted (default rad/s)")
-    g.add_argument("--resample", choices=("linear",), default=None,
-                   help="resample non-uniform time onto a uniform grid and bridge missing "
-                   "samples (default: they are errors)")
     g.add_argument("--torque-levels", action="store_true",
                    help="replace a noisy measured torque by its piecewise-constant levels "
                    "(the model takes the torque as its exact input; default: a noisy torque "
                    "is an error)")
-
-
-def parse_columns(text: str | None) -> dict[str, str] | None:
-    from .errors import InputError
-
-    if text is None:
-        return None
-    out = {}
-    for item in text.split(","):
-        ours, eq, theirs = item.partition("=")
-        if not eq or not ours.strip() or not theirs.strip():
-            raise InputError(
-                f"--columns must be OURS=THEIRS pairs separated by commas, e.g. "
-                f"'t=time,w_motor=n_mot'; got {text!r}"
-            )
-        key, name = ours.strip(), theirs.strip()
-        if key in out:
-            raise InputError(f"--columns maps {key!r} twice ({out[key]!r} and {name!r})")
-        out[key] = name
-    return out
+    p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
+    add_report_option(p)
+    p.set_defaults(func=run)
+    return p
 
 
 def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]:
@@ -230,7 +189,7 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     Parameters
     ----------
     args : argparse.Namespace
-        Parsed arguments holding the options of :func:`add_reader_options`.
+        Parsed arguments holding the file options and ``speed_unit``.
     paths : list of str
         The files.
 
@@ -242,45 +201,15 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     from .errors import InputError
     from .records import read_records
 
-    columns = parse_columns(args.columns)
-    delimiter = "\t" if args.delimiter == "tab" else args.delimiter
+    options = file_options(args)
     out: list[Record] = []
     for path in paths:
         if path == "-":
             raise InputError("'-': identify reads files, not the standard input; give a "
                              "file name (or /dev/stdin)")
-        try:
-            out += read_records(path, columns=columns, sample_time=args.sample_time,
-                                delimiter=delimiter, decimal=args.decimal,
-                                speed_unit=args.speed_unit, resample=args.resample)
-        except InputError as exc:  # the reader's advice, in the words of the command line
-            message = str(exc)
-            for python, flag in READER_FLAGS:
-                message = message.replace(python, flag)
-            raise InputError(message) from exc
+        with reader_errors():
+            out += read_records(path, speed_unit=args.speed_unit, **options)
     return out
-
-
-#: The reader's advice (library keywords) -> the same advice as flags of ``identify``.
-READER_FLAGS = (
-    ("resample='linear'", "--resample linear"),
-    ("columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}",
-     "--columns t=...,torque=...,w_motor=...,w_load=..."),
-    ("columns={'t': ..., 'torque': ...}", "--columns t=...,torque=..."),
-    ("columns={...}", "--columns t=...,w_motor=..."),
-    ("pass sample_time=", "pass --sample-time TS"),
-    ("drop sample_time", "drop --sample-time"),
-    ("sample_time (got", "--sample-time (got"),
-    ("columns['t'] = ", "--columns t="),
-    ("columns: ", "--columns: "),
-    ("pass decimal=','", "pass --decimal ,"),
-    ("pass decimal='.'", "pass --decimal ."),
-    ("delimiter ';'", "--delimiter ';'"),
-    ("(delimiter=", "(--delimiter "),
-    ("sample_time = ", "--sample-time "),
-    ("pass delimiter='\\t'", "pass --delimiter tab"),
-    ("pass delimiter=", "pass --delimiter "),
-)
 
 
 #: More separate step-downs (each beyond a tenth of the largest) than this in one record
@@ -294,7 +223,7 @@ def _check_step_down_experiment(rec: Record, prior: Any) -> int:
     one; a record that ends at the step-down shows none). Returns the number of separate
     step-downs."""
     from .errors import InputError
-    from .torque import torque_noise_std
+    from .torque import JUMP_THRESHOLD, torque_noise_std
 
     i_s, t_s, _, _ = find_step_down(rec)
     period = 2.0 * math.pi / math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
@@ -309,12 +238,13 @@ def _check_step_down_experiment(rec: Record, prior: Any) -> int:
     # random input also has a largest drop, but no level the shaft rests on before it
     n = int(round(need / rec.ts))
     u = rec.torque
+    noise = torque_noise_std(u)
     before = u[max(0, i_s - 2 * n) : i_s]
     if before.size > n:  # some n samples within the 2n before the drop must be a level
         drop = float(u[max(0, i_s - n)] - u[min(u.size - 1, i_s + n)])
         windows = np.lib.stride_tricks.sliding_window_view(before, n)
         wobble = float(np.min(np.ptp(windows, axis=1)))
-        if wobble > 0.05 * abs(drop) + 8.0 * torque_noise_std(u):
+        if wobble > 0.05 * abs(drop) + JUMP_THRESHOLD * noise:
             raise InputError(
                 f"{rec.name}: the torque is not held before its largest drop at "
                 f"t = {t_s:.6g} s (over any {need:.3g} s of the {2 * need:.3g} s before it, it "
@@ -322,7 +252,8 @@ def _check_step_down_experiment(rec: Record, prior: Any) -> int:
                 "experiment, a held torque stepped down"
             )
     downs = np.diff(u)  # separate drops beyond a tenth of the largest and the noise
-    big = np.flatnonzero(downs < min(0.1 * downs.min(), -12.0 * torque_noise_std(u)))
+    jump = JUMP_THRESHOLD * math.sqrt(2.0) * noise  # as find_step_down counts a drop
+    big = np.flatnonzero(downs < min(0.1 * downs.min(), -jump))
     count = 1 + int(np.sum(np.diff(big) > 1)) if big.size else 0  # separate jumps
     if count > MAX_STEP_DOWNS:
         raise InputError(

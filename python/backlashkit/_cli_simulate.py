@@ -26,6 +26,7 @@ import numpy as np
 
 from . import _validate as v
 from . import signals
+from ._cli_files import add_file_options, file_options, reader_errors
 from .cli import missing_directory
 from .errors import InputError, SensitivityWarning
 from .io import check_writable, read_drive_toml, write_csv
@@ -111,18 +112,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--torque", metavar="TORQUE.csv", help="motor torque record, columns t (s), torque "
         "(N m): CSV (';', decimal commas), .mat or .npz, read as identify reads experiments"
     )
-    rd = p.add_argument_group("reading the torque file (with --torque)")
-    rd.add_argument("--columns", metavar="OURS=THEIRS,...", default=None,
-                    help="the file's names of our columns t, torque, e.g. 't=time,torque=M'")
-    rd.add_argument("--sample-time", type=float, default=None, metavar="TS",
-                    help="sample time in s when the file has no time column (t = 0 first)")
-    rd.add_argument("--delimiter", choices=(",", ";", "tab"), default=None,
-                    help="CSV separator (default: detected from the header)")
-    rd.add_argument("--decimal", choices=(".", ","), default=None,
-                    help="CSV decimal mark (default: detected)")
-    rd.add_argument("--resample", choices=("linear",), default=None,
-                    help="resample non-uniform time onto a uniform grid (zero-order hold) "
-                    "and bridge missing samples (default: they are errors)")
+    add_file_options(p.add_argument_group("reading the torque file (with --torque)"),
+                     columns_help="the file's names of our columns t, torque, e.g. "
+                     "'t=time,torque=M'")
     src.add_argument(
         "--experiment",
         choices=EXPERIMENTS,
@@ -206,19 +198,10 @@ def _note(message: str) -> None:
 
 def _read_torque(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]:
     """The --torque file, read as identify reads experiments (its advice as flags)."""
-    from ._cli_identify import READER_FLAGS, parse_columns
     from .records import read_torque
 
-    try:
-        return read_torque(args.torque, columns=parse_columns(args.columns),
-                           sample_time=args.sample_time,
-                           delimiter="\t" if args.delimiter == "tab" else args.delimiter,
-                           decimal=args.decimal, resample=args.resample)
-    except InputError as exc:
-        message = str(exc)
-        for python, flag in READER_FLAGS:
-            message = message.replace(python, flag)
-        raise InputError(message) from exc
+    with reader_errors():
+        return read_torque(args.torque, **file_options(args))
 
 
 def _check_source(args: argparse.Namespace) -> None:

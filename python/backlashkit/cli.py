@@ -92,6 +92,45 @@ def missing_directory(flag: str, out: Path) -> str:
     return f"{flag} {out}: directory {out.parent} does not exist"
 
 
+def check_reproduce_outputs(json_path: str | None, report: str | None,
+                            force: bool) -> Path | None:
+    """Refuse, before any run, the ``--json FILE`` and ``--report DIR`` of a ``reproduce``
+    target that exist (without ``--force``), sit in a missing directory or cannot be
+    written; return the report directory.
+
+    Parameters
+    ----------
+    json_path : str or None
+        ``--json`` (``"-"``: standard output).
+    report : str or None
+        ``--report``.
+    force : bool
+        ``--force``.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The report directory.
+    """
+    from .io import check_writable
+
+    if json_path not in (None, "-"):
+        if Path(json_path).exists() and not force:
+            raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
+        if not Path(json_path).parent.is_dir():
+            raise InputError(missing_directory("--json", Path(json_path)))
+        check_writable(json_path, "--json")
+    if report is None:
+        return None
+    rep = Path(report)
+    if rep.exists() and not rep.is_dir():
+        raise InputError(f"--report {rep} exists and is not a directory")
+    if rep.exists() and any(rep.iterdir()) and not force:
+        raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
+    check_writable(rep, "--report", directory=True)
+    return rep
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A library warning as the command line's notes are: one line on stderr."""
     print(f"backlashkit: note: {' '.join(str(message).split())}", file=sys.stderr)

@@ -427,23 +427,10 @@ def run_cli(args: argparse.Namespace) -> int:
     int
         0 when the joint estimator meets every bar, 1 otherwise.
     """
-    from .cli import flag_names, missing_directory
-    from .io import check_writable
+    from .cli import check_reproduce_outputs, flag_names
 
-    json_path, report, force = args.json, args.report, bool(args.force)
-    if json_path not in (None, "-") and Path(json_path).exists() and not force:
-        raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
-    rep = None if report is None else Path(report)
-    if rep is not None:
-        if rep.exists() and not rep.is_dir():
-            raise InputError(f"--report {rep} exists and is not a directory")
-        if rep.exists() and any(rep.iterdir()) and not force:
-            raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
-        check_writable(rep, "--report", directory=True)
-    if json_path not in (None, "-"):
-        if not Path(json_path).parent.is_dir():
-            raise InputError(missing_directory("--json", Path(json_path)))
-        check_writable(json_path, "--json")
+    json_path = args.json
+    rep = check_reproduce_outputs(json_path, args.report, bool(args.force))
     snr1 = _numbers("--snr-step1", args.snr_step1)
     if len(snr1) != 2 or not all(math.isfinite(x) for x in snr1):
         raise InputError(f"--snr-step1 must be two finite numbers SNR_M,SNR_L in dB, got "

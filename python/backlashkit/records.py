@@ -70,8 +70,6 @@ FIELDS = ("t", "torque", "w_motor", "w_load")
 #: Accepted speed units and their factor to rad/s.
 SPEED_UNITS = {"rad/s": 1.0, "rpm": 2.0 * math.pi / 60.0}
 DELIMITERS = (",", ";", "\t")
-#: Relative tolerance on the time steps for a grid to count as uniform.
-UNIFORM_RTOL = 1e-6
 #: Longest run of missing samples (a time gap or NaN) that ``resample="linear"``
 #: bridges; a longer one hides the drive's response (an impact lasts a few samples).
 MAX_BRIDGE = 10
@@ -773,7 +771,7 @@ def _build(rec_name, cols, label, precision, sample_time, resample,
                 "interpolated; crop the record to the samples where every channel is known"
             )
     ts = float(np.median(dt))
-    tol = max(UNIFORM_RTOL * ts, precision, v.uniform_tolerance(t, ts))
+    tol = max(precision, v.uniform_tolerance(t, ts))
     dev = np.abs(dt - ts)
     uniform = float(dev.max()) <= tol
     if uniform:

@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
 from ..nonlinearities import (
     Backlash,
     ExactInverse,
@@ -152,26 +151,11 @@ def run_cli(args: argparse.Namespace) -> int:
     int
         0 when every bar of the reproduction is met, 1 otherwise.
     """
-    from ..cli import missing_directory
-    from ..io import check_writable
+    from ..cli import check_reproduce_outputs
 
-    force = bool(getattr(args, "force", False))
     json_path = getattr(args, "json", None)
-    report = getattr(args, "report", None)
-    if json_path not in (None, "-") and Path(json_path).exists() and not force:
-        raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
-    rep = None
-    if report is not None:
-        rep = Path(report)
-        if rep.exists() and not rep.is_dir():
-            raise InputError(f"--report {rep} exists and is not a directory")
-        if rep.exists() and any(rep.iterdir()) and not force:
-            raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
-        check_writable(rep, "--report", directory=True)
-    if json_path not in (None, "-"):
-        if not Path(json_path).parent.is_dir():
-            raise InputError(missing_directory("--json", Path(json_path)))
-        check_writable(json_path, "--json")
+    rep = check_reproduce_outputs(json_path, getattr(args, "report", None),
+                                  bool(getattr(args, "force", False)))
     runs = run_tao1995()
     doc = {
         "controller": runs["exact"].summary()["controller"],

@@ -1,0 +1,134 @@
+"""File-reading options shared by ``identify`` (experiments) and ``simulate --torque``.
+
+Both commands read their files with :mod:`backlashkit.records`; the options below map
+onto its keywords, and :func:`reader_errors` rewrites its advice (``pass
+sample_time=``) into the flags of the command line (``pass --sample-time TS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from .errors import InputError
+
+__all__ = ["READER_FLAGS", "add_file_options", "file_options", "parse_columns",
+           "reader_errors"]
+
+
+def add_file_options(g: Any, *, columns_help: str) -> None:
+    """Add ``--columns``, ``--sample-time``, ``--delimiter``, ``--decimal`` and
+    ``--resample`` to a parser or argument group.
+
+    Parameters
+    ----------
+    g : argparse.ArgumentParser or argparse._ArgumentGroup
+        Where the options go.
+    columns_help : str
+        Help of ``--columns`` (which columns the command reads).
+    """
+    g.add_argument("--columns", metavar="OURS=THEIRS,...", default=None, help=columns_help)
+    g.add_argument("--sample-time", type=float, default=None, metavar="TS",
+                   help="sample time in s when the file has no time column (t = 0 first)")
+    g.add_argument("--delimiter", choices=(",", ";", "tab"), default=None,
+                   help="CSV separator (default: detected from the header)")
+    g.add_argument("--decimal", choices=(".", ","), default=None,
+                   help="CSV decimal mark (default: detected)")
+    g.add_argument("--resample", choices=("linear",), default=None,
+                   help="resample non-uniform time onto a uniform grid (the torque as a "
+                   "zero-order hold) and bridge missing samples (default: they are errors)")
+
+
+def file_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keywords of :func:`backlashkit.records.read_records` given by the options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments holding the options of :func:`add_file_options`.
+
+    Returns
+    -------
+    dict
+        ``columns``, ``sample_time``, ``delimiter``, ``decimal``, ``resample``.
+    """
+    return {"columns": parse_columns(args.columns), "sample_time": args.sample_time,
+            "delimiter": "\t" if args.delimiter == "tab" else args.delimiter,
+            "decimal": args.decimal, "resample": args.resample}
+
+
+def parse_columns(text: str | None) -> dict[str, str] | None:
+    """``--columns t=time,w_motor=n_mot`` as a mapping (None without the option).
+
+    Parameters
+    ----------
+    text : str or None
+        The option's value.
+
+    Returns
+    -------
+    dict of str to str, or None
+        Our column names to the file's.
+
+    Raises
+    ------
+    InputError
+        If the text is not OURS=THEIRS pairs, or maps a column twice.
+    """
+    if text is None:
+        return None
+    out = {}
+    for item in text.split(","):
+        ours, eq, theirs = item.partition("=")
+        if not eq or not ours.strip() or not theirs.strip():
+            raise InputError(
+                f"--columns must be OURS=THEIRS pairs separated by commas, e.g. "
+                f"'t=time,w_motor=n_mot'; got {text!r}"
+            )
+        key, name = ours.strip(), theirs.strip()
+        if key in out:
+            raise InputError(f"--columns maps {key!r} twice ({out[key]!r} and {name!r})")
+        out[key] = name
+    return out
+
+
+@contextmanager
+def reader_errors() -> Iterator[None]:
+    """Raise the reader's errors again with its advice in the command line's flags.
+
+    Yields
+    ------
+    None
+    """
+    try:
+        yield
+    except InputError as exc:
+        message = str(exc)
+        for python, flag in READER_FLAGS:
+            message = message.replace(python, flag)
+        raise InputError(message) from exc
+
+
+#: The reader's advice (library keywords) -> the same advice as flags.
+READER_FLAGS = (
+    ("resample='linear'", "--resample linear"),
+    ("columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}",
+     "--columns t=...,torque=...,w_motor=...,w_load=..."),
+    ("columns={'t': ..., 'torque': ...}", "--columns t=...,torque=..."),
+    ("columns={...}", "--columns t=...,w_motor=..."),
+    ("pass sample_time=", "pass --sample-time TS"),
+    ("drop sample_time", "drop --sample-time"),
+    ("sample_time (got", "--sample-time (got"),
+    ("columns['t'] = ", "--columns t="),
+    ("columns: ", "--columns: "),
+    ("pass decimal=','", "pass --decimal ,"),
+    ("pass decimal='.'", "pass --decimal ."),
+    ("delimiter ';'", "--delimiter ';'"),
+    ("(delimiter=", "(--delimiter "),
+    ("sample_time = ", "--sample-time "),
+    ("pass delimiter='\\t'", "pass --delimiter tab"),
+    ("pass delimiter=", "pass --delimiter "),
+)
+
