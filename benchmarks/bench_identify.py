@@ -9,6 +9,7 @@
    share of its profile-likelihood interval (the fit's time minus that of the same fit
    with ``interval=FisherInterval()``), the same fit with the stiffness restarts of
    earlier versions, ``stiffness_restarts=(0.15,)`` (the cost of the wider default),
+   without the restarts of the friction split, ``friction_restarts=()``,
    and with ``noise_model=ARNoise(2)``, left out of the default for its cost.
 3. With ``--reproduce``: ``backlashkit reproduce ravanbod2002 --runs 10 --jobs 2``
    wall time (target < 60 s on 2 cores), once.
@@ -111,6 +112,10 @@ def main() -> None:
                                                stiffness_grid=args.stiffness_grid,
                                                stiffness_restarts=(0.15,)).fit(recs),
                        args.repeats)
+    t_nofric = _median(lambda: JointIdentifier(prior, workers=1,
+                                               stiffness_grid=args.stiffness_grid,
+                                               friction_restarts=()).fit(recs),
+                       args.repeats)
     t_ar = _median(lambda: JointIdentifier(prior, workers=1, stiffness_grid=args.stiffness_grid,
                                            noise_model=ARNoise(2)).fit(recs), args.repeats)
     t_two = _median(lambda: TwoStepIdentifier(prior, workers=1).fit(rec1, final_records=rec2),
@@ -124,6 +129,7 @@ def main() -> None:
     print(f"{'    of which the profile-likelihood interval':<55} {t_joint - t_fisher:7.2f} s "
           "(the same fit with interval=FisherInterval())")
     print(f"{'    with stiffness_restarts=(0.15,) (before 0.4, 0.8)':<55} {t_narrow:7.2f} s")
+    print(f"{'    with friction_restarts=() (before them)':<55} {t_nofric:7.2f} s")
     print(f"{'    with noise_model=ARNoise(2)':<55} {t_ar:7.2f} s")
     print(f"{'  TwoStepIdentifier.fit (paper A), workers=1':<55} {t_two:7.2f} s")
     print(f"{'  RegressionIdentifier.fit (Table 2 baseline), workers=1':<55} {t_reg:7.2f} s")

@@ -26,7 +26,7 @@ scenarios and the count of trials beyond ``max(5 %, 3 CRB)``.
 
 Run: ``python benchmarks/robustness_joint.py [--trials 20] [--seed 5] [--jobs 2]
 [--stiffness-grid 9] [--split-shifts 0.5] [--stiffness-restarts 0.15,0.4,0.8]
-[--search-factor 3]
+[--friction-restarts 1.0] [--search-factor 3]
 [--final-horizon H]
 [--fine-horizons 0.25,0.6,1.6] [--ambiguity-starts 4] [--interval profile|fisher]
 [--bootstrap N] [--scenarios 0,1,...] [--dump FILE]``. ``--interval`` chooses the
@@ -135,6 +135,9 @@ def main() -> None:
     ap.add_argument("--stiffness-restarts", default="0.15,0.4,0.8",
                     help="JointIdentifier(stiffness_restarts=...), log-shifts of k_sh, "
                     "comma-separated ('' for none)")
+    ap.add_argument("--friction-restarts", default="1.0",
+                    help="JointIdentifier(friction_restarts=...), log-shifts of f_M / f_L, "
+                    "comma-separated ('' for none, the code before them)")
     ap.add_argument("--search-factor", default="3",
                     help="JointIdentifier(search_factor=...) ('none' for unbounded)")
     ap.add_argument("--final-horizon", type=float, default=None,
@@ -159,6 +162,8 @@ def main() -> None:
         "split_shifts": tuple(float(x) for x in args.split_shifts.split(",") if x.strip()),
         "stiffness_restarts": tuple(float(x) for x in args.stiffness_restarts.split(",")
                                     if x.strip()),
+        "friction_restarts": tuple(float(x) for x in args.friction_restarts.split(",")
+                                   if x.strip()),
         "search_factor": None if args.search_factor == "none" else float(args.search_factor),
         "final_horizon": args.final_horizon,
         "fine_horizons": tuple(float(x) for x in args.fine_horizons.split(",") if x.strip()),

@@ -170,7 +170,7 @@ def test_uncertainty_of_theta_is_refused(exp_csv, tmp_path, capsys):
     prior = tmp_path / "prior.toml"
     prior.write_text(Path(DRIVE_TOML).read_text() + "\n[uncertainty]\ntheta = 0.1\n")
     err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", str(prior)])
-    assert "[uncertainty] theta: theta is what identify estimates" in err
+    assert "[uncertainty] theta: the backlash is what identify estimates" in err
 
 
 def test_time_in_ms_is_refused_for_every_method(exp_csv, tmp_path, capsys):
@@ -203,6 +203,33 @@ def test_speeds_in_rpm_read_as_rad_per_s_are_refused(exp_csv, tmp_path, capsys):
                                    "--interval", "fisher", "--columns",
                                    "w_motor=w_load,w_load=w_motor"])
     assert "the fit moved" in err and "w_motor and w_load swapped?" in err
+
+
+@pytest.mark.parametrize("method", ["two-step", "regression"])
+def test_held_speed_far_from_the_priors_steady_state_is_refused(exp_csv, tmp_path, capsys,
+                                                               method):
+    """The paper's methods simulate the prior from the held speed: in rpm it is 9.5 times
+    the prior's (refused; --allow-far-from-prior answers with a note); a
+    speed scaled by 1e-300 is refused too, instead of a theta of 1e-302 rad."""
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    for name, factor in (("rpm", 60 / (2 * np.pi)), ("tiny", 1e-300)):
+        path = tmp_path / f"{name}.csv"
+        write_csv(path, {"t": t, "torque": u, "w_motor": factor * w_m,
+                         "w_load": factor * w_l})
+        err = _one_line_error(capsys, ["identify", str(path), "--drive", DRIVE_TOML,
+                                       "--method", method])
+        assert f"{name}.csv: under the torque held before the step-down" in err
+        gain = float(re.search(r"the speeds are (\S+) times the prior's", err).group(1))
+        assert gain == pytest.approx(factor, rel=0.01) and "rpm read as rad/s?" in err
+        assert "use --method joint" in err and "--allow-far-from-prior" in err
+    assert main(["identify", str(tmp_path / "rpm.csv"), "--drive", DRIVE_TOML, "--method",
+                 method, "--allow-far-from-prior", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert any("are 9.5" in n and "times the prior's" in n for n in out["notes"])
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method", method,
+                 "--json"]) == 0  # the right units: no note of it
+    out = json.loads(capsys.readouterr().out)
+    assert not any("times the prior's" in n for n in out["notes"])
     assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--interval", "fisher",
                  "--json"]) == 0
     out, _ = capsys.readouterr()
@@ -496,3 +523,35 @@ def test_no_glitch_in_the_robustness_drives(j_l):
             for snr in (20.0, 30.0, 40.0):
                 check_spikes(Record(t, r.torque, signals.add_noise(r.w_motor, snr, rng=rng),
                                     signals.add_noise(r.w_load, snr, rng=rng)))
+
+
+def test_a_closed_stdout_stops_quietly(exp_csv):
+    """``backlashkit identify ... --json | head -c 10``: no error message when the reader
+    closes the pipe before the answer is written."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "backlashkit", "identify", str(exp_csv), "--drive", DRIVE_TOML,
+         "--method", "two-step", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait() == 1 and err == ""
+
+
+def test_noise_free_records_are_said_so(tmp_path, capsys):
+    """A simulated record without noise leaves a residual of numerical error only: the
+    note says so, instead of calling it coloured noise (try --noise ar)."""
+    path = tmp_path / "clean.csv"
+    assert main(["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.942",
+                 "--hold", "2", "--duration", "4", "--out", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["theta"] == pytest.approx(math.radians(2.0), rel=1e-3)
+    (note,) = [n for n in doc["notes"] if "spread" in n]
+    assert "(noise-free, simulated records?)" in note
+    assert not any("--noise ar" in n for n in doc["notes"])

@@ -397,3 +397,19 @@ def test_torque_files_are_read_as_identify_reads_experiments(tmp_path, capsys):
     code, _, err = run([DRIVE, *PAPER_EXPERIMENT, "--decimal", ",", "--out",
                         str(tmp_path / "x.csv")], capsys)
     assert code == 2 and "--decimal only applies with --torque" in err
+
+
+def test_plot_formats_are_the_same_for_simulate_and_control(tmp_path, capsys):
+    """Both --plot options write .jpg as well, and refuse .gif before computing."""
+    out, jpg = tmp_path / "o.csv", tmp_path / "f.JPG"
+    step = ["simulate", DRIVE, "--experiment", "step", "--amplitude", "0.1", "--duration",
+            "0.5", "--out", str(out)]
+    assert main([*step, "--plot", str(jpg)]) == 0
+    assert jpg.read_bytes()[:2] == b"\xff\xd8"  # the JPEG start-of-image marker
+    for argv in ([*step, "--force"], ["control", str(EXAMPLES / "tao1995.toml")]):
+        capsys.readouterr()
+        assert main([*argv, "--plot", str(tmp_path / "f.gif")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1
+        assert "f.gif: the file name must end in .png, .svg, .pdf or .jpg" in err
+    assert not (tmp_path / "f.gif").exists()

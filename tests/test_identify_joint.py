@@ -413,6 +413,24 @@ def test_wide_stiffness_restarts_reach_the_truths_basin():
     assert _weighted_sse(fit, fit.noise_std_) < _weighted_sse(narrow, fit.noise_std_) - 50
 
 
+def test_friction_restarts_cross_the_ridge_of_a_wrong_split():
+    """A trial of ``benchmarks/robustness_joint.py --seed 11 --trials 30`` (light load,
+    theta 5 deg, 40 dB, CRB 0.11 %): without the restarts of the friction split the fit
+    settles with f_M 42 % low and f_L 42 % high, theta 2.9 % low (9 of its standard
+    errors), 35 000 chi-square units above the minimum near the truth; the restart with
+    f_M / f_L multiplied by e reaches that minimum."""
+    drive, recs, prior = _robustness_trial(11, 8, 26, 30, 5.0, 40.0)
+    fisher = bk.FisherInterval()
+    stuck = JointIdentifier(prior, friction_restarts=(), interval=fisher).fit(recs)
+    fit = JointIdentifier(prior, interval=fisher).fit(recs)
+    assert fit.friction_restarts == (1.0,)  # the default
+    assert stuck.params_["f_M"] < 0.7 * drive.f_M and stuck.theta_ < 0.98 * drive.theta
+    assert abs(stuck.theta_ - drive.theta) > 5 * stuck.std_
+    assert abs(fit.params_["f_M"] / drive.f_M - 1) < 0.05
+    assert abs(fit.theta_ - drive.theta) < 1.96 * fit.std_
+    assert _weighted_sse(fit, fit.noise_std_) < _weighted_sse(stuck, fit.noise_std_) - 10_000
+
+
 def test_fine_horizons_avoid_a_wrong_basin():
     """A trial of ``benchmarks/robustness_joint.py --seed 5 --trials 20`` (light load,
     theta 5 deg, 20 dB, CRB 1.1 %): continued by the long steps 0.4 -> 1 -> 3 s alone,
@@ -584,6 +602,7 @@ def test_final_horizon(short):
         ({"fine_horizons": (0.3, -1.0)}, r"fine_horizons\[\.\.\.\] must be > 0"),
         ({"ambiguity_starts": -1}, "ambiguity_starts must be an integer >= 0, got -1"),
         ({"stiffness_restarts": 0.1}, "stiffness_restarts must be a sequence of numbers > 0"),
+        ({"friction_restarts": (-1.0,)}, r"friction_restarts\[\.\.\.\] must be > 0"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):

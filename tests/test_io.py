@@ -76,7 +76,10 @@ def test_uncertainty_table_is_accepted_and_read(tmp_path):
 @pytest.mark.parametrize(
     ("extra", "culprit"),
     [
-        ("[uncertainty]\nJ_X = 0.1\n", r"unknown key\(s\) J_X in \[uncertainty\]"),
+        ("[uncertainty]\nJ_X = 0.1\n", r"unknown key\(s\) J_X in \[uncertainty\]; allowed keys: "
+         r"J_M, J_L, k_sh, f_M, f_L, f_sh$"),
+        ("[uncertainty]\ntheta = 0.1\n", r"\[uncertainty\] theta: the backlash is what identify "
+         r"estimates"),
         ("[uncertainty]\nJ_L = -0.1\n", "J_L must be >= 0"),
         ("[uncertainty]\nJ_L = 'ten'\n", "J_L must be a number"),
     ],

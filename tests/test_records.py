@@ -285,6 +285,16 @@ def test_nan_in_npz(tmp_path):
     one_line(exc, str(path), "sample 7", "'w_motor'", "resample='linear'")
 
 
+def test_logical_npz_variable_is_refused(tmp_path):
+    cols = channels()
+    cols["torque"] = cols["torque"] > 0.5 * cols["torque"].max()  # a mask saved by mistake
+    path = tmp_path / "mask.npz"
+    np.savez(path, **cols)
+    with pytest.raises(InputError) as exc:
+        read_records(path)
+    one_line(exc, str(path), "variable 'torque' holds true/false values", "double(x)")
+
+
 # --- malformed input --------------------------------------------------------------
 
 

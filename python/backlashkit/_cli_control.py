@@ -11,7 +11,7 @@ import numpy as np
 
 from .cli import missing_directory
 from .errors import InputError
-from .io import check_writable
+from .io import check_plot_suffix, check_writable
 
 __all__ = ["add_parser", "run"]
 
@@ -46,7 +46,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--trace", metavar="OUT.csv", help="write the trace (one row per ts)")
-    p.add_argument("--plot", metavar="FILE", help="save a figure (format from the extension)")
+    p.add_argument("--plot", metavar="FILE",
+                   help="save a figure (format from the extension: .png, .svg, .pdf, .jpg)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=run)
     return p
@@ -109,8 +110,8 @@ def run(args: argparse.Namespace) -> int:
 
     trace = _check_out(args.trace, args.force, "--trace")
     plot = _check_out(args.plot, args.force, "--plot")
-    if plot is not None and plot.suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
-        raise InputError(f"--plot {plot}: extension must be .png, .pdf, .svg or .jpg")
+    if plot is not None:
+        check_plot_suffix("--plot", plot)
     if trace is not None and plot is not None and trace.resolve() == plot.resolve():
         raise InputError("--plot and --trace must be different files")
     sc = load_scenario(args.scenario)

@@ -134,8 +134,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument(
         "--allow-far-from-prior", action="store_true",
-        help="joint: answer even when a linear parameter ends more than 5 times off the "
-        "prior (default: refused, a unit or column mistake being likelier)"
+        help="answer even when a linear parameter ends more than 5 times off the prior "
+        "(joint), or the speeds under the torque held before the step-down are more than 5 "
+        "times the prior's (two-step, regression) (default: refused, a unit or column "
+        "mistake being likelier)"
     )
     p.add_argument(
         "--prior-rel-std", type=float, default=None, metavar="REL",
@@ -289,6 +291,11 @@ FAR_FROM_PRIOR = 3.0
 REFUSE_FROM_PRIOR = 5.0
 
 
+#: A fit this close to 100 % (rms residual over the speed's spread) leaves no noise to
+#: model: a measured speed has noise far above it (a 16-bit encoder: about 1e-5).
+NOISE_FREE = 1e-7
+
+
 def _far_from_prior(est, prior, factor: float = FAR_FROM_PRIOR) -> list[str]:
     """The estimated linear parameters more than ``factor`` times off the prior."""
     out = []
@@ -301,6 +308,42 @@ def _far_from_prior(est, prior, factor: float = FAR_FROM_PRIOR) -> list[str]:
 
 _CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
                 "columns (w_motor and w_load swapped?) and PRIOR.toml")
+
+
+def _check_held_speeds(records: list[Record], prior: Any, *, allow: bool) -> list[str]:
+    """The two-step and regression methods simulate the prior from the speed held before
+    the step-down; a record in other units, or a prior far off, makes that meaningless.
+    Before the step-down, the inertia-weighted speed ``v = (J_M w_M + J_L w_L) / J``
+    follows the rigid body ``J v' = torque - (f_M + f_L) v`` (the shaft's forces cancel,
+    the backlash does not change where it settles); ``v = g r + a^k v_0`` is fitted by
+    least squares, ``r`` the body's response to the record's torque from rest and
+    ``a^k`` the decay of its initial speed. A gain ``g`` more than
+    ``REFUSE_FROM_PRIOR`` times off 1 (or negative) is refused unless ``allow``, one more
+    than ``FAR_FROM_PRIOR`` times off is noted. Returns the notes."""
+    from scipy.signal import lfilter
+
+    from .errors import InputError
+
+    notes = []
+    friction, inertia = prior.f_M + prior.f_L, prior.J_M + prior.J_L
+    for rec in records:
+        i_s, t_s, _, _ = find_step_down(rec)
+        a = math.exp(-friction * rec.ts / inertia)  # exact for a zero-order hold
+        rest = lfilter([0.0, (1.0 - a) / friction], [1.0, -a], rec.torque[:i_s])
+        v = (prior.J_M * rec.w_motor[:i_s] + prior.J_L * rec.w_load[:i_s]) / inertia
+        basis = np.column_stack([rest, a ** np.arange(i_s)])
+        (gain, _), *_ = np.linalg.lstsq(basis, v, rcond=None)
+        what = (f"{rec.name}: under the torque held before the step-down at t = {t_s:.6g} "
+                f"s the speeds are {gain:.3g} times the prior's")
+        if not 1.0 / REFUSE_FROM_PRIOR <= gain <= REFUSE_FROM_PRIOR and not allow:
+            raise InputError(
+                f"{what} (this method simulates the prior from them): {_CHECK_UNITS}; if "
+                "the prior's frictions are that far off, use --method joint (it estimates "
+                "them) or pass --allow-far-from-prior"
+            )
+        if not 1.0 / FAR_FROM_PRIOR <= gain <= FAR_FROM_PRIOR:
+            notes.append(f"{what}: {_CHECK_UNITS}")
+    return notes
 
 
 def _ratios(est, prior, names: list[str]) -> str:
@@ -345,6 +388,13 @@ def _notes(args: argparse.Namespace, est: Any, prior: Any, bounds: list[float],
     if far:
         out.append(f"{_ratios(est, prior, far)} of the prior: {_CHECK_UNITS}")
     message = est.correlation_message()
+    misfit = 1.0 - float(np.min(est.fit_percent_)) / 100.0  # rms residual / spread
+    if misfit < NOISE_FREE:  # a residual this small is no noise, white or coloured
+        out.append(f"the model reproduces every speed to {max(misfit, 1e-16):.1g} of its "
+                   "spread (noise-free, simulated records?): the residual is numerical "
+                   "error, so std and interval only say that theta is determined to that "
+                   "precision")
+        message = None
     if message is not None:
         message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
         out.append(message.replace("raise the order", "raise --noise-order"))
@@ -433,8 +483,7 @@ def _run(args: argparse.Namespace) -> int:
     extra: dict[str, Any] = {}
     for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
                           ("--final-horizon", args.final_horizon), ("--noise", args.noise),
-                          ("--prior-rel-std", args.prior_rel_std),
-                          ("--allow-far-from-prior", args.allow_far_from_prior or None)):
+                          ("--prior-rel-std", args.prior_rel_std)):
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")
     for option, value in (("--n-theta", args.n_theta), ("--cutoff-motor", args.cutoff_motor),
@@ -443,6 +492,12 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"{option} only applies with --method two-step")
     if args.seed is not None and args.bootstrap is None:
         raise InputError("--seed only applies with --bootstrap (the seed of its resamples)")
+    if args.method != "joint":  # the joint fit estimates the frictions: checked after it
+        from .identify import _as_records
+
+        _as_records(records + (finals or []), prior=prior)  # the identifiers' checks first
+        read_notes += _check_held_speeds(records + (finals or []), prior,
+                                         allow=args.allow_far_from_prior)
     if args.method == "joint":
         from .identify_joint import JointIdentifier
 
@@ -450,11 +505,6 @@ def _run(args: argparse.Namespace) -> int:
             rel: Any = args.prior_rel_std
         else:
             rel = read_uncertainty_toml(args.drive) or None
-            if rel is not None and "theta" in rel:
-                raise InputError(
-                    f"{args.drive}: [uncertainty] theta: theta is what identify estimates, "
-                    "without a prior; remove it (list the linear parameters only)"
-                )
         everything = records + (finals or [])
         _refuse_duplicates(everything)
         from .errors import CorrelatedResidualsWarning

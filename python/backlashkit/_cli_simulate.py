@@ -29,7 +29,7 @@ from . import signals
 from ._cli_files import add_file_options, file_options, reader_errors
 from .cli import missing_directory
 from .errors import InputError, SensitivityWarning
-from .io import check_writable, read_drive_toml, write_csv
+from .io import check_plot_suffix, check_writable, read_drive_toml, write_csv
 from .laws import ShaftLaw
 
 __all__ = ["add_parser", "run"]
@@ -132,7 +132,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--plot",
         metavar="FILE",
         help="also save a plot of speeds, twist and shaft torque (format from the extension: "
-        ".png, .svg, .pdf)",
+        ".png, .svg, .pdf, .jpg)",
     )
     out.add_argument("--force", action="store_true", help="overwrite output files if they exist")
     out.add_argument(
@@ -251,8 +251,7 @@ def _check_output(args: argparse.Namespace) -> Path:
                 raise InputError(f"--out {out} is also an input file; choose another name")
     if args.plot is not None:
         plot = Path(args.plot)
-        if plot.suffix.lower() not in (".png", ".svg", ".pdf"):
-            raise InputError(f"--plot {plot}: the file name must end in .png, .svg or .pdf")
+        check_plot_suffix("--plot", plot)
         if not plot.parent.is_dir():
             raise InputError(missing_directory("--plot", plot))
         if plot.exists() and not args.force:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
@@ -142,6 +143,16 @@ def fail(message: str) -> int:
     return 2
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's last flush does not fail on
+    the closed pipe too (the recipe of Python's ``signal`` documentation)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout is no file (captured in tests)
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the exit status."""
     parser = build_parser()
@@ -155,6 +166,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args.func(args) or 0)
     except InputError as exc:
         return fail(str(exc))
+    except BrokenPipeError:  # the reader closed stdout (| head): stop quietly
+        _silence_stdout()
+        return 1
     except FileNotFoundError as exc:
         return fail(f"file not found: {exc.filename}" if exc.filename else str(exc))
     except IsADirectoryError as exc:

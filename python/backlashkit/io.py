@@ -201,8 +201,9 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
 def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     """Read the optional ``[uncertainty]`` table of a drive file.
 
-    Each entry is the relative (fractional) uncertainty of one drive parameter,
-    e.g. ``J_L = 0.1`` for +-10 %. Parameters not listed are taken as exact.
+    Each entry is the relative (fractional) uncertainty of one linear drive parameter
+    (``J_M``, ``J_L``, ``k_sh``, ``f_M``, ``f_L``, ``f_sh``; not ``theta``, which is
+    estimated), e.g. ``J_L = 0.1`` for +-10 %. Parameters not listed are taken as exact.
 
     Parameters
     ----------
@@ -217,7 +218,7 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     Raises
     ------
     InputError
-        If the file does not parse, the table holds a key that is not a drive
+        If the file does not parse, the table holds a key that is not a linear drive
         parameter, or a value that is not a finite number >= 0.
     """
     doc = load_toml(path)
@@ -225,11 +226,17 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     table = _table(doc, "uncertainty", path, required=False)
     if table is None:
         return {}
-    unknown = [k for k in table if k not in DRIVE_KEYS]
+    linear = DRIVE_KEYS[:-1]  # theta has no prior: it is what identification estimates
+    if "theta" in table:
+        raise InputError(
+            f"{path}: [uncertainty] theta: the backlash is what identify estimates, without "
+            f"a prior; remove it (list the linear parameters only: {_fmt_keys(linear)})"
+        )
+    unknown = [k for k in table if k not in linear]
     if unknown:
         raise InputError(
             f"{path}: unknown key(s) {_fmt_keys(unknown)} in [uncertainty]; allowed keys: "
-            f"{_fmt_keys(DRIVE_KEYS)}"
+            f"{_fmt_keys(linear)}"
         )
     out = {}
     for key, value in table.items():
@@ -475,6 +482,30 @@ def write_csv(
         raise InputError(
             f"{target} already exists; pass --force (force=True from Python) to overwrite it"
         ) from None
+
+
+#: Figure formats of the CLI's ``--plot`` options (matplotlib's, by extension).
+PLOT_SUFFIXES = (".png", ".svg", ".pdf", ".jpg", ".jpeg")
+
+
+def check_plot_suffix(option: str, path: PathLike) -> None:
+    """Refuse a figure file name whose extension names no :data:`PLOT_SUFFIXES` format.
+
+    Parameters
+    ----------
+    option : str
+        The option that gave the name, for the message (e.g. ``"--plot"``).
+    path : str or os.PathLike
+        The file name.
+
+    Raises
+    ------
+    InputError
+        If the extension is not one of :data:`PLOT_SUFFIXES` (any case).
+    """
+    if Path(path).suffix.lower() not in PLOT_SUFFIXES:
+        raise InputError(f"{option} {path}: the file name must end in .png, .svg, .pdf or "
+                         ".jpg (the figure's format)")
 
 
 def check_writable(path: PathLike, what: str, *, directory: bool = False) -> None:

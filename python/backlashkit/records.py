@@ -478,9 +478,11 @@ def _vector(name: str, var: str, value: Any) -> np.ndarray:
     if arr.dtype == object:
         raise InputError(f"{name}: variable {var!r} holds a cell array or other objects, not "
                          "numbers; save it as a numeric vector")
-    if not (
-        np.issubdtype(arr.dtype, np.number) or arr.dtype == bool
-    ) or np.iscomplexobj(arr):
+    if arr.dtype == bool:  # a MATLAB logical: a mask or a flag saved by mistake
+        raise InputError(f"{name}: variable {var!r} holds true/false values, not "
+                         "measurements; save the signal itself (double(x) in MATLAB if "
+                         "0 and 1 are meant)")
+    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise InputError(f"{name}: variable {var!r} must hold real numbers, got {arr.dtype}")
     if arr.ndim != 1:
         if sum(s > 1 for s in arr.shape) > 1:
