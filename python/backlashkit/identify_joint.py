@@ -624,9 +624,10 @@ class JointIdentifier:
         restarts; ``()`` for none). The sum of the frictions shows on the whole record,
         their split only while the shaft crosses the backlash: at 40 dB on a light load
         a fit settled with ``f_M : f_L`` at 0.58 : 1.42 of the truth's, 9 standard errors
-        off in ``theta`` and 35 000 chi-square units above the minimum near the truth,
-        behind a ridge that no local step crosses; the restart at ``e^1`` reaches it
-        (``benchmarks/robustness_joint.py --trials 30 --seed 11``; the trial is a test).
+        off in ``theta`` and above the minimum near the truth (by more than 10 000
+        chi-square units, the trial's test), behind a ridge that no local step crosses;
+        the restart at ``e^1`` reaches it (``benchmarks/robustness_joint.py --trials 30
+        --seed 11``).
     interval : ProfileLikelihood, FisherInterval or ParametricBootstrap, optional
         Where ``ci95_`` (and, for the bootstrap, ``std_``) comes from (module
         :mod:`backlashkit.intervals`; default ``ProfileLikelihood()``). The profile
