@@ -64,7 +64,7 @@ def main() -> None:
     print(f"{'Err_p':>5} | {'mean':>8} {'err%':>6} {'std':>9} {'CRB joint':>9} {'std/CRB':>7} | "
           f"{'mean std_':>9} {'cover95':>7} | {'s/fit':>5}")
     start = time.perf_counter()
-    n_amb = n_fits = 0
+    n_amb = n_fits = n_misfit = 0
     for err in (float(e) for e in args.errs.split(",")):
         rel = err / math.sqrt(3.0) if args.penalty else None
         crb = (cramer_rao_bound(truth, t, u1, snr_db=SNR1, estimate="all", prior_rel_std=rel)
@@ -80,6 +80,7 @@ def main() -> None:
             std.append(fit.std_)
             cover += fit.ci95_[0] <= THETA <= fit.ci95_[1]
             n_amb += fit.ambiguous_
+            n_misfit += fit.misfit_restarted_
             n_fits += 1
         per_fit = (time.perf_counter() - t0) / args.runs
         m, s = float(np.mean(est)), float(np.std(est, ddof=1))
@@ -90,6 +91,7 @@ def main() -> None:
     print(f"err% = (mean - theta*) / theta*; std with ddof=1; cover95 = runs whose "
           f"ci95_ holds theta*; {time.perf_counter() - start:.1f} s")
     print(f"ambiguous searches (JointIdentifier.ambiguous_): {n_amb} of {n_fits}")
+    print(f"misfit restarts (JointIdentifier.misfit_restarted_): {n_misfit} of {n_fits}")
 
 
 if __name__ == "__main__":

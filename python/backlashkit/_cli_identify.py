@@ -554,6 +554,8 @@ def _run(args: argparse.Namespace) -> int:
             "interval": est.interval_,
             "ci95_bounded": list(est.ci95_bounded_),
             "ambiguous": est.ambiguous_,
+            "misfit_restarted": est.misfit_restarted_,
+            "misfit_restart_won": est.misfit_restart_won_,
             "noise_model": ("white" if est.noise_ar_ is None
                             else f"ar({est.noise_ar_.shape[-1]})"),
             "residuals_correlated": est.correlation_message() is not None,
