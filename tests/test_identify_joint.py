@@ -437,8 +437,9 @@ def test_friction_restarts_cross_the_ridge_of_a_wrong_split():
 
 def test_misfit_restart_leaves_a_stiff_shaft_without_backlash():
     """A trial of ``benchmarks/robustness_joint.py --seed 21 --trials 40`` (light load,
-    theta 2 deg, 40 dB, CRB 0.2 %): from the prior (J_M 40 % low) every start of the
-    theta grid lies in the basin of a stiff shaft with almost no backlash, and the fit
+    theta 2 deg, 40 dB, CRB 0.2 %): from the prior (J_M 31 % low, J_L 37 % high)
+    every start of the theta grid lies in the basin of a stiff shaft with almost no
+    backlash, and the fit
     ends at 7 % of the true theta with a residual whose lag-1 autocorrelation (0.24)
     no noise has; the second search, from the fitted linear parameters, finds the
     truth's basin and is kept."""
