@@ -286,6 +286,9 @@ CORRELATED_LAG1 = 0.2
 #: ``1 / sqrt(n)`` (0.004 for 80 s at 1 kHz), a model in a wrong basin a correlated
 #: residual (0.24-0.25 in the failures that motivated it).
 MISFIT_LAG1 = 0.02
+#: ... or above this many of its standard deviations under white noise, ``1 / sqrt(n)``
+#: for ``n`` fitted samples (short records or ``final_horizon``: 0.16 for 1000 samples).
+MISFIT_SIGMAS = 5.0
 #: The second search's fit replaces the first only if its -2 log likelihood is lower
 #: by more than this (chi-square units).
 MISFIT_MARGIN = 1.0
@@ -642,7 +645,8 @@ class JointIdentifier:
         --seed 11``).
     misfit_restart : bool, optional
         When a residual of the fit is correlated beyond noise (lag-1 autocorrelation
-        above :data:`MISFIT_LAG1` = 0.02 in magnitude, whitened with ``ARNoise``), run
+        above :data:`MISFIT_LAG1` = 0.02 and 5 of its standard deviations ``1 /
+        sqrt(n)`` under white noise in magnitude, whitened with ``ARNoise``), run
         the whole search once more from the fitted linear parameters instead of the
         prior (the prior penalty, if any, stays at the prior) and keep the fit of
         higher likelihood, the noise levels profiled out (default True). A prior 40 %
@@ -950,8 +954,10 @@ class JointIdentifier:
         return self
 
     def _misfit(self) -> bool:
-        """Whether a residual is too correlated for noise (:data:`MISFIT_LAG1`)."""
-        return bool(np.max(np.abs(self.residual_lag1_)) > MISFIT_LAG1)
+        """Whether a residual is too correlated for noise (:data:`MISFIT_LAG1`,
+        :data:`MISFIT_SIGMAS`)."""
+        limit = np.maximum(MISFIT_LAG1, MISFIT_SIGMAS / np.sqrt(self._lag1_samples))
+        return bool(np.any(np.abs(self.residual_lag1_) > limit))
 
     def _search_again(self, records) -> None:
         """The whole search once more from the fitted linear parameters; the fit of
@@ -1347,12 +1353,14 @@ class JointIdentifier:
                 blocks.setdefault((sp.k, c), []).append(best.r[pos : pos + m])
                 pos += m
         self.residual_lag1_ = np.zeros((len(recs), 2))
+        self._lag1_samples = np.ones((len(recs), 2))
         # -2 log likelihood with the noise variances profiled out (up to a constant):
         # comparable between fits whose noise levels differ (misfit_restart)
         self._neg2_loglik = float(np.sum(best.r[pos:] ** 2))  # the prior's rows
         for (k, c), parts in blocks.items():
             e = np.concatenate(parts)
             self.residual_lag1_[k, c] = _lag1(e)
+            self._lag1_samples[k, c] = max(e.size, 1)
             self._neg2_loglik += e.size * math.log(
                 max(float(sigma[k, c]) ** 2 * float(np.mean(e**2)), 1e-300))
         if ar is not None:  # the noise's own std, not its innovation's
