@@ -18,7 +18,8 @@ the estimate (the optimiser's fault); how many trials beyond 5 % where the CRB i
 most 2.5 % of theta, beside the number an efficient unbiased estimator would give
 (``sum 2 Phi(-5 % / CRB)`` over those trials); and, unless the interval is Fisher's,
 on how many trials the two intervals disagree and where the ends lie in Fisher
-half-widths.
+half-widths; the largest residual lag-1 autocorrelation per fit (median, 99th
+percentile, max) and how many fits ran the second search of ``misfit_restart`` and kept it.
 Issue 3 asks: within 5 % everywhere, about 95 % coverage. Where the CRB itself is above
 2.5 % of theta (0.5 deg at 20 dB: 4.6-7.2 %), no unbiased estimator stays within 5 %
 in 95 % of the trials, so the summary also gives the worst error over the other

@@ -644,9 +644,9 @@ class JointIdentifier:
         the restart at ``e^1`` reaches it (``benchmarks/robustness_joint.py --trials 30
         --seed 11``).
     misfit_restart : bool, optional
-        When a residual of the fit is correlated beyond noise (lag-1 autocorrelation
-        above :data:`MISFIT_LAG1` = 0.02 and 5 of its standard deviations ``1 /
-        sqrt(n)`` under white noise in magnitude, whitened with ``ARNoise``), run
+        When a residual of the fit (whitened, with ``ARNoise``) is correlated beyond
+        noise, its lag-1 autocorrelation above both :data:`MISFIT_LAG1` = 0.02 and
+        :data:`MISFIT_SIGMAS` = 5 times ``1 / sqrt(n)`` (its std under white noise), run
         the whole search once more from the fitted linear parameters instead of the
         prior (the prior penalty, if any, stays at the prior) and keep the fit of
         higher likelihood, the noise levels profiled out (default True). A prior 40 %
