@@ -236,6 +236,62 @@ def test_held_speed_far_from_the_priors_steady_state_is_refused(exp_csv, tmp_pat
     assert '"far_from_prior": []' in out
 
 
+def test_the_library_warns_of_a_prior_mismatch(exp):
+    """What ``identify`` refuses, the library answers with a PriorMismatchWarning and
+    says in ``held_speed_gains_`` / ``far_from_prior_``: speeds in rpm are 9.55 times
+    the prior's held speed, and the joint fit moves J_M x0.1."""
+    from scipy.signal import lfilter
+
+    from backlashkit import PriorMismatchWarning, RegressionIdentifier, TwoStepIdentifier
+    from backlashkit.identify import find_step_down, held_speed_gain
+    from backlashkit.intervals import FisherInterval
+
+    prior = read_drive_toml(DRIVE_TOML, require_theta=False).with_theta(None)
+    rpm = 60 / (2 * np.pi)
+    bad = Record(exp.t, exp.torque, rpm * exp.w_motor, rpm * exp.w_load, name="rpm.csv")
+    gain = held_speed_gain(exp, prior)
+    # the same least squares with the rigid body's response from scipy's filter
+    i_s = find_step_down(exp)[0]
+    f, j = prior.f_M + prior.f_L, prior.J_M + prior.J_L
+    a = math.exp(-f * exp.ts / j)
+    rest = lfilter([0.0, (1 - a) / f], [1.0, -a], exp.torque[:i_s])
+    v = (prior.J_M * exp.w_motor[:i_s] + prior.J_L * exp.w_load[:i_s]) / j
+    basis = np.column_stack([rest, a ** np.arange(i_s)])
+    assert gain == pytest.approx(np.linalg.lstsq(basis, v, rcond=None)[0][0], rel=1e-9)
+    assert gain == pytest.approx(1.0, abs=0.02)  # paper_drive.toml is the record's drive
+    assert held_speed_gain(bad, prior) == pytest.approx(rpm * gain, rel=1e-9)
+    for cls in (TwoStepIdentifier, RegressionIdentifier):
+        with pytest.warns(PriorMismatchWarning, match=r"^rpm\.csv: .* 9\.\d+ times the "
+                                                      r"prior's.*rpm read as rad/s\?"):
+            est = cls(prior).fit(bad)
+        assert est.held_speed_gains_ == [pytest.approx(rpm * gain, rel=1e-9)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", PriorMismatchWarning)
+            assert cls(prior).fit(exp).held_speed_gains_ == [pytest.approx(gain, rel=1e-9)]
+    with pytest.warns(PriorMismatchWarning, match=r"the fit moved J_M x0\.1"):
+        est = JointIdentifier(prior, interval=FisherInterval()).fit(bad)
+    assert "J_M" in est.far_from_prior_
+
+
+def test_what_the_core_cannot_simulate_names_the_record(exp_csv, tmp_path, capsys):
+    """A torque of 1e300 N m makes the joint fit's drive chatter, speeds of 1e300 rad/s
+    the two-step method's prior (started at that held speed): the compiled core's
+    refusal comes with the file's name, on one line (it said only "cannot compute
+    with this input" before)."""
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    write_csv(tmp_path / "torque.csv", {"t": t, "torque": 1e300 * u, "w_motor": w_m,
+                                        "w_load": w_l})
+    write_csv(tmp_path / "speeds.csv", {"t": t, "torque": u, "w_motor": 1e300 * w_m,
+                                        "w_load": 1e300 * w_l})
+    err = _one_line_error(capsys, ["identify", str(tmp_path / "torque.csv"), "--drive",
+                                   DRIVE_TOML])
+    assert "torque.csv: cannot simulate the drive on this record: contact chatter" in err
+    err = _one_line_error(capsys, ["identify", str(tmp_path / "speeds.csv"), "--drive",
+                                   DRIVE_TOML, "--method", "two-step",
+                                   "--allow-far-from-prior"])
+    assert "speeds.csv: cannot simulate the prior on this record: contact chatter" in err
+
+
 def test_two_step_at_the_edge_of_its_search_is_noted(exp_csv, capsys):
     """On this short 0.942 N m record alone (paper A uses it for step 2 only) the eq. 6
     pre-estimate is off and the least squares ends at an edge of its window."""

@@ -50,7 +50,7 @@ def test_control_json_trace_plot(tmp_path, capsys):
         (("frequency = [1.3]  # rad/s", "frequency = [1.3, 2.0]"), "same length"),
         (("c_l = -0.5", "c_l = 0.5"), "[backlash] c_l must be <= 0"),
         (("ts = 0.01", "tss = 0.01"), "unknown key"),
-        (('kind = "exact"', 'kind = "magic"'), "[inverse] inverse must be one of"),
+        (('kind = "exact"', 'kind = "magic"'), "[inverse] kind must be one of"),
         (("[plant]", "[plant\n"), "not valid TOML"),
         (("theta_b0 = [1.51, 0.2, -0.55]", "theta_b0 = [1.51, 0.2, -0.55, 1.0]"),
          "[adaptation] theta_b0 must be a list of exactly 3 numbers"),

@@ -145,6 +145,32 @@ def test_levels_of_a_slow_noisy_ramp_are_refused(step1, tmp_path, capsys):
     assert "--torque-levels found one level only" in err and err.count("\n") == 1
 
 
+def test_levels_refuse_a_ramp_inside_a_level(step1):
+    """A torque that ramps up over 1 s and then steps down would be levelled into a
+    step at t = 0 (the model driven by it starts 1 s early): refused with the span; a
+    50 ms ramp through noise (one level) too. Steps through white or filtered noise
+    are levelled (noise filtered over 10-200 samples: 4 x 10 records)."""
+    from scipy.signal import lfilter
+
+    t = step1.t
+    rng = np.random.default_rng(5)
+    up = np.clip(0.157 * t, 0.0, 0.157) * (t < 40.0) + 1e-3 * rng.standard_normal(t.size)
+    with pytest.raises(InputError, match=r"^up: torque_levels cannot level the torque, and "
+                       r"between t = 0 s and 0\.9\d+ s it departs from its level 0\.157 N m "
+                       r"by up to 0\.15\d* N m .*give the torque command"):
+        torque_levels(bk.Record(t, up, step1.w_motor, step1.w_load, name="up"))
+    down = np.clip(0.157 * (40.05 - t) / 0.05, 0.0, 0.157) + 3e-3 * rng.standard_normal(t.size)
+    with pytest.raises(InputError, match=r"found one level only.*between t = 39\.9\d+ s"):
+        torque_levels(bk.Record(t, down, step1.w_motor, step1.w_load, name="down"))
+    for seed in range(10):
+        for corr in (10, 40, 100, 200):
+            white = 1e-3 * np.sqrt(2 * corr - 1) * np.random.default_rng(seed).standard_normal(
+                t.size)
+            noise = lfilter([1 / corr], [1, -(1 - 1 / corr)], white)  # std about 1e-3
+            rec = bk.Record(t, step1.torque + noise, step1.w_motor, step1.w_load)
+            assert np.unique(torque_levels(rec).torque).size == 2
+
+
 def test_filtered_and_quantised_torque_noise(step1):
     """Noise through a first-order filter (40 samples) hides from second differences;
     the spread of the held level shows it. Quantised noise (2 mN m counts, most

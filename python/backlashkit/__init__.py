@@ -15,7 +15,12 @@ from .control import (
     design_mrc,
     simulate_closed_loop,
 )
-from .errors import CorrelatedResidualsWarning, InputError, SensitivityWarning
+from .errors import (
+    CorrelatedResidualsWarning,
+    InputError,
+    PriorMismatchWarning,
+    SensitivityWarning,
+)
 from .identify import Record, RegressionIdentifier, TwoStepIdentifier
 from .identify_joint import (
     CramerRaoBound,
@@ -78,6 +83,7 @@ __all__ = [
     "JointIdentifier",
     "NearGrazing",
     "Sensitivity",
+    "PriorMismatchWarning",
     "SensitivityWarning",
     "ShaftLaw",
     "TwoMassDrive",

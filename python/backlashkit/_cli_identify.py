@@ -26,7 +26,14 @@ import numpy as np
 
 from ._cli_files import add_file_options, file_options, reader_errors
 from .cli import flag_names
-from .identify import Record, RegressionIdentifier, TwoStepIdentifier, find_step_down
+from .identify import (
+    FAR_FROM_PRIOR,
+    Record,
+    RegressionIdentifier,
+    TwoStepIdentifier,
+    find_step_down,
+    held_speed_gain,
+)
 from .io import read_drive_toml, read_uncertainty_toml
 from .report_identify import add_report_option, check_report_directory, maybe_write_report
 
@@ -283,11 +290,11 @@ def _refuse_duplicates(records: list[Record]) -> None:
         seen[key] = rec.name
 
 
-#: An estimated linear parameter this many times off its prior (either way) is noted.
-FAR_FROM_PRIOR = 3.0
-#: ... and this many times off refuses the answer, unless --allow-far-from-prior: a
-#: prior that far off is rarer than a unit or column mistake (rpm read as rad/s moves
-#: J_M x0.1, swapped speeds J_M x6 and k_sh x6), whose theta means nothing.
+#: An estimated linear parameter (or held speed) FAR_FROM_PRIOR times off its prior
+#: (either way) is noted; this many times off refuses the answer, unless
+#: --allow-far-from-prior: a prior that far off is rarer than a unit or column mistake
+#: (rpm read as rad/s moves J_M x0.1, swapped speeds J_M x6 and k_sh x6), whose theta
+#: means nothing.
 REFUSE_FROM_PRIOR = 5.0
 
 
@@ -313,28 +320,16 @@ _CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the t
 def _check_held_speeds(records: list[Record], prior: Any, *, allow: bool) -> list[str]:
     """The two-step and regression methods simulate the prior from the speed held before
     the step-down; a record in other units, or a prior far off, makes that meaningless.
-    Before the step-down, the inertia-weighted speed ``v = (J_M w_M + J_L w_L) / J``
-    follows the rigid body ``J v' = torque - (f_M + f_L) v`` (the shaft's forces cancel,
-    the backlash does not change where it settles); ``v = g r + a^k v_0`` is fitted by
-    least squares, ``r`` the body's response to the record's torque from rest and
-    ``a^k`` the decay of its initial speed. A gain ``g`` more than
-    ``REFUSE_FROM_PRIOR`` times off 1 (or negative) is refused unless ``allow``, one more
-    than ``FAR_FROM_PRIOR`` times off is noted. Returns the notes."""
-    from scipy.signal import lfilter
-
+    A :func:`~backlashkit.identify.held_speed_gain` more than ``REFUSE_FROM_PRIOR``
+    times off 1 (or negative) is refused unless ``allow``, one more than
+    ``FAR_FROM_PRIOR`` times off is noted. Returns the notes."""
     from .errors import InputError
 
     notes = []
-    friction, inertia = prior.f_M + prior.f_L, prior.J_M + prior.J_L
     for rec in records:
-        i_s, t_s, _, _ = find_step_down(rec)
-        a = math.exp(-friction * rec.ts / inertia)  # exact for a zero-order hold
-        rest = lfilter([0.0, (1.0 - a) / friction], [1.0, -a], rec.torque[:i_s])
-        v = (prior.J_M * rec.w_motor[:i_s] + prior.J_L * rec.w_load[:i_s]) / inertia
-        basis = np.column_stack([rest, a ** np.arange(i_s)])
-        (gain, _), *_ = np.linalg.lstsq(basis, v, rcond=None)
-        what = (f"{rec.name}: under the torque held before the step-down at t = {t_s:.6g} "
-                f"s the speeds are {gain:.3g} times the prior's")
+        gain = held_speed_gain(rec, prior)
+        what = (f"{rec.name}: under the torque held before the step-down at t = "
+                f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
         if not 1.0 / REFUSE_FROM_PRIOR <= gain <= REFUSE_FROM_PRIOR and not allow:
             raise InputError(
                 f"{what} (this method simulates the prior from them): {_CHECK_UNITS}; if "
@@ -426,7 +421,11 @@ def run(args: argparse.Namespace) -> int:
     flags = dict(_FLAGS)
     if args.prior_rel_std is not None:  # else the [uncertainty] table gave the values
         flags["prior_rel_std"] = "--prior-rel-std"
-    with flag_names(flags):
+    from .errors import PriorMismatchWarning
+
+    with flag_names(flags), warnings.catch_warnings():
+        # the command notes or refuses a prior mismatch itself, with its flags
+        warnings.simplefilter("ignore", PriorMismatchWarning)
         return _run(args)
 
 
@@ -455,7 +454,11 @@ def _run(args: argparse.Namespace) -> int:
 
         for group in (records, finals or []):
             for k, rec in enumerate(group):
-                group[k] = torque_levels(rec)
+                try:
+                    group[k] = torque_levels(rec)
+                except InputError as exc:  # a ramp: the library's name -> the flag
+                    raise InputError(str(exc).replace("torque_levels", "--torque-levels", 1)
+                                     ) from None
                 if group[k] is rec:
                     read_notes.append(f"{rec.name}: the torque is piecewise constant already; "
                                       "--torque-levels left it as it is")

@@ -8,7 +8,8 @@ status 2.
 
 from __future__ import annotations
 
-__all__ = ["CorrelatedResidualsWarning", "InputError", "SensitivityWarning"]
+__all__ = ["CorrelatedResidualsWarning", "InputError", "PriorMismatchWarning",
+           "SensitivityWarning"]
 
 
 class InputError(ValueError):
@@ -31,4 +32,16 @@ class CorrelatedResidualsWarning(UserWarning):
     The joint estimator's likelihood treats them as white (after whitening, with an
     autoregressive noise model); when they are not, its standard error and interval
     are too narrow.
+    """
+
+
+class PriorMismatchWarning(UserWarning):
+    """The data sit far from what the prior drive predicts.
+
+    Emitted when a record's speeds under the torque held before the step-down are
+    more than :data:`backlashkit.identify.FAR_FROM_PRIOR` times off the prior's
+    response (the two-step and regression methods simulate the prior from them), or
+    when a joint fit moves a linear parameter that far from the prior. Far more often
+    than a prior that wrong, the speeds are in other units (rpm read as rad/s) or the
+    columns are swapped; the estimate of ``theta`` then means nothing.
     """

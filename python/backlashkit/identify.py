@@ -91,6 +91,7 @@ __all__ = [
     "commutation_instants",
     "find_step_down",
     "fir_lowpass",
+    "held_speed_gain",
     "pre_estimate",
 ]
 
@@ -98,6 +99,10 @@ ArrayLike = Sequence[float] | np.ndarray
 
 #: Paper A's identification time dt_4 in s.
 DEFAULT_DT4 = 1.0
+
+#: A record's held speed (:func:`held_speed_gain`) or a joint fit's linear parameter
+#: this many times off the prior's (either way) raises a PriorMismatchWarning.
+FAR_FROM_PRIOR = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -350,6 +355,76 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
     return i_s, float(record.t[i_s]), float(u[k]), float(u[i_s])
 
 
+def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
+    """How many times the prior's speed the record holds before its step-down.
+
+    Before the step-down the inertia-weighted speed ``v = (J_M w_M + J_L w_L) / J``
+    (``J = J_M + J_L``) follows the rigid body ``J v' = torque - (f_M + f_L) v``: the
+    shaft's forces cancel, and the backlash does not change where it settles. With
+    the prior's inertias and frictions, ``v = g r + a^k v_0`` is fitted by least
+    squares, ``r`` the body's response to the record's torque from rest (zero-order
+    hold, exact) and ``a^k`` the decay of an initial speed; ``g`` is returned. The
+    two-step and regression methods simulate the prior from the held speed: a ``g``
+    far from 1 means speeds in other units (rpm read as rad/s gives about 9.55),
+    swapped columns, or frictions that far off.
+
+    Parameters
+    ----------
+    record : Record
+        A step-down experiment.
+    prior : TwoMassDrive
+        The prior drive (its ``theta`` is not used).
+
+    Returns
+    -------
+    float
+        The least-squares gain ``g`` (1 when the record fits the prior's rigid body).
+
+    Raises
+    ------
+    InputError
+        If the record has no step-down (see :func:`find_step_down`).
+    """
+    from itertools import accumulate
+
+    i_s = find_step_down(record)[0]
+    friction, inertia = prior.f_M + prior.f_L, prior.J_M + prior.J_L
+    a = math.exp(-friction * record.ts / inertia)
+    b = (1.0 - a) / friction
+    # r[k] = a r[k-1] + b u[k-1], r[0] = 0 (scipy.signal.lfilter would cost its import)
+    rest = np.fromiter(accumulate((b * float(x) for x in record.torque[: i_s - 1]),
+                                  lambda r, x: a * r + x, initial=0.0), float, i_s)
+    v = (prior.J_M * record.w_motor[:i_s] + prior.J_L * record.w_load[:i_s]) / inertia
+    basis = np.column_stack([rest, a ** np.arange(i_s)])
+    scale = float(np.max(np.abs(v))) or 1.0  # speeds of 1e300 would overflow the squares
+    (gain, _), *_ = np.linalg.lstsq(basis, v / scale, rcond=None)
+    return float(gain) * scale
+
+
+def _far(ratio: float) -> bool:
+    """Whether a ratio to the prior is more than FAR_FROM_PRIOR off (either way)."""
+    return not 1.0 / FAR_FROM_PRIOR <= ratio <= FAR_FROM_PRIOR
+
+
+def _warn_held_speeds(recs: list[Record], prior: TwoMassDrive) -> list[float]:
+    """:func:`held_speed_gain` of every record; a PriorMismatchWarning for those far
+    off (:data:`FAR_FROM_PRIOR`)."""
+    import warnings
+
+    from .errors import PriorMismatchWarning
+
+    gains = [held_speed_gain(rec, prior) for rec in recs]
+    for rec, gain in zip(recs, gains, strict=True):
+        if _far(gain):
+            warnings.warn(
+                f"{rec.name}: under the torque held before the step-down the speeds are "
+                f"{gain:.3g} times the prior's, and this method simulates the prior from "
+                "them: check the units of the speeds (rpm read as rad/s?), the columns "
+                "(w_motor and w_load swapped?) and the prior's frictions",
+                PriorMismatchWarning, stacklevel=3)
+    return gains
+
+
 def _firwin_hamming(numtaps: int, cutoff: float) -> np.ndarray:
     """Hamming-windowed sinc low-pass taps, unit DC gain: ``scipy.signal.firwin(numtaps,
     cutoff)`` (``cutoff`` relative to Nyquist), checked against it by the tests.
@@ -599,6 +674,9 @@ def commutation_instants(
             f"{record.name}: the record ends before t_s + dt3 = {t_s + dt3:.6g} s"
         )
     t, y = record.t, record.w_load
+    # eq. 9's argmins do not depend on the speed's scale, but 1e300 rad/s would overflow
+    # its squares: scaled by a power of 2, exact, so every other record's sums are unchanged
+    y = np.ldexp(y, -math.frexp(float(np.max(np.abs(y))))[1])
     wc = _w_c(y[i_s : i_s + n1 + 1], t[i_s : i_s + n1 + 1], alpha, anchor, onset)
     i_c = i_s + int(np.argmin(wc))
     lo = i_s + n2
@@ -641,6 +719,7 @@ class _Segment:
     torque: np.ndarray
     w_motor: np.ndarray
     w0: float
+    name: str = "record"
 
 
 def _segment(record: Record, dt4: float, level_window: float) -> _Segment:
@@ -655,7 +734,7 @@ def _segment(record: Record, dt4: float, level_window: float) -> _Segment:
     nl = max(1, min(i_s, int(round(level_window / ts))))
     w0 = float(np.mean(record.w_motor[i_s - nl : i_s]))
     sl = slice(i_s, i_s + n4 + 1)
-    return _Segment(record.t[sl], record.torque[sl], record.w_motor[sl], w0)
+    return _Segment(record.t[sl], record.torque[sl], record.w_motor[sl], w0, record.name)
 
 
 def _cost(prior: TwoMassDrive, segments: list[_Segment], thetas: np.ndarray, workers) -> np.ndarray:
@@ -666,7 +745,15 @@ def _cost(prior: TwoMassDrive, segments: list[_Segment], thetas: np.ndarray, wor
     for seg in segments:
         drives = [prior.with_theta(float(th)) for th in thetas]
         x0 = np.array([[seg.w0, seg.w0, th + prior.f_L * seg.w0 / prior.k_sh] for th in thetas])
-        responses = simulate_batch(drives, seg.t, seg.torque, initial_state=x0, workers=workers)
+        try:
+            responses = simulate_batch(drives, seg.t, seg.torque, initial_state=x0,
+                                       workers=workers)
+        except InputError:
+            raise
+        except ValueError as exc:  # what the compiled core refuses, with the record named
+            text = " ".join(str(exc).split())
+            raise InputError(f"{seg.name}: cannot simulate the prior on this record: "
+                             f"{text}") from exc
         for j, r in enumerate(responses):
             e = seg.w_motor - r.w_motor
             total[j] += float(e @ e)
@@ -761,6 +848,11 @@ class TwoStepIdentifier:
         Final search interval ``theta_ini (1 -+ n_theta)`` in rad.
     cost_ : float
         ``W_1`` at ``theta_`` in (rad/s)^2.
+    held_speed_gains_ : list of float
+        :func:`held_speed_gain` per record (``records``, then ``final_records`` if
+        given): the held speeds over the prior's; one more than
+        :data:`FAR_FROM_PRIOR` times off 1 raises a
+        :class:`~backlashkit.errors.PriorMismatchWarning`.
     """
 
     method = "two-step"
@@ -819,6 +911,12 @@ class TwoStepIdentifier:
             If a parameter is invalid, or a record has no step-down, no commutation
             the method can use, or a pre-estimate that is not positive (each message
             names the record).
+
+        Warns
+        -----
+        PriorMismatchWarning
+            If a record's held speeds are more than :data:`FAR_FROM_PRIOR` times off
+            the prior's response (:func:`held_speed_gain`).
         """
         prior = _check_prior(self.prior)
         n_theta = v.positive("n_theta", self.n_theta)
@@ -833,6 +931,7 @@ class TwoStepIdentifier:
         recs = _as_records(records, prior=prior)
         finals = recs if final_records is None else _as_records(final_records, "final_records",
                                                                 prior=prior)
+        gains = _warn_held_speeds(recs if finals is recs else recs + finals, prior)
         alpha = prior.f_L / prior.J_L
         comms, inis = [], []
         for rec in recs:
@@ -868,6 +967,7 @@ class TwoStepIdentifier:
         self.t_c_ = [c.t_c for c in comms]
         self.t_b_ = [c.t_b for c in comms]
         self.bounds_ = (lo, hi)
+        self.held_speed_gains_ = gains
         return self
 
 
@@ -902,6 +1002,10 @@ class RegressionIdentifier:
         Criterion at ``theta_`` in (rad/s)^2.
     t_s_ : list of float
         Step-down instant per record in s.
+    held_speed_gains_ : list of float
+        :func:`held_speed_gain` per record: the held speeds over the prior's; one more
+        than :data:`FAR_FROM_PRIOR` times off 1 raises a
+        :class:`~backlashkit.errors.PriorMismatchWarning`.
     """
 
     method = "regression"
@@ -940,6 +1044,12 @@ class RegressionIdentifier:
         ------
         InputError
             If a parameter is invalid or a record has no step-down.
+
+        Warns
+        -----
+        PriorMismatchWarning
+            If a record's held speeds are more than :data:`FAR_FROM_PRIOR` times off
+            the prior's response (:func:`held_speed_gain`).
         """
         prior = _check_prior(self.prior)
         theta_max = v.positive("theta_max", self.theta_max)
@@ -947,6 +1057,7 @@ class RegressionIdentifier:
         level_window = v.positive("level_window", self.level_window)
         n_grid = _check_int("n_grid", self.n_grid, 2)
         recs = _as_records(records, prior=prior)
+        self.held_speed_gains_ = _warn_held_speeds(recs, prior)
         segments = [_segment(r, dt4, level_window) for r in recs]
         self.theta_, self.cost_ = _search(prior, segments, 0.0, theta_max, n_grid, self.workers)
         self.t_s_ = [find_step_down(r)[1] for r in recs]

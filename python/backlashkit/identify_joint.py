@@ -109,8 +109,13 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import _validate as v
-from .errors import CorrelatedResidualsWarning, InputError, SensitivityWarning
-from .identify import Record, TwoStepIdentifier, _as_records, find_step_down
+from .errors import (
+    CorrelatedResidualsWarning,
+    InputError,
+    PriorMismatchWarning,
+    SensitivityWarning,
+)
+from .identify import Record, TwoStepIdentifier, _as_records, _far, find_step_down
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, profile_crossing
 from .noise_models import (
     ARNoise,
@@ -318,7 +323,23 @@ def _x0(p: np.ndarray, level: float | None) -> np.ndarray:
 
 
 def _simulate(p: np.ndarray, span: _Span, law, workers, end: int | None = None) -> np.ndarray:
-    """States ``(len(p), end, 3)`` of packed parameter rows ``p`` over a span."""
+    """States ``(len(p), end, 3)`` of packed parameter rows ``p`` over a span.
+
+    What the compiled core refuses (contact chatter, a mode too fast for the sample
+    time) becomes an :class:`InputError` naming the record; the searches catch it as
+    the ``ValueError`` it still is.
+    """
+    try:
+        return _simulate_span(p, span, law, workers, end)
+    except InputError:
+        raise
+    except ValueError as exc:
+        text = " ".join(str(exc).split())
+        raise InputError(f"{span.record.name}: cannot simulate the drive on this record: "
+                         f"{text}") from exc
+
+
+def _simulate_span(p: np.ndarray, span: _Span, law, workers, end: int | None) -> np.ndarray:
     from .simulate import _simulate_packed
 
     if span.hold is not None:  # from rest through the held torque, on a coarse grid
@@ -777,6 +798,12 @@ class JointIdentifier:
     misfit_restart_won_ : bool
         Whether the second search's fit was kept (every fitted attribute then comes
         from it, ``theta_starts_`` and the two-step estimates included).
+    far_from_prior_ : list of str
+        The estimated linear parameters more than
+        :data:`~backlashkit.identify.FAR_FROM_PRIOR` times off the prior (either way);
+        when any, :meth:`fit` emits a
+        :class:`~backlashkit.errors.PriorMismatchWarning` (wrong units or columns
+        are far likelier than a prior that wrong).
     """
 
     method = "joint"
@@ -854,8 +881,9 @@ class JointIdentifier:
         v.positive("pre_window", self.pre_window)
         v.positive("theta_max", self.theta_max)
         _check_int("n_grid", self.n_grid, 2)
-        if not isinstance(self.misfit_restart, (bool, np.bool_)):
-            raise InputError(f"misfit_restart must be True or False, got {self.misfit_restart!r}")
+        for name in ("two_step_start", "misfit_restart"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
         _check_int("n_starts", self.n_starts, 1)
         _check_int("n_continue", self.n_continue, 1)
         _check_int("ambiguity_starts", self.ambiguity_starts, 0)
@@ -934,6 +962,14 @@ class JointIdentifier:
         ------
         InputError
             If a parameter is invalid or a record cannot be used (message names it).
+
+        Warns
+        -----
+        CorrelatedResidualsWarning
+            If a residual is too correlated for the interval
+            (:meth:`correlation_message`).
+        PriorMismatchWarning
+            If a linear parameter ends far from the prior (``far_from_prior_``).
         """
         self._check()
         # one BLAS thread: the products J^T J (n_samples x 7) gain nothing from more,
@@ -951,6 +987,15 @@ class JointIdentifier:
         message = self.correlation_message()
         if message is not None:
             warnings.warn(message, CorrelatedResidualsWarning, stacklevel=2)
+        self.far_from_prior_ = [name for name in self.estimated_[1:]
+                                if _far(self.params_[name] / getattr(self.prior, name))]
+        if self.far_from_prior_:
+            ratios = ", ".join(f"{name} x{self.params_[name] / getattr(self.prior, name):.3g}"
+                               for name in self.far_from_prior_)
+            warnings.warn(
+                f"the fit moved {ratios} from the prior: check the units of the speeds "
+                "(rpm read as rad/s?) and of the time, the columns (w_motor and w_load "
+                "swapped?) and the prior", PriorMismatchWarning, stacklevel=2)
         return self
 
     def _misfit(self) -> bool:
@@ -1151,7 +1196,9 @@ class JointIdentifier:
         self.theta_ini_ = None
         if self.two_step_start:
             try:
-                ts_est = TwoStepIdentifier(start_drive, workers=self.workers).fit(recs)
+                with warnings.catch_warnings():  # a start only; far_from_prior_ says it
+                    warnings.simplefilter("ignore", PriorMismatchWarning)
+                    ts_est = TwoStepIdentifier(start_drive, workers=self.workers).fit(recs)
                 self.theta_two_step_ = float(ts_est.theta_)
                 self.theta_ini_ = float(ts_est.theta_ini_)
                 starts.append(self.theta_two_step_)

@@ -41,6 +41,16 @@ _MAD = 1.4826  # median absolute deviation -> std of a Gaussian
 PIECEWISE_CONSTANT = 0.01
 #: Samples of the held level before the largest drop that measure the torque's noise.
 PLATEAU_SAMPLES = 5000
+#: :func:`torque_levels` refuses a level whose samples, averaged over RAMP_WINDOW
+#: samples, depart from it by more than RAMP_SIGMAS noise std (and than
+#: TORQUE_NOISE_LIMIT of the largest torque): a ramp or a smooth torque, not a step
+#: through noise. Averaged white noise stays far within 1 noise std; on 40 records
+#: of 80 s at 1 ms, noise filtered over 100 samples reached 6.2 once (the estimate of
+#: its std low), none over 10-200 samples reached 8 (``tests/test_torque.py``).
+RAMP_WINDOW = 51
+RAMP_SIGMAS = 8.0
+#: Samples per block of the noise estimate of that check.
+NOISE_BLOCK = 500
 
 
 def torque_noise_std(torque: np.ndarray) -> float:
@@ -120,7 +130,8 @@ def torque_levels(rec: Record) -> Record:
     noise std of its first differences from one sample to the next; each level is the
     median of its samples. For steps through noise (paper A's experiments measured
     with a current sensor); a ramp slower than that threshold per sample, or a smooth
-    torque, becomes one level, and the identification then finds no step-down.
+    torque, would become part of a level, so a level its samples depart from by more
+    than noise is refused.
 
     Parameters
     ----------
@@ -137,7 +148,9 @@ def torque_levels(rec: Record) -> Record:
     Raises
     ------
     InputError
-        If ``rec`` is not a record.
+        If ``rec`` is not a record, or if the torque departs from a level by more than
+        noise (:data:`RAMP_SIGMAS`; a ramp or a smooth torque, which levels would
+        replace by a step: the message gives the time span).
 
     Examples
     --------
@@ -163,6 +176,46 @@ def torque_levels(rec: Record) -> Record:
     noise_d = max(_MAD * float(np.median(d)), float(moves.min()))
     starts = np.flatnonzero(d > JUMP_THRESHOLD * noise_d) + 1
     levels = np.empty_like(u)
-    for seg in np.split(np.arange(u.size), starts):
+    segments = np.split(np.arange(u.size), starts)
+    for seg in segments:
         levels[seg] = np.median(u[seg])
+    for seg in segments:  # noise per sample from the differences: noise_d / sqrt(2)
+        _refuse_a_drift(rec, u[seg], float(levels[seg[0]]), int(seg[0]),
+                        noise_d / math.sqrt(2.0), len(segments) == 1)
     return dataclasses.replace(rec, torque=levels)
+
+
+def _refuse_a_drift(rec: Record, u: np.ndarray, level: float, i0: int, floor: float,
+                    only: bool) -> None:
+    """Refuse a level the torque departs from by more than noise (:data:`RAMP_SIGMAS`).
+
+    The noise std is the larger of the samples' robust spread in blocks of
+    :data:`NOISE_BLOCK` samples about their own medians (the median over the blocks:
+    neither a ramp nor a second level within the segment moves it, and it sees noise
+    filtered over tens of samples) and the first differences' (``floor``, which sees
+    quantised noise whose spread is mostly 0).
+    """
+    if u.size < RAMP_WINDOW:
+        return
+    dev = u - level
+    blocks = np.array_split(u, max(1, u.size // NOISE_BLOCK))
+    spread = float(np.median([np.median(np.abs(b - np.median(b))) for b in blocks]))
+    noise = max(_MAD * spread, floor)
+    c = np.concatenate([[0.0], np.cumsum(dev)])
+    mean = (c[RAMP_WINDOW:] - c[:-RAMP_WINDOW]) / RAMP_WINDOW  # over [j, j + W)
+    limit = max(RAMP_SIGMAS * noise, TORQUE_NOISE_LIMIT * float(np.max(np.abs(rec.torque))))
+    out = np.flatnonzero(np.abs(mean) > limit)
+    if not out.size:
+        return
+    a = rec.t[i0 + out[0]]
+    b = rec.t[i0 + out[-1] + RAMP_WINDOW - 1]
+    worst = float(np.max(np.abs(mean)))
+    what = ("found one level only: the torque never changes by more than "
+            f"{JUMP_THRESHOLD:g} noise std from one sample to the next" if only else
+            "cannot level the torque")
+    raise InputError(
+        f"{rec.name}: torque_levels {what}, and between t = {a:.6g} s and {b:.6g} s it "
+        f"departs from its level {level:.4g} N m by up to {worst:.3g} N m (averaged over "
+        f"{RAMP_WINDOW} samples; noise std about {noise:.3g} N m): a ramp or a smooth "
+        "torque, not a step through noise; give the torque command (the set-point) instead"
+    )

@@ -149,8 +149,9 @@ def _inverse(name: str, params: dict, src: str) -> InverseKind:
     keep = {"smooth-filter": ("alpha",), "smooth-ramp": ("beta_r", "beta_l")}.get(name, ())
     try:
         return inverse_from_name(name, **{k: params[k] for k in keep if k in params})
-    except InputError as exc:
-        raise InputError(f"{src}: [inverse] {exc}") from None
+    except InputError as exc:  # the table's key is `kind`, the library's word `inverse`
+        text = str(exc).replace("inverse must be one of", "kind must be one of", 1)
+        raise InputError(f"{src}: [inverse] {text}") from None
 
 
 def _num(
