@@ -226,6 +226,7 @@ def test_held_speed_far_from_the_priors_steady_state_is_refused(exp_csv, tmp_pat
                  method, "--allow-far-from-prior", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert any("are 9.5" in n and "times the prior's" in n for n in out["notes"])
+    assert out["records"][0]["held_speed_gain"] == pytest.approx(60 / (2 * np.pi), rel=0.01)
     assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method", method,
                  "--json"]) == 0  # the right units: no note of it
     out = json.loads(capsys.readouterr().out)

@@ -579,10 +579,12 @@ def _run(args: argparse.Namespace) -> int:
             onset="constant" if args.onset is None else args.onset,
         ).fit(records, final_records=finals)
         theta_ini: float | None = est.theta_ini_
-        rows = zip(records, est.commutations_, est.theta_ini_per_record_, strict=True)
-        for rec, com, ini in rows:
+        rows = zip(records, est.commutations_, est.theta_ini_per_record_,
+                   est.held_speed_gains_[: len(records)], strict=True)
+        for rec, com, ini, gain in rows:
             per_record.append(
-                {"file": rec.name, "t_s": com.t_s, "t_c": com.t_c, "t_b": com.t_b, "theta_ini": ini}
+                {"file": rec.name, "t_s": com.t_s, "t_c": com.t_c, "t_b": com.t_b,
+                 "theta_ini": ini, "held_speed_gain": gain}
             )
         bounds = list(est.bounds_)
         extra["onset"] = est.onset
@@ -591,9 +593,10 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError("--final only applies with --method two-step")
         est = RegressionIdentifier(prior).fit(records)
         theta_ini = None
-        for rec, t_s in zip(records, est.t_s_, strict=True):
+        for rec, t_s, gain in zip(records, est.t_s_, est.held_speed_gains_, strict=True):
             per_record.append(
-                {"file": rec.name, "t_s": t_s, "t_c": None, "t_b": None, "theta_ini": None}
+                {"file": rec.name, "t_s": t_s, "t_c": None, "t_b": None, "theta_ini": None,
+                 "held_speed_gain": gain}
             )
         bounds = [0.0, float(RegressionIdentifier(prior).theta_max)]
     report = maybe_write_report(args, records, est, prior, final_records=finals)
