@@ -445,8 +445,10 @@ def test_misfit_restart_leaves_a_stiff_shaft_without_backlash():
     truth's basin and is kept."""
     drive, recs, prior = _robustness_trial(21, 5, 12, 40, 2.0, 40.0)
     fisher = bk.FisherInterval()
-    with pytest.warns(bk.CorrelatedResidualsWarning, match="lag-1"):
+    with pytest.warns(bk.CorrelatedResidualsWarning,
+                      match=r"lag-1 .*the model misfits, since the noise itself is white"):
         stuck = JointIdentifier(prior, misfit_restart=False, interval=fisher).fit(recs)
+    assert np.all(np.abs(stuck.held_noise_lag1_) < 0.1)  # the speeds' own noise: white
     fit = JointIdentifier(prior, interval=fisher).fit(recs)
     assert fit.misfit_restart is True  # the default
     with pytest.raises(bk.InputError, match="misfit_restart must be True or False, got 'no'"):

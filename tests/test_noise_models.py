@@ -148,6 +148,9 @@ def test_white_model_on_coloured_noise_warns(colored_fits):
     assert msgs[0].startswith("the residual of w_")
     assert "exp.csv (record 1)" in msgs[0] and "noise_model=ARNoise()" in msgs[0]
     assert CORRELATED_LAG1 < 0.5 < CORR
+    # the noise on the held level is coloured itself: no second search (it cannot help)
+    assert white.held_noise_lag1_ == pytest.approx(np.full((1, 2), CORR), abs=0.1)
+    assert not white.misfit_restarted_
 
 
 def test_ar_model_on_coloured_noise(colored_fits, clean):

@@ -392,6 +392,7 @@ def _notes(args: argparse.Namespace, est: Any, prior: Any, bounds: list[float],
         message = None
     if message is not None:
         message = message.replace("fit with noise_model=ARNoise()", "try --noise ar")
+        message = message.replace("ARNoise would hide", "--noise ar would hide")
         out.append(message.replace("raise the order", "raise --noise-order"))
     if est.ambiguous_:
         out.append("the search ended in distinct minima of nearly equal cost (the likelihood "

@@ -297,6 +297,13 @@ MISFIT_SIGMAS = 5.0
 #: The second search's fit replaces the first only if its -2 log likelihood is lower
 #: by more than this (chi-square units).
 MISFIT_MARGIN = 1.0
+#: Seconds (at most half of it) of the level held before each step-down whose speeds
+#: show the noise's own colour, model-free (``held_noise_lag1_``), and the fewest
+#: samples that tell it.
+HELD_NOISE_SECONDS = 5.0
+HELD_NOISE_MIN = 200
+#: Degree of the polynomial trend removed there first (a speed still settling).
+HELD_TREND_DEGREE = 3
 
 #: The default interval and noise model (frozen, so one instance serves every identifier).
 _PROFILE = ProfileLikelihood()
@@ -409,6 +416,40 @@ def _refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
             "mean): these speeds do not show a two-mass drive responding to this torque; "
             "check the columns, units and the prior"
         )
+
+
+def _held_noise_lag1(recs: list[Record]) -> tuple[np.ndarray, np.ndarray]:
+    """Lag-1 autocorrelation of each record's speed noise on the level held before its
+    step-down, ``(n_records, 2)`` (NaN without :data:`HELD_NOISE_MIN` samples there),
+    and the samples used per record.
+
+    Model-free: from the first differences of the speeds less a cubic trend (the
+    level, and a speed still settling); noise ``e_t = rho e_(t-1) + w_t`` gives their
+    lag-1 autocorrelation ``(rho - 1) / 2``, so ``rho = 1 + 2 r_1`` (white noise: 0,
+    with std about
+    ``1.4 / sqrt(n)``). Where the speed still rings the estimate is high (NaN above 1,
+    e.g. on a noise-free record).
+    """
+    out = np.full((len(recs), 2), np.nan)
+    samples = np.ones(len(recs))
+    for k, rec in enumerate(recs):
+        try:
+            i_s = find_step_down(rec)[0]
+        except InputError:
+            continue
+        m = min(int(round(HELD_NOISE_SECONDS / rec.ts)), i_s // 2)
+        if m < HELD_NOISE_MIN:
+            continue
+        samples[k] = m
+        x = np.linspace(-1.0, 1.0, m)
+        for c, w in enumerate((rec.w_motor, rec.w_load)):
+            y = w[i_s - m : i_s]
+            y = y - np.polynomial.polynomial.polyval(  # a speed still settling: its trend
+                x, np.polynomial.polynomial.polyfit(x, y, HELD_TREND_DEGREE))
+            rho = 1.0 + 2.0 * _lag1(np.diff(y))
+            # above 1 no noise: the speed's own motion (ringing) dominates the differences
+            out[k, c] = rho if rho <= 1.0 else np.nan
+    return out, samples
 
 
 def _lag1(e: np.ndarray) -> float:
@@ -677,9 +718,10 @@ class JointIdentifier:
         from their own linear parameters the grid finds the truth's basin (``theta``
         within 0.2 %; ``benchmarks/robustness_joint.py --trials 40 --seed 21
         --scenarios 4,5,7,8``; one trial is a test). Costs nothing where the model
-        fits; about one more fit where the noise is coloured and modelled as white
-        (the :class:`~backlashkit.errors.CorrelatedResidualsWarning` then says to use
-        ``ARNoise``).
+        fits. Not run when, with white noise modelled, the noise itself is
+        coloured (``held_noise_lag1_`` beyond the same limits): the second search
+        cannot whiten it (the :class:`~backlashkit.errors.CorrelatedResidualsWarning`
+        then says to use ``ARNoise``).
     interval : ProfileLikelihood, FisherInterval or ParametricBootstrap, optional
         Where ``ci95_`` (and, for the bootstrap, ``std_``) comes from (module
         :mod:`backlashkit.intervals`; default ``ProfileLikelihood()``). The profile
@@ -798,6 +840,14 @@ class JointIdentifier:
     misfit_restart_won_ : bool
         Whether the second search's fit was kept (every fitted attribute then comes
         from it, ``theta_starts_`` and the two-step estimates included).
+    held_noise_lag1_ : numpy.ndarray
+        Lag-1 autocorrelation of each record's speed noise ``(n_records, 2)``
+        (``w_M``, ``w_L``) on the last :data:`HELD_NOISE_SECONDS` (at most half) of the
+        level held before the step-down, from the speeds alone (their first
+        differences' lag-1 autocorrelation ``r_1`` gives ``1 + 2 r_1``; white noise
+        about 0 within ``1.4 / sqrt(n)``): whether the noise itself is coloured,
+        whatever the model (a speed still ringing there reads high; NaN above 1).
+        NaN where the record holds no level of :data:`HELD_NOISE_MIN` samples.
     far_from_prior_ : list of str
         The estimated linear parameters more than
         :data:`~backlashkit.identify.FAR_FROM_PRIOR` times off the prior (either way);
@@ -1002,7 +1052,17 @@ class JointIdentifier:
         """Whether a residual is too correlated for noise (:data:`MISFIT_LAG1`,
         :data:`MISFIT_SIGMAS`)."""
         limit = np.maximum(MISFIT_LAG1, MISFIT_SIGMAS / np.sqrt(self._lag1_samples))
-        return bool(np.any(np.abs(self.residual_lag1_) > limit))
+        if not np.any(np.abs(self.residual_lag1_) > limit):
+            return False
+        return self.noise_ar_ is not None or not self._noise_coloured()
+
+    def _noise_coloured(self) -> bool:
+        """Whether the speeds' own noise (``held_noise_lag1_``) is correlated beyond
+        :data:`MISFIT_LAG1` and ``MISFIT_SIGMAS`` of its std under white noise."""
+        held = self.held_noise_lag1_
+        limit = np.maximum(MISFIT_LAG1,
+                           MISFIT_SIGMAS * 1.4 / np.sqrt(self._held_samples)[:, np.newaxis])
+        return bool(np.any(np.abs(np.nan_to_num(held)) > limit))
 
     def _search_again(self, records) -> None:
         """The whole search once more from the fitted linear parameters; the fit of
@@ -1028,7 +1088,8 @@ class JointIdentifier:
             A sentence naming the record and speed whose residual (whitened, with
             :class:`~backlashkit.noise_models.ARNoise`) has the largest lag-1
             autocorrelation, when it exceeds :data:`CORRELATED_LAG1` in magnitude
-            (then the standard error and interval of ``theta`` are too narrow); None
+            (then the standard error and interval of ``theta`` are too narrow), and
+            whether the noise or the model is to blame (``held_noise_lag1_``); None
             otherwise. :meth:`fit` emits it as a
             :class:`~backlashkit.errors.CorrelatedResidualsWarning`.
         """
@@ -1041,6 +1102,13 @@ class JointIdentifier:
                 f"ARNoise(order={self.noise_ar_.shape[-1]}) does not whiten the noise")
         fix = ("fit with noise_model=ARNoise()" if self.noise_ar_ is None else
                "raise the order")
+        held = self.held_noise_lag1_[k, c]
+        if self.noise_ar_ is None and np.isfinite(held) and not self._noise_coloured():
+            # the speeds' own noise is white: the residual's correlation is the model's
+            what = (f"the model misfits, since the noise itself is white (lag-1 {held:.2f} "
+                    "on the level held before the step-down)")
+            fix = ("check the prior (a wrong basin of the fit) and whether a two-mass drive "
+                   "with backlash describes the record; ARNoise would hide the misfit")
         return (f"the residual of {('w_M', 'w_L')[c]} in {self._record_names[k]} (record "
                 f"{k + 1}) has lag-1 "
                 f"autocorrelation {rho:.2f} (white noise: about 0): {what}, so the standard "
@@ -1399,6 +1467,7 @@ class JointIdentifier:
             for c in (0, 1):
                 blocks.setdefault((sp.k, c), []).append(best.r[pos : pos + m])
                 pos += m
+        self.held_noise_lag1_, self._held_samples = _held_noise_lag1(recs)
         self.residual_lag1_ = np.zeros((len(recs), 2))
         self._lag1_samples = np.ones((len(recs), 2))
         # -2 log likelihood with the noise variances profiled out (up to a constant):
