@@ -235,6 +235,8 @@ def test_held_speed_far_from_the_priors_steady_state_is_refused(exp_csv, tmp_pat
                  "--json"]) == 0
     out, _ = capsys.readouterr()
     assert '"far_from_prior": []' in out
+    held = json.loads(out)["records"][0]["held_noise_lag1"]  # 30 dB white noise: about 0
+    assert len(held) == 2 and all(abs(x) < 0.2 for x in held)
 
 
 def test_the_library_warns_of_a_prior_mismatch(exp):

@@ -541,14 +541,15 @@ def _run(args: argparse.Namespace) -> int:
             )
         theta_ini = est.theta_ini_
         rows = zip(everything, est.fit_percent_, est.model_start_, est.noise_std_,
-                   est.commutations_, est.residual_lag1_, strict=True)
-        for k, (rec, fitp, how, noise, (t_s, t_c, t_b), lag1) in enumerate(rows):
+                   est.commutations_, est.residual_lag1_, est.held_noise_lag1_, strict=True)
+        for k, (rec, fitp, how, noise, (t_s, t_c, t_b), lag1, held) in enumerate(rows):
             per_record.append(
                 {"file": rec.name, "t_s": t_s, "t_c": t_c, "t_b": t_b,
                  "theta_ini": None, "fit_percent": [float(x) for x in fitp],
                  "model_start": how, "noise_std": [float(x) for x in noise],
                  "noise_ar": None if est.noise_ar_ is None else est.noise_ar_[k].tolist(),
                  "residual_lag1": [float(x) for x in lag1],
+                 "held_noise_lag1": [_num(x) for x in held],
                  "commutation": "model"}
             )
         bounds = [float(est.theta_max / est.n_grid), float(est.theta_max)]
