@@ -426,9 +426,8 @@ def _held_noise_lag1(recs: list[Record]) -> tuple[np.ndarray, np.ndarray]:
     Model-free: from the first differences of the speeds less a cubic trend (the
     level, and a speed still settling); noise ``e_t = rho e_(t-1) + w_t`` gives their
     lag-1 autocorrelation ``(rho - 1) / 2``, so ``rho = 1 + 2 r_1`` (white noise: 0,
-    with std about
-    ``1.4 / sqrt(n)``). Where the speed still rings the estimate is high (NaN above 1,
-    e.g. on a noise-free record).
+    with std about ``1.4 / sqrt(n)``). Where the speed still rings the estimate is
+    high (NaN above 1, e.g. on a noise-free record).
     """
     out = np.full((len(recs), 2), np.nan)
     samples = np.ones(len(recs))

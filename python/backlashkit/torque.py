@@ -45,8 +45,9 @@ PLATEAU_SAMPLES = 5000
 #: samples, depart from it by more than RAMP_SIGMAS noise std (and than
 #: TORQUE_NOISE_LIMIT of the largest torque): a ramp or a smooth torque, not a step
 #: through noise. Averaged white noise stays far within 1 noise std; on 40 records
-#: of 80 s at 1 ms, noise filtered over 100 samples reached 6.2 once (the estimate of
-#: its std low), none over 10-200 samples reached 8 (``tests/test_torque.py``).
+#: of 80 s at 1 ms each, noise filtered over 100 samples reached 6.2 once (the
+#: estimate of its std low), none filtered over 10-200 samples reached 8 (a scratch
+#: run; ``tests/test_torque.py`` checks 10 records each).
 RAMP_WINDOW = 51
 RAMP_SIGMAS = 8.0
 #: Samples per block of the noise estimate of that check.
