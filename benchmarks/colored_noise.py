@@ -8,7 +8,8 @@ white Gaussian noise passed through the first-order filter ``e_t = c e_{t-1} + w
 (lag-1 correlation ``c``), scaled to the SNR over the whole record (the project's
 definition). Each trial draws a prior with paper A's ``Err_p`` (``P_hat = P* (1 - Err_p
 X)``, ``X ~ U[-1, 1]``) and fits the same records twice with
-:class:`~backlashkit.JointIdentifier`: ``noise_model=WhiteNoise()`` (the default) and
+:class:`~backlashkit.JointIdentifier`: ``noise_model=WhiteNoise()`` (the default
+before ``AutoNoise()``, which picks ``ARNoise`` on this noise) and
 ``noise_model=ARNoise(order)``.
 
 Printed per noise model: mean error of theta, the empirical std of the estimates and

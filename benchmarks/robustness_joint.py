@@ -23,10 +23,11 @@ percentile, max), how many fits ran the second search of ``misfit_restart`` and 
 and how many ended with a linear parameter more than 3 times off the prior
 (``far_from_prior_``).
 ``--corr C`` passes the speeds' noise through ``e_t = C e_(t-1) + w_t`` (scaled to the
-same SNR; the CRB printed is then that noise's), ``--noise ar`` fits
-``ARNoise(2)``, and ``--torque-noise R`` measures the torque with white noise of std R
-times the step and levels it with :func:`backlashkit.torque_levels` before the fit
-(a speed observer's coloured noise and a current sensor's torque, as on a real drive).
+same SNR; the CRB printed is then that noise's), ``--noise ar`` fits ``ARNoise(2)``
+(``white``: ``WhiteNoise()``; default the identifier's ``AutoNoise()``), and
+``--torque-noise R`` measures the torque with white noise of std R times the step and
+levels it with :func:`backlashkit.torque_levels` before the fit (a speed observer's
+coloured noise and a current sensor's torque, as on a real drive).
 Issue 3 asks: within 5 % everywhere, about 95 % coverage. Where the CRB itself is above
 2.5 % of theta (0.5 deg at 20 dB: 4.6-7.2 %), no unbiased estimator stays within 5 %
 in 95 % of the trials, so the summary also gives the worst error over the other
@@ -201,8 +202,9 @@ def main() -> None:
     ap.add_argument("--corr", type=float, default=0.0,
                     help="lag-1 correlation of the speeds' first-order noise (default 0: "
                     "white)")
-    ap.add_argument("--noise", choices=("white", "ar"), default="white",
-                    help="JointIdentifier(noise_model=...): WhiteNoise() or ARNoise(2)")
+    ap.add_argument("--noise", choices=("auto", "white", "ar"), default="auto",
+                    help="JointIdentifier(noise_model=...): AutoNoise() (its default), "
+                    "WhiteNoise() or ARNoise(2)")
     ap.add_argument("--torque-noise", type=float, default=0.0,
                     help="torque measured with white noise of this std relative to the "
                     "step, levelled by torque_levels before the fit (default 0: exact)")
@@ -223,8 +225,8 @@ def main() -> None:
         "ambiguity_starts": args.ambiguity_starts,
         "interval": ProfileLikelihood() if args.interval == "profile" else FisherInterval(),
     }
-    if args.noise == "ar":
-        options["noise_model"] = bk.ARNoise(2)
+    if args.noise != "auto":
+        options["noise_model"] = bk.ARNoise(2) if args.noise == "ar" else bk.WhiteNoise()
     start = time.perf_counter()
     scen = list(scenarios(args.err_p))
     if args.scenarios:

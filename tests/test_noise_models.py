@@ -22,7 +22,14 @@ from backlashkit.errors import CorrelatedResidualsWarning, InputError
 from backlashkit.identify import Record
 from backlashkit.identify_joint import CORRELATED_LAG1, JointIdentifier
 from backlashkit.io import write_csv
-from backlashkit.noise_models import ARNoise, WhiteNoise, fit_ar, innovation_ratio, whiten
+from backlashkit.noise_models import (
+    ARNoise,
+    AutoNoise,
+    WhiteNoise,
+    fit_ar,
+    innovation_ratio,
+    whiten,
+)
 
 P_TRUE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 THETA = 3.49e-2
@@ -56,7 +63,7 @@ def colored_fits(clean):
     rec = _record(clean, CORR, 3)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        white = JointIdentifier(PRIOR).fit(rec)
+        white = JointIdentifier(PRIOR, noise_model=WhiteNoise()).fit(rec)
     ar = JointIdentifier(PRIOR, noise_model=ARNoise(2)).fit(rec)
     return rec, white, ar, caught
 
@@ -111,7 +118,7 @@ def test_bad_input(call, pattern):
 @pytest.mark.parametrize(
     ("kwargs", "pattern"),
     [
-        ({"noise_model": "ar"}, r"noise_model must be a WhiteNoise or ARNoise"),
+        ({"noise_model": "ar"}, r"noise_model must be a WhiteNoise, ARNoise or AutoNoise"),
         ({"noise_model": ARNoise(), "noise": (0.1, 0.1)}, r"give one or the other"),
         ({"noise_model": ARNoise(), "final_horizon": 0.5}, r"cannot be combined with "
          r"final_horizon \(got 0\.5\)"),
@@ -214,10 +221,14 @@ def colored_csv(clean, tmp_path_factory):
 
 def test_cli_noise_ar(colored_csv, capsys):
     path, prior = colored_csv
-    code = main(["identify", str(path), "--drive", str(prior)])
+    code = main(["identify", str(path), "--drive", str(prior), "--noise", "white"])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "note: the residual of w_" in out and "try --noise ar" in out
+    code = main(["identify", str(path), "--drive", str(prior), "--json"])  # auto: AR here
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert json.loads(out)["noise_model"] == "ar(2)"
     code = main(["identify", str(path), "--drive", str(prior), "--noise", "ar", "--json"])
     out, err = capsys.readouterr()
     assert code == 0, err
@@ -237,7 +248,8 @@ def test_cli_noise_ar(colored_csv, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--noise-order", "3"], "--noise-order only applies with --noise ar"),
+        (["--noise", "white", "--noise-order", "3"],
+         "--noise-order only applies with --noise ar or auto"),
         (["--noise", "ar", "--noise-order", "0"], "--noise-order must be an integer >= 1"),
         (["--noise", "ar", "--method", "two-step"], "--noise only applies with --method joint"),
         (["--noise", "ar", "--final-horizon", "1"], "cannot be combined with final_horizon"),
@@ -250,8 +262,31 @@ def test_cli_noise_errors(colored_csv, capsys, argv, message):
     assert code == 2 and err.count("\n") == 1 and message in err, err
 
 
-def test_white_noise_is_the_default():
-    assert JointIdentifier(PRIOR).noise_model == WhiteNoise()
+def test_auto_noise_is_the_default(clean, colored_fits):
+    """AutoNoise (the default) looks at the speeds on the level held before the
+    step-down: white noise there -> WhiteNoise (the same fit as WhiteNoise()), noise
+    filtered to lag-1 0.8 -> ARNoise(2) (the same fit as ARNoise(2)); ARNoise cannot
+    whiten a final_horizon fit, so AutoNoise stays white there."""
+    assert JointIdentifier(PRIOR).noise_model == AutoNoise()
+    white_rec = _record(clean, 0.0, 8)
+    auto = JointIdentifier(PRIOR, interval=bk.FisherInterval()).fit(white_rec)
+    white = JointIdentifier(PRIOR, interval=bk.FisherInterval(),
+                            noise_model=WhiteNoise()).fit(white_rec)
+    assert auto.noise_model_ == WhiteNoise() and auto.noise_ar_ is None
+    assert np.all(np.abs(auto.held_noise_lag1_) < 0.1)
+    assert auto.theta_ == white.theta_ and auto.std_ == white.std_
+    rec, _, ar, _ = colored_fits
+    auto = JointIdentifier(PRIOR).fit(rec)
+    assert auto.noise_model_ == ARNoise(2) and auto.noise_model == AutoNoise()
+    assert auto.theta_ == pytest.approx(ar.theta_, rel=1e-9)
+    assert auto.ci95_ == pytest.approx(ar.ci95_, rel=1e-9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CorrelatedResidualsWarning)
+        short = JointIdentifier(PRIOR, final_horizon=1.0,
+                                interval=bk.FisherInterval()).fit(rec)
+    assert short.noise_model_ == WhiteNoise()
+    with pytest.raises(InputError, match="order must be an integer >= 1, got 0"):
+        AutoNoise(0)
 
 
 # --- the Cramér-Rao bound with autoregressive noise -------------------------------------

@@ -30,7 +30,7 @@ from .identify_joint import (
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
-from .noise_models import ARNoise, WhiteNoise
+from .noise_models import ARNoise, AutoNoise, WhiteNoise
 from .nonlinearities import (
     Backlash,
     ExactInverse,
@@ -56,6 +56,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ARNoise",
+    "AutoNoise",
     "AdaptiveLaw",
     "Backlash",
     "DiscreteAdaptiveController",

@@ -163,13 +163,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--seed", type=int, default=None,
                    help="joint --bootstrap: seed of the resamples' noise (default 0)")
     p.add_argument(
-        "--noise", choices=("white", "ar"), default=None,
-        help="joint: measurement noise model, white (default) or autoregressive (for "
-        "filtered speeds, whose noise is correlated from sample to sample: the "
-        "residuals are whitened, the interval widened accordingly)"
+        "--noise", choices=("auto", "white", "ar"), default=None,
+        help="joint: measurement noise model, white, autoregressive (for filtered "
+        "speeds, whose noise is correlated from sample to sample: the residuals are "
+        "whitened, the interval widened accordingly) or auto (default: autoregressive "
+        "where the speeds' noise on the level held before the step-down is correlated)"
     )
     p.add_argument("--noise-order", type=int, default=None, metavar="P",
-                   help="joint --noise ar: order of the autoregressive model (default 2)")
+                   help="joint --noise ar or auto: order of the autoregressive model "
+                   "(default 2)")
     p.add_argument(
         "--final-horizon", type=float, default=None, metavar="S",
         help="joint: final fit and interval on S seconds after the start and every torque "
@@ -513,7 +515,7 @@ def _run(args: argparse.Namespace) -> int:
         _refuse_duplicates(everything)
         from .errors import CorrelatedResidualsWarning
         from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
-        from .noise_models import ARNoise, WhiteNoise
+        from .noise_models import ARNoise, AutoNoise, WhiteNoise
 
         seed = 0 if args.seed is None else args.seed
         if seed < 0:  # the library's message would offer a SeedSequence
@@ -523,11 +525,14 @@ def _run(args: argparse.Namespace) -> int:
         interval: Any = FisherInterval() if args.interval == "fisher" else ProfileLikelihood()
         if args.bootstrap is not None:
             interval = ParametricBootstrap(args.bootstrap, seed=seed)
-        if args.noise_order is not None and args.noise != "ar":
-            raise InputError("--noise-order only applies with --noise ar")
+        if args.noise_order is not None and args.noise == "white":
+            raise InputError("--noise-order only applies with --noise ar or auto")
+        order = 2 if args.noise_order is None else args.noise_order
         noise_model: Any = WhiteNoise()
         if args.noise == "ar":
-            noise_model = ARNoise(2 if args.noise_order is None else args.noise_order)
+            noise_model = ARNoise(order)
+        elif args.noise in (None, "auto"):
+            noise_model = AutoNoise(order)
         est = JointIdentifier(prior, prior_rel_std=rel, interval=interval,
                               noise_model=noise_model, final_horizon=args.final_horizon)
         with warnings.catch_warnings():  # said below, as a note, or in the JSON

@@ -119,6 +119,7 @@ from .identify import Record, TwoStepIdentifier, _as_records, _far, find_step_do
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, profile_crossing
 from .noise_models import (
     ARNoise,
+    AutoNoise,
     WhiteNoise,
     _impulse_length,
     fit_ar,
@@ -307,7 +308,7 @@ HELD_TREND_DEGREE = 3
 
 #: The default interval and noise model (frozen, so one instance serves every identifier).
 _PROFILE = ProfileLikelihood()
-_WHITE = WhiteNoise()
+_AUTO = AutoNoise()
 
 #: Order of a two-mass drive's values in a packed kernel parameter row
 #: (:class:`~backlashkit.DriveChain` fields ``J, f, k, d, theta``).
@@ -727,9 +728,11 @@ class JointIdentifier:
         search can move the estimate: a held-theta refit more than
         :data:`RECENTRE_MARGIN` below the estimate's cost restarts the final
         refinement from there.
-    noise_model : WhiteNoise or ARNoise, optional
+    noise_model : WhiteNoise, ARNoise or AutoNoise, optional
         The measurement noise (module :mod:`backlashkit.noise_models`; default
-        ``WhiteNoise()``). ``ARNoise(order)`` whitens the residuals by an
+        ``AutoNoise()``: ``ARNoise(2)`` where the speeds' own noise is coloured on the
+        level held before the step-down, ``WhiteNoise()`` otherwise; ``noise_model_``
+        says which). ``ARNoise(order)`` whitens the residuals by an
         autoregressive model fitted to them: for filtered speed measurements, whose
         noise is correlated from sample to sample and makes the white-noise interval
         too narrow (``benchmarks/colored_noise.py``; README, "Coloured noise"). It
@@ -847,6 +850,8 @@ class JointIdentifier:
         about 0 within ``1.4 / sqrt(n)``): whether the noise itself is coloured,
         whatever the model (a speed still ringing there reads high; NaN above 1).
         NaN where the record holds no level of :data:`HELD_NOISE_MIN` samples.
+    noise_model_ : WhiteNoise or ARNoise
+        The noise model fitted: ``noise_model``, or what ``AutoNoise`` chose.
     far_from_prior_ : list of str
         The estimated linear parameters more than
         :data:`~backlashkit.identify.FAR_FROM_PRIOR` times off the prior (either way);
@@ -886,7 +891,7 @@ class JointIdentifier:
         friction_restarts: Sequence[float] = (1.0,),
         misfit_restart: bool = True,
         interval: ProfileLikelihood | FisherInterval | ParametricBootstrap = _PROFILE,
-        noise_model: WhiteNoise | ARNoise = _WHITE,
+        noise_model: WhiteNoise | ARNoise | AutoNoise = _AUTO,
         final_horizon: float | None = None,
         workers: int | None = None,
     ) -> None:
@@ -954,10 +959,10 @@ class JointIdentifier:
                 "interval must be a ProfileLikelihood, FisherInterval or ParametricBootstrap "
                 f"(backlashkit.intervals), got {type(self.interval).__name__}"
             )
-        if not isinstance(self.noise_model, (WhiteNoise, ARNoise)):
+        if not isinstance(self.noise_model, (WhiteNoise, ARNoise, AutoNoise)):
             raise InputError(
-                "noise_model must be a WhiteNoise or ARNoise (backlashkit.noise_models), "
-                f"got {type(self.noise_model).__name__}"
+                "noise_model must be a WhiteNoise, ARNoise or AutoNoise "
+                f"(backlashkit.noise_models), got {type(self.noise_model).__name__}"
             )
         if isinstance(self.noise_model, ARNoise):
             if self.noise is not None:
@@ -1125,6 +1130,13 @@ class JointIdentifier:
                 f"({MIN_FINAL_SAMPLES * ts_max:.3g} s at Ts = {ts_max:.3g} s), got "
                 f"{self.final_horizon!r}"
             )
+        # the speeds' own noise, before any model: AutoNoise chooses from it
+        self.held_noise_lag1_, self._held_samples = _held_noise_lag1(recs)
+        self.noise_model_ = self.noise_model
+        if isinstance(self.noise_model, AutoNoise):
+            coloured = (self.noise is None and self.final_horizon is None
+                        and self._noise_coloured())
+            self.noise_model_ = ARNoise(self.noise_model.order) if coloured else WhiteNoise()
         rel = _rel_std(self.prior_rel_std, LINEAR_PARAMS)
         free = [n for n in LINEAR_PARAMS if n in rel and getattr(prior, n) > 0]
         names = ("theta", *free)
@@ -1398,15 +1410,15 @@ class JointIdentifier:
             sig_now = np.maximum(sig_now * np.sqrt(sq / count[:, np.newaxis]), 1e-300)
             best = lm_on(make_residual(final_spans, final_h, sig_now), best.z, self.max_iter)
         ar = None
-        if isinstance(self.noise_model, ARNoise):
+        if isinstance(self.noise_model_, ARNoise):
             # whiten by A(q) fitted to the residuals, refit; repeated noise_iter times
             sig_now = sig_now.copy()  # the earlier stages' residual functions keep theirs
             for _ in range(max(1, self.noise_iter)):
                 sims_f = model(best.z[np.newaxis, :], final_spans)
-                ar = np.empty((len(recs), 2, self.noise_model.order))
+                ar = np.empty((len(recs), 2, self.noise_model_.order))
                 for sp, x in zip(final_spans, sims_f, strict=True):
                     for c, y in enumerate((sp.y_m, sp.y_l)):
-                        ar[sp.k, c], var = fit_ar(y - x[0, :, c], self.noise_model.order)
+                        ar[sp.k, c], var = fit_ar(y - x[0, :, c], self.noise_model_.order)
                         sig_now[sp.k, c] = math.sqrt(max(var, 1e-300))
                 best = lm_on(make_residual(final_spans, final_h, sig_now, ar), best.z,
                              self.max_iter)
@@ -1466,7 +1478,6 @@ class JointIdentifier:
             for c in (0, 1):
                 blocks.setdefault((sp.k, c), []).append(best.r[pos : pos + m])
                 pos += m
-        self.held_noise_lag1_, self._held_samples = _held_noise_lag1(recs)
         self.residual_lag1_ = np.zeros((len(recs), 2))
         self._lag1_samples = np.ones((len(recs), 2))
         # -2 log likelihood with the noise variances profiled out (up to a constant):

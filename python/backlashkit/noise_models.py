@@ -2,7 +2,10 @@
 
 Configuration objects for ``JointIdentifier(noise_model=...)``:
 
-* :class:`WhiteNoise` (the default) -- independent Gaussian samples, one variance per
+* :class:`AutoNoise` (the default) -- :class:`ARNoise` where the speeds' own noise is
+  coloured (seen on the level held before the step-down, before the fit),
+  :class:`WhiteNoise` otherwise.
+* :class:`WhiteNoise` -- independent Gaussian samples, one variance per
   record and speed. Right for simulated data and for speeds sampled without
   filtering; the fit is then maximum likelihood.
 * :class:`ARNoise` -- an autoregressive process per record and speed,
@@ -31,7 +34,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["ARNoise", "WhiteNoise", "fit_ar", "innovation_ratio", "whiten"]
+__all__ = ["ARNoise", "AutoNoise", "WhiteNoise", "fit_ar", "innovation_ratio", "whiten"]
 
 #: Highest order accepted (the whitening filter drops this many samples per record).
 MAX_ORDER = 50
@@ -70,11 +73,45 @@ class ARNoise:
     order: int = 2
 
     def __post_init__(self) -> None:
-        from .identify import _check_int
+        _check_order(self.order)
 
-        _check_int("order", self.order, 1)
-        if self.order > MAX_ORDER:
-            raise InputError(f"order must be at most {MAX_ORDER}, got {self.order!r}")
+
+@dataclass(frozen=True)
+class AutoNoise:
+    """:class:`ARNoise` where the speeds' own noise is coloured, :class:`WhiteNoise`
+    elsewhere.
+
+    Before the fit, the lag-1 autocorrelation of every record's speed noise is
+    estimated from the speeds alone on the level held before the step-down
+    (``JointIdentifier.held_noise_lag1_``: white noise gives 0 within about
+    ``1.4 / sqrt(n)``). Beyond 0.02 and 5 of those standard deviations in any record
+    and speed the fit uses ``ARNoise(order)``, otherwise ``WhiteNoise()``; also white
+    where no record holds such a level, where ``noise=(s_M, s_L)`` fixes the noise
+    levels, and with ``final_horizon`` (which :class:`ARNoise` cannot whiten).
+    ``JointIdentifier.noise_model_`` says which was used. On white noise the answer is
+    the white model's; on speeds filtered by an observer it is the autoregressive
+    model's, whose interval is calibrated where the white one is 2.6 times too narrow
+    (README, "Coloured noise").
+
+    Parameters
+    ----------
+    order : int, optional
+        Order of the :class:`ARNoise` used where the noise is coloured, 1 to 50
+        (default 2).
+    """
+
+    order: int = 2
+
+    def __post_init__(self) -> None:
+        _check_order(self.order)
+
+
+def _check_order(order) -> None:
+    from .identify import _check_int
+
+    _check_int("order", order, 1)
+    if order > MAX_ORDER:
+        raise InputError(f"order must be at most {MAX_ORDER}, got {order!r}")
 
 
 def fit_ar(e, order: int) -> tuple[np.ndarray, float]:
