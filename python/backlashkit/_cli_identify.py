@@ -330,6 +330,8 @@ def _check_held_speeds(records: list[Record], prior: Any, *, allow: bool) -> lis
     notes = []
     for rec in records:
         gain = held_speed_gain(rec, prior)
+        if not math.isfinite(gain):  # too few samples before the step-down to tell
+            continue
         what = (f"{rec.name}: under the torque held before the step-down at t = "
                 f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
         if not 1.0 / REFUSE_FROM_PRIOR <= gain <= REFUSE_FROM_PRIOR and not allow:
@@ -489,6 +491,7 @@ def _run(args: argparse.Namespace) -> int:
     extra: dict[str, Any] = {}
     for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
                           ("--final-horizon", args.final_horizon), ("--noise", args.noise),
+                          ("--noise-order", args.noise_order),
                           ("--prior-rel-std", args.prior_rel_std)):
         if value is not None and args.method != "joint":
             raise InputError(f"{option} only applies with --method joint")

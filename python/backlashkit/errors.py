@@ -42,6 +42,7 @@ class PriorMismatchWarning(UserWarning):
     more than :data:`backlashkit.identify.FAR_FROM_PRIOR` times off the prior's
     response (the two-step and regression methods simulate the prior from them), or
     when a joint fit moves a linear parameter that far from the prior. Far more often
-    than a prior that wrong, the speeds are in other units (rpm read as rad/s) or the
-    columns are swapped; the estimate of ``theta`` then means nothing.
+    than a prior that wrong, the speeds are in other units (rpm read as rad/s) or, for
+    the joint fit, the speed columns are swapped; the estimate of ``theta`` then means
+    nothing.
     """

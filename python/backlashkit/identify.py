@@ -103,6 +103,8 @@ DEFAULT_DT4 = 1.0
 #: A record's held speed (:func:`held_speed_gain`) or a joint fit's linear parameter
 #: this many times off the prior's (either way) raises a PriorMismatchWarning.
 FAR_FROM_PRIOR = 3.0
+#: Fewest samples before the step-down that :func:`held_speed_gain` fits (else NaN).
+HELD_MIN_SAMPLES = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -365,8 +367,9 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
     squares, ``r`` the body's response to the record's torque from rest (zero-order
     hold, exact) and ``a^k`` the decay of an initial speed; ``g`` is returned. The
     two-step and regression methods simulate the prior from the held speed: a ``g``
-    far from 1 means speeds in other units (rpm read as rad/s gives about 9.55),
-    swapped columns, or frictions that far off.
+    far from 1 means speeds or torque in other units (rpm read as rad/s gives about
+    9.55) or frictions that far off. (Swapped speed columns do not show here: both
+    speeds are equal on a held level.)
 
     Parameters
     ----------
@@ -378,17 +381,28 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
     Returns
     -------
     float
-        The least-squares gain ``g`` (1 when the record fits the prior's rigid body).
+        The least-squares gain ``g`` (1 when the record fits the prior's rigid body);
+        NaN when fewer than :data:`HELD_MIN_SAMPLES` samples precede the step-down.
 
     Raises
     ------
     InputError
-        If the record has no step-down (see :func:`find_step_down`).
+        If ``record`` or ``prior`` is not one, the prior has no friction
+        (``f_M + f_L = 0``: no steady speed), or the record has no step-down (see
+        :func:`find_step_down`).
     """
     from itertools import accumulate
 
-    i_s = find_step_down(record)[0]
+    if not isinstance(record, Record):
+        raise InputError(f"record must be a Record, got {type(record).__name__}")
+    _check_prior(prior)
     friction, inertia = prior.f_M + prior.f_L, prior.J_M + prior.J_L
+    if not friction > 0:
+        raise InputError(f"held_speed_gain needs f_M + f_L > 0 (a steady speed), got "
+                         f"{friction!r}")
+    i_s = find_step_down(record)[0]
+    if i_s < HELD_MIN_SAMPLES:
+        return math.nan
     a = math.exp(-friction * record.ts / inertia)
     b = (1.0 - a) / friction
     # r[k] = a r[k-1] + b u[k-1], r[0] = 0 (scipy.signal.lfilter would cost its import)
@@ -396,9 +410,12 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
                                   lambda r, x: a * r + x, initial=0.0), float, i_s)
     v = (prior.J_M * record.w_motor[:i_s] + prior.J_L * record.w_load[:i_s]) / inertia
     basis = np.column_stack([rest, a ** np.arange(i_s)])
-    scale = float(np.max(np.abs(v))) or 1.0  # speeds of 1e300 would overflow the squares
-    (gain, _), *_ = np.linalg.lstsq(basis, v / scale, rcond=None)
-    return float(gain) * scale
+    # both sides scaled to 1 (speeds of 1e300 would overflow the squares, a torque of
+    # 1e-15 fall below lstsq's rank cut-off)
+    scale = float(np.max(np.abs(v))) or 1.0
+    col = float(np.max(np.abs(rest))) or 1.0
+    (gain, _), *_ = np.linalg.lstsq(basis / [col, 1.0], v / scale, rcond=None)
+    return float(gain) * scale / col
 
 
 def _far(ratio: float) -> bool:
@@ -415,12 +432,12 @@ def _warn_held_speeds(recs: list[Record], prior: TwoMassDrive) -> list[float]:
 
     gains = [held_speed_gain(rec, prior) for rec in recs]
     for rec, gain in zip(recs, gains, strict=True):
-        if _far(gain):
+        if math.isfinite(gain) and _far(gain):
             warnings.warn(
                 f"{rec.name}: under the torque held before the step-down the speeds are "
                 f"{gain:.3g} times the prior's, and this method simulates the prior from "
-                "them: check the units of the speeds (rpm read as rad/s?), the columns "
-                "(w_motor and w_load swapped?) and the prior's frictions",
+                "them: check the units of the speeds (rpm read as rad/s?) and of the "
+                "torque, and the prior's frictions",
                 PriorMismatchWarning, stacklevel=3)
     return gains
 
@@ -849,8 +866,8 @@ class TwoStepIdentifier:
     cost_ : float
         ``W_1`` at ``theta_`` in (rad/s)^2.
     held_speed_gains_ : list of float
-        :func:`held_speed_gain` per record (``records``, then ``final_records`` if
-        given): the held speeds over the prior's; one more than
+        :func:`held_speed_gain` per record (``records``, then the ``final_records``
+        not among them): the held speeds over the prior's; one more than
         :data:`FAR_FROM_PRIOR` times off 1 raises a
         :class:`~backlashkit.errors.PriorMismatchWarning`.
     """
@@ -931,7 +948,8 @@ class TwoStepIdentifier:
         recs = _as_records(records, prior=prior)
         finals = recs if final_records is None else _as_records(final_records, "final_records",
                                                                 prior=prior)
-        gains = _warn_held_speeds(recs if finals is recs else recs + finals, prior)
+        gains = _warn_held_speeds(recs + [f for f in finals if all(f is not r for r in recs)],
+                                  prior)
         alpha = prior.f_L / prior.J_L
         comms, inis = [], []
         for rec in recs:

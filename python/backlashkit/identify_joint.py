@@ -305,6 +305,10 @@ HELD_NOISE_SECONDS = 5.0
 HELD_NOISE_MIN = 200
 #: Degree of the polynomial trend removed there first (a speed still settling).
 HELD_TREND_DEGREE = 3
+#: The window starts this many time constants of the prior's shaft ringing
+#: (``2 J_M J_L / ((J_M + J_L) f_sh)``) after the last torque change before the
+#: step-down: ringing left there reads as coloured noise (e^-12: below 1e-5 of it).
+HELD_RINGING_DECAYS = 12.0
 
 #: The default interval and noise model (frozen, so one instance serves every identifier).
 _PROFILE = ProfileLikelihood()
@@ -419,7 +423,8 @@ def _refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
         )
 
 
-def _held_noise_lag1(recs: list[Record]) -> tuple[np.ndarray, np.ndarray]:
+def _held_noise_lag1(recs: list[Record], prior: TwoMassDrive
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Lag-1 autocorrelation of each record's speed noise on the level held before its
     step-down, ``(n_records, 2)`` (NaN without :data:`HELD_NOISE_MIN` samples there),
     and the samples used per record.
@@ -427,17 +432,25 @@ def _held_noise_lag1(recs: list[Record]) -> tuple[np.ndarray, np.ndarray]:
     Model-free: from the first differences of the speeds less a cubic trend (the
     level, and a speed still settling); noise ``e_t = rho e_(t-1) + w_t`` gives their
     lag-1 autocorrelation ``(rho - 1) / 2``, so ``rho = 1 + 2 r_1`` (white noise: 0,
-    with std about ``1.4 / sqrt(n)``). Where the speed still rings the estimate is
-    high (NaN above 1, e.g. on a noise-free record).
+    with std about ``1.4 / sqrt(n)``; noise averaged over a few samples, by an observer,
+    about 1). The window starts :data:`HELD_RINGING_DECAYS` time constants of the
+    prior's shaft ringing after the last torque change (ringing reads as coloured
+    noise); above 2 (the differences follow the speed's own motion, e.g. on a
+    noise-free record) NaN, between 1 and 2 (noise averaged over samples) 1.
     """
     out = np.full((len(recs), 2), np.nan)
     samples = np.ones(len(recs))
+    j_eff = prior.J_M * prior.J_L / (prior.J_M + prior.J_L)
+    tau = 2.0 * j_eff / prior.f_sh if prior.f_sh > 0 else math.inf
     for k, rec in enumerate(recs):
         try:
             i_s = find_step_down(rec)[0]
         except InputError:
             continue
-        m = min(int(round(HELD_NOISE_SECONDS / rec.ts)), i_s // 2)
+        u = rec.torque[:i_s]
+        changes = np.flatnonzero(u != u[-1])
+        settled = (int(changes[-1]) + 1 if changes.size else 0) + HELD_RINGING_DECAYS * tau / rec.ts
+        m = min(int(round(HELD_NOISE_SECONDS / rec.ts)), int(i_s - min(settled, i_s)))
         if m < HELD_NOISE_MIN:
             continue
         samples[k] = m
@@ -447,8 +460,10 @@ def _held_noise_lag1(recs: list[Record]) -> tuple[np.ndarray, np.ndarray]:
             y = y - np.polynomial.polynomial.polyval(  # a speed still settling: its trend
                 x, np.polynomial.polynomial.polyfit(x, y, HELD_TREND_DEGREE))
             rho = 1.0 + 2.0 * _lag1(np.diff(y))
-            # above 1 no noise: the speed's own motion (ringing) dominates the differences
-            out[k, c] = rho if rho <= 1.0 else np.nan
+            # above 2 no noise: the speed's own motion dominates the differences; up to
+            # 2 noise averaged over samples (an observer's), whose differences have
+            # r_1 about 0
+            out[k, c] = min(rho, 1.0) if rho <= 2.0 else np.nan
     return out, samples
 
 
@@ -844,11 +859,12 @@ class JointIdentifier:
         from it, ``theta_starts_`` and the two-step estimates included).
     held_noise_lag1_ : numpy.ndarray
         Lag-1 autocorrelation of each record's speed noise ``(n_records, 2)``
-        (``w_M``, ``w_L``) on the last :data:`HELD_NOISE_SECONDS` (at most half) of the
-        level held before the step-down, from the speeds alone (their first
+        (``w_M``, ``w_L``) on the last :data:`HELD_NOISE_SECONDS` of the level held
+        before the step-down (from :data:`HELD_RINGING_DECAYS` ringing time constants
+        after its start: 7 s on paper A's drive), from the speeds alone (their first
         differences' lag-1 autocorrelation ``r_1`` gives ``1 + 2 r_1``; white noise
         about 0 within ``1.4 / sqrt(n)``): whether the noise itself is coloured,
-        whatever the model (a speed still ringing there reads high; NaN above 1).
+        whatever the model (a speed still ringing there reads high; NaN above 2).
         NaN where the record holds no level of :data:`HELD_NOISE_MIN` samples.
     noise_model_ : WhiteNoise or ARNoise
         The noise model fitted: ``noise_model``, or what ``AutoNoise`` chose.
@@ -1131,7 +1147,7 @@ class JointIdentifier:
                 f"{self.final_horizon!r}"
             )
         # the speeds' own noise, before any model: AutoNoise chooses from it
-        self.held_noise_lag1_, self._held_samples = _held_noise_lag1(recs)
+        self.held_noise_lag1_, self._held_samples = _held_noise_lag1(recs, prior)
         self.noise_model_ = self.noise_model
         if isinstance(self.noise_model, AutoNoise):
             coloured = (self.noise is None and self.final_horizon is None

@@ -84,9 +84,11 @@ class AutoNoise:
     Before the fit, the lag-1 autocorrelation of every record's speed noise is
     estimated from the speeds alone on the level held before the step-down
     (``JointIdentifier.held_noise_lag1_``: white noise gives 0 within about
-    ``1.4 / sqrt(n)``). Beyond 0.02 and 5 of those standard deviations in any record
-    and speed the fit uses ``ARNoise(order)``, otherwise ``WhiteNoise()``; also white
-    where no record holds such a level, where ``noise=(s_M, s_L)`` fixes the noise
+    ``1.4 / sqrt(n)``), from 12 time constants of the prior's shaft ringing after the
+    torque last changed (7 s on paper A's drive) to the step-down. Beyond 0.02 and 5
+    of those standard deviations in any record and speed the fit uses
+    ``ARNoise(order)``, otherwise ``WhiteNoise()``; also white where no record holds
+    such a level of 200 samples, where ``noise=(s_M, s_L)`` fixes the noise
     levels, and with ``final_horizon`` (which :class:`ARNoise` cannot whiten).
     ``JointIdentifier.noise_model_`` says which was used. On white noise the answer is
     the white model's; on speeds filtered by an observer it is the autoregressive

@@ -42,15 +42,14 @@ PIECEWISE_CONSTANT = 0.01
 #: Samples of the held level before the largest drop that measure the torque's noise.
 PLATEAU_SAMPLES = 5000
 #: :func:`torque_levels` refuses a level whose samples, averaged over RAMP_WINDOW
-#: samples, depart from it by more than RAMP_SIGMAS noise std (and than
-#: TORQUE_NOISE_LIMIT of the largest torque): a ramp or a smooth torque, not a step
-#: through noise. Averaged white noise stays far within 1 noise std; on 40 records
-#: of 80 s at 1 ms each, noise filtered over 100 samples reached 6.2 once (the
-#: estimate of its std low), none filtered over 10-200 samples reached 8 (a scratch
-#: run; ``tests/test_torque.py`` checks 10 records each).
+#: samples, depart from it by more than RAMP_SIGMAS std of that average's noise (and
+#: than TORQUE_NOISE_LIMIT of the largest torque): a ramp, a smooth torque, or a step
+#: the noise hides from one sample to the next, not a step through noise. On 20
+#: records of 80 s at 1 ms each with white noise and noise filtered over 3-200
+#: samples, none was refused (a scratch run; ``tests/test_torque.py`` checks 10 each).
 RAMP_WINDOW = 51
 RAMP_SIGMAS = 8.0
-#: Samples per block of the noise estimate of that check.
+#: Samples per block of the estimate of that noise.
 NOISE_BLOCK = 500
 
 
@@ -190,20 +189,20 @@ def _refuse_a_drift(rec: Record, u: np.ndarray, level: float, i0: int, floor: fl
                     only: bool) -> None:
     """Refuse a level the torque departs from by more than noise (:data:`RAMP_SIGMAS`).
 
-    The noise std is the larger of the samples' robust spread in blocks of
-    :data:`NOISE_BLOCK` samples about their own medians (the median over the blocks:
-    neither a ramp nor a second level within the segment moves it, and it sees noise
-    filtered over tens of samples) and the first differences' (``floor``, which sees
-    quantised noise whose spread is mostly 0).
+    The torque's departure from the level is averaged over :data:`RAMP_WINDOW`
+    samples, and compared with the spread of that average: its robust spread in
+    blocks of :data:`NOISE_BLOCK` samples about their own medians, the median over the
+    blocks (neither a ramp nor a second level within the segment moves it, and it
+    follows noise filtered over tens of samples), at least the first differences'
+    noise averaged (``floor``, which sees quantised noise whose spread is mostly 0).
     """
     if u.size < RAMP_WINDOW:
         return
-    dev = u - level
-    blocks = np.array_split(u, max(1, u.size // NOISE_BLOCK))
-    spread = float(np.median([np.median(np.abs(b - np.median(b))) for b in blocks]))
-    noise = max(_MAD * spread, floor)
-    c = np.concatenate([[0.0], np.cumsum(dev)])
+    c = np.concatenate([[0.0], np.cumsum(u - level)])
     mean = (c[RAMP_WINDOW:] - c[:-RAMP_WINDOW]) / RAMP_WINDOW  # over [j, j + W)
+    blocks = np.array_split(mean, max(1, mean.size // NOISE_BLOCK))
+    spread = float(np.median([np.median(np.abs(b - np.median(b))) for b in blocks]))
+    noise = max(_MAD * spread, floor / math.sqrt(RAMP_WINDOW))
     limit = max(RAMP_SIGMAS * noise, TORQUE_NOISE_LIMIT * float(np.max(np.abs(rec.torque))))
     out = np.flatnonzero(np.abs(mean) > limit)
     if not out.size:
@@ -217,6 +216,7 @@ def _refuse_a_drift(rec: Record, u: np.ndarray, level: float, i0: int, floor: fl
     raise InputError(
         f"{rec.name}: torque_levels {what}, and between t = {a:.6g} s and {b:.6g} s it "
         f"departs from its level {level:.4g} N m by up to {worst:.3g} N m (averaged over "
-        f"{RAMP_WINDOW} samples; noise std about {noise:.3g} N m): a ramp or a smooth "
-        "torque, not a step through noise; give the torque command (the set-point) instead"
+        f"{RAMP_WINDOW} samples, whose noise std is about {noise:.3g} N m): a ramp, a "
+        "smooth torque, or a step too small for the noise to tell from one sample to the "
+        "next; give the torque command (the set-point) instead"
     )
