@@ -305,7 +305,7 @@ REFUSE_FROM_PRIOR = 5.0
 NOISE_FREE = 1e-7
 
 
-def _far_from_prior(est, prior, factor: float = FAR_FROM_PRIOR) -> list[str]:
+def _far_from_prior(est, prior, factor: float) -> list[str]:
     """The estimated linear parameters more than ``factor`` times off the prior."""
     out = []
     for name in est.estimated_[1:]:
@@ -383,7 +383,7 @@ def _notes(args: argparse.Namespace, est: Any, prior: Any, bounds: list[float],
         if exact:
             out.append(f"{', '.join(exact)} held at the prior's values: [uncertainty] gives "
                        "them a relative std of 0 (known exactly)")
-    far = _far_from_prior(est, prior)
+    far = est.far_from_prior_  # FAR_FROM_PRIOR times off
     if far:
         out.append(f"{_ratios(est, prior, far)} of the prior: {_CHECK_UNITS}")
     message = est.correlation_message()
@@ -578,7 +578,7 @@ def _run(args: argparse.Namespace) -> int:
             "estimated": list(est.estimated_),
             "param_std": est.param_std_,
             "prior_rel_std": rel,
-            "far_from_prior": _far_from_prior(est, prior),
+            "far_from_prior": est.far_from_prior_,
         }
     elif args.method == "two-step":
         est = TwoStepIdentifier(
