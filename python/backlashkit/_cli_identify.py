@@ -27,10 +27,10 @@ import numpy as np
 from ._cli_files import add_file_options, file_options, reader_errors
 from .cli import flag_names
 from .identify import (
-    FAR_FROM_PRIOR,
     Record,
     RegressionIdentifier,
     TwoStepIdentifier,
+    _far,
     find_step_down,
     held_speed_gain,
 )
@@ -292,8 +292,8 @@ def _refuse_duplicates(records: list[Record]) -> None:
         seen[key] = rec.name
 
 
-#: An estimated linear parameter (or held speed) FAR_FROM_PRIOR times off its prior
-#: (either way) is noted; this many times off refuses the answer, unless
+#: An estimated linear parameter (or held speed) identify.FAR_FROM_PRIOR times off its
+#: prior (either way) is noted; this many times off refuses the answer, unless
 #: --allow-far-from-prior: a prior that far off is rarer than a unit or column mistake
 #: (rpm read as rad/s moves J_M x0.1, swapped speeds J_M x6 and k_sh x6), whose theta
 #: means nothing.
@@ -307,12 +307,8 @@ NOISE_FREE = 1e-7
 
 def _far_from_prior(est, prior, factor: float) -> list[str]:
     """The estimated linear parameters more than ``factor`` times off the prior."""
-    out = []
-    for name in est.estimated_[1:]:
-        ratio = est.params_[name] / getattr(prior, name)
-        if not 1.0 / factor <= ratio <= factor:
-            out.append(name)
-    return out
+    return [name for name in est.estimated_[1:]
+            if _far(est.params_[name] / getattr(prior, name), factor)]
 
 
 _CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
@@ -334,13 +330,13 @@ def _check_held_speeds(records: list[Record], prior: Any, *, allow: bool) -> lis
             continue
         what = (f"{rec.name}: under the torque held before the step-down at t = "
                 f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
-        if not 1.0 / REFUSE_FROM_PRIOR <= gain <= REFUSE_FROM_PRIOR and not allow:
+        if _far(gain, REFUSE_FROM_PRIOR) and not allow:
             raise InputError(
                 f"{what} (this method simulates the prior from them): {_CHECK_UNITS}; if "
                 "the prior's frictions are that far off, use --method joint (it estimates "
                 "them) or pass --allow-far-from-prior"
             )
-        if not 1.0 / FAR_FROM_PRIOR <= gain <= FAR_FROM_PRIOR:
+        if _far(gain):
             notes.append(f"{what}: {_CHECK_UNITS}")
     return notes
 

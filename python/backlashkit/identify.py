@@ -418,9 +418,9 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
     return float(gain) * scale / col
 
 
-def _far(ratio: float) -> bool:
-    """Whether a ratio to the prior is more than FAR_FROM_PRIOR off (either way)."""
-    return not 1.0 / FAR_FROM_PRIOR <= ratio <= FAR_FROM_PRIOR
+def _far(ratio: float, factor: float = FAR_FROM_PRIOR) -> bool:
+    """Whether a ratio to the prior is more than ``factor`` off (either way)."""
+    return not 1.0 / factor <= ratio <= factor
 
 
 def _warn_held_speeds(recs: list[Record], prior: TwoMassDrive) -> list[float]:

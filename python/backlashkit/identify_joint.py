@@ -423,6 +423,12 @@ def _refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
         )
 
 
+def _beyond_noise(lag1: np.ndarray, white_std: np.ndarray) -> bool:
+    """Whether any lag-1 autocorrelation exceeds both :data:`MISFIT_LAG1` and
+    :data:`MISFIT_SIGMAS` times its std under white noise."""
+    return bool(np.any(np.abs(lag1) > np.maximum(MISFIT_LAG1, MISFIT_SIGMAS * white_std)))
+
+
 def _held_noise_lag1(recs: list[Record], prior: TwoMassDrive
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Lag-1 autocorrelation of each record's speed noise on the level held before its
@@ -1071,18 +1077,15 @@ class JointIdentifier:
     def _misfit(self) -> bool:
         """Whether a residual is too correlated for noise (:data:`MISFIT_LAG1`,
         :data:`MISFIT_SIGMAS`)."""
-        limit = np.maximum(MISFIT_LAG1, MISFIT_SIGMAS / np.sqrt(self._lag1_samples))
-        if not np.any(np.abs(self.residual_lag1_) > limit):
+        if not _beyond_noise(self.residual_lag1_, 1.0 / np.sqrt(self._lag1_samples)):
             return False
         return self.noise_ar_ is not None or not self._noise_coloured()
 
     def _noise_coloured(self) -> bool:
         """Whether the speeds' own noise (``held_noise_lag1_``) is correlated beyond
         :data:`MISFIT_LAG1` and ``MISFIT_SIGMAS`` of its std under white noise."""
-        held = self.held_noise_lag1_
-        limit = np.maximum(MISFIT_LAG1,
-                           MISFIT_SIGMAS * 1.4 / np.sqrt(self._held_samples)[:, np.newaxis])
-        return bool(np.any(np.abs(np.nan_to_num(held)) > limit))
+        return _beyond_noise(np.nan_to_num(self.held_noise_lag1_),
+                             1.4 / np.sqrt(self._held_samples)[:, np.newaxis])
 
     def _search_again(self, records) -> None:
         """The whole search once more from the fitted linear parameters; the fit of
