@@ -5,6 +5,7 @@ from __future__ import annotations
 import enum
 import importlib
 import inspect
+import pkgutil
 
 import pytest
 from numpydoc.validate import validate
@@ -16,9 +17,19 @@ import backlashkit
 ENFORCED = {"GL08", "SS01", "PR01", "PR02", "PR03", "RT01", "RT03"}
 
 
+def _public_modules() -> tuple[str, ...]:
+    """Every public module of the package (no ``_`` part; the CLI only words results)."""
+    names = []
+    for info in pkgutil.walk_packages(backlashkit.__path__, "backlashkit."):
+        parts = info.name.split(".")[1:]
+        if any(p.startswith("_") for p in parts) or parts[0] == "cli":
+            continue
+        names.append(".".join(parts))
+    return tuple(names)
+
+
 #: Public modules whose ``__all__`` is documented API besides the package's own.
-SUBMODULES = ("identify", "identify_joint", "noise_models", "records", "ravanbod2002",
-              "signals")
+SUBMODULES = _public_modules()
 
 
 def _exported():
@@ -27,7 +38,7 @@ def _exported():
             yield name, getattr(backlashkit, name)
     for mod in SUBMODULES:
         module = importlib.import_module(f"backlashkit.{mod}")
-        for name in module.__all__:
+        for name in getattr(module, "__all__", ()):
             obj = getattr(module, name)
             if callable(obj) and getattr(obj, "__module__", "") == module.__name__:
                 yield f"{mod}.{name}", obj

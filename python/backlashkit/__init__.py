@@ -21,16 +21,15 @@ from .errors import (
     PriorMismatchWarning,
     SensitivityWarning,
 )
-from .identify import Record, RegressionIdentifier, TwoStepIdentifier
-from .identify_joint import (
-    CramerRaoBound,
-    JointIdentifier,
-    cramer_rao_bound,
-)
-from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+from .identify.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+from .identify.joint import CramerRaoBound, JointIdentifier, cramer_rao_bound
+from .identify.noise import ARNoise, AutoNoise, WhiteNoise
+from .identify.readers import read_records, read_torque
+from .identify.record import Record
+from .identify.torque import torque_levels
+from .identify.two_step import RegressionIdentifier, TwoStepIdentifier
 from .laws import ShaftLaw
 from .lti import LinearPlantWithBacklash
-from .noise_models import ARNoise, AutoNoise, WhiteNoise
 from .nonlinearities import (
     Backlash,
     ExactInverse,
@@ -39,18 +38,19 @@ from .nonlinearities import (
     SmoothFilterInverse,
     SmoothRampInverse,
 )
+from .actuator import CurrentLoop
+from .encoder import Encoder, measure_encoders
 from .plants import DriveChain, TwoMassDrive
-from .records import read_records, read_torque
 from .simulate import (
     ContactEvent,
     DriveResponse,
+    FrictionEvent,
     NearGrazing,
     Sensitivity,
     assess_sensitivity,
     simulate_batch,
     simulate_drive,
 )
-from .torque import torque_levels
 
 __version__ = "0.1.0"
 
@@ -75,6 +75,10 @@ __all__ = [
     "design_mrc",
     "simulate_closed_loop",
     "ContactEvent",
+    "CurrentLoop",
+    "Encoder",
+    "FrictionEvent",
+    "measure_encoders",
     "CorrelatedResidualsWarning",
     "CramerRaoBound",
     "DriveChain",

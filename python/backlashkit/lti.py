@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import _validate as _v
+from . import validate as _v
 from .errors import InputError
 from .nonlinearities import Backlash
 

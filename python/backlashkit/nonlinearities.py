@@ -25,7 +25,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import _validate as _v
+from . import validate as _v
 from .errors import InputError
 
 __all__ = [

@@ -13,7 +13,12 @@ imported here.
 from __future__ import annotations
 
 from .adaptive import AdaptiveLaw
-from .closed_loop import ClosedLoopResponse, SumOfSines, TableReference, simulate_closed_loop
+from .closed_loop import (
+    ClosedLoopResponse,
+    SumOfSines,
+    TableReference,
+    simulate_closed_loop,
+)
 from .design import MRCDesign, design_mrc
 from .discrete import DiscreteAdaptiveController, simulate_discrete_loop
 from .scenario import ControlScenario, load_scenario

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import _validate as _v
+from .. import validate as _v
 from ..errors import InputError
 
 __all__ = ["AdaptiveLaw", "adaptive_rate"]

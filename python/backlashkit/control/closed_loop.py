@@ -17,10 +17,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import _validate as _v
+from .. import validate as _v
 from ..errors import InputError
 from ..lti import as_state_space
-from ..nonlinearities import Backlash, ExactInverse, GainOnlyInverse, InverseKind
+from ..nonlinearities import (
+    Backlash,
+    ExactInverse,
+    GainOnlyInverse,
+    InverseKind,
+)
 from .adaptive import AdaptiveLaw
 from .design import MRCDesign, companion, design_mrc
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _validate as _v
+from .. import validate as _v
 from ..errors import InputError
 from ..lti import as_state_space, zoh_discretize
 from ..nonlinearities import (

@@ -31,7 +31,12 @@ import numpy as np
 from ..errors import InputError
 from ..nonlinearities import Backlash, InverseKind, inverse_from_name
 from .adaptive import AdaptiveLaw
-from .closed_loop import ClosedLoopResponse, SumOfSines, TableReference, simulate_closed_loop
+from .closed_loop import (
+    ClosedLoopResponse,
+    SumOfSines,
+    TableReference,
+    simulate_closed_loop,
+)
 from .design import design_mrc
 
 if sys.version_info >= (3, 11):

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 #: Fewest samples at a channel's extreme counted as clipping.
 MIN_COUNT = 5

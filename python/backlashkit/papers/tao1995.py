@@ -15,6 +15,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..control.adaptive import AdaptiveLaw
+from ..control.closed_loop import ClosedLoopResponse, SumOfSines, simulate_closed_loop
 from ..nonlinearities import (
     Backlash,
     ExactInverse,
@@ -22,8 +24,6 @@ from ..nonlinearities import (
     NoInverse,
     SmoothFilterInverse,
 )
-from .adaptive import AdaptiveLaw
-from .closed_loop import ClosedLoopResponse, SumOfSines, simulate_closed_loop
 
 __all__ = ["PAPER", "add_arguments", "run_cli", "run_tao1995"]
 
@@ -151,7 +151,7 @@ def run_cli(args: argparse.Namespace) -> int:
     int
         0 when every bar of the reproduction is met, 1 otherwise.
     """
-    from ..cli import check_reproduce_outputs
+    from ..cli.main import check_reproduce_outputs
 
     json_path = getattr(args, "json", None)
     rep = check_reproduce_outputs(json_path, getattr(args, "report", None),
@@ -185,8 +185,13 @@ def _write_report(rep: Path, runs: dict[str, ClosedLoopResponse], checks) -> Non
     per controller variant, into ``rep``."""
     from matplotlib.figure import Figure
 
-    from .._cli_control import write_trace
-    from .._html import bars_table, figure, page, save_figure
+    from ..cli.control import write_trace
+    from ..htmlpage import (
+        bars_table,
+        figure,
+        page,
+        save_figure,
+    )
 
     rep.mkdir(parents=True, exist_ok=True)
     save_figure(runs["exact"].plot(), rep, "fig5_exact_inverse")

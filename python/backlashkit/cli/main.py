@@ -1,6 +1,6 @@
 """Command-line interface: ``backlashkit <command> ...``.
 
-Each subcommand lives in its own module (``_cli_<name>.py``) exposing
+Each subcommand lives in its own module (``cli/<name>.py``) exposing
 ``add_parser(subparsers)``, which registers the subcommand and sets ``func`` to a
 callable ``func(args) -> int``. Conventions shared by every subcommand:
 
@@ -22,12 +22,12 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = ["flag_names", "main"]
 
 #: Modules that register subcommands, in the order they are listed by ``--help``.
-SUBCOMMAND_MODULES = ("_cli_simulate", "_cli_identify", "_cli_control", "_cli_reproduce")
+SUBCOMMAND_MODULES = ("simulate", "identify", "control", "reproduce")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -37,7 +37,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every available subcommand registered."""
-    from . import __version__
+    from .. import __version__
 
     parser = _Parser(
         prog="backlashkit",
@@ -113,7 +113,7 @@ def check_reproduce_outputs(json_path: str | None, report: str | None,
     pathlib.Path or None
         The report directory.
     """
-    from .io import check_writable
+    from ..io import check_writable
 
     if json_path not in (None, "-"):
         if Path(json_path).exists() and not force:

@@ -57,9 +57,9 @@ from typing import Any
 
 import numpy as np
 
-from . import _validate as v
-from .errors import InputError
-from .identify import Record
+from .. import validate as v
+from ..errors import InputError
+from .record import Record
 
 __all__ = ["FIELDS", "read_records", "read_torque"]
 

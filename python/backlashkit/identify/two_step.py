@@ -71,27 +71,23 @@ Choices the paper leaves open (documented here, configurable where it matters)
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from . import _validate as v
-from ._clipping import check_not_clipped
-from .errors import InputError
-from .plants import TwoMassDrive
-from .torque import JUMP_THRESHOLD, check_torque_noise, torque_noise_std
+from .. import validate as v
+from ..errors import InputError
+from ..plants import TwoMassDrive
+from .record import Record, as_records, check_prior
+from .step import find_step_down, warn_held_speeds
 
 __all__ = [
     "Commutation",
-    "Record",
     "RegressionIdentifier",
     "TwoStepIdentifier",
     "commutation_instants",
-    "find_step_down",
     "fir_lowpass",
-    "held_speed_gain",
     "pre_estimate",
 ]
 
@@ -99,348 +95,6 @@ ArrayLike = Sequence[float] | np.ndarray
 
 #: Paper A's identification time dt_4 in s.
 DEFAULT_DT4 = 1.0
-
-#: A record's held speed (:func:`held_speed_gain`) or a joint fit's linear parameter
-#: this many times off the prior's (either way) raises a PriorMismatchWarning.
-FAR_FROM_PRIOR = 3.0
-#: Fewest samples before the step-down that :func:`held_speed_gain` fits (else NaN).
-HELD_MIN_SAMPLES = 10
-
-
-@dataclass(frozen=True, eq=False)
-class Record:
-    """One step-down experiment: uniformly sampled torque and measured speeds.
-
-    Parameters
-    ----------
-    t : array_like
-        Uniform, strictly increasing time grid in s.
-    torque : array_like
-        Motor torque in N m (zero-order hold), one sample per ``t``.
-    w_motor, w_load : array_like
-        Measured motor and load speeds in rad/s.
-    name : str, optional
-        Name used in messages (e.g. the file name).
-    """
-
-    t: np.ndarray
-    torque: np.ndarray
-    w_motor: np.ndarray
-    w_load: np.ndarray
-    name: str = field(default="record")
-
-    def __post_init__(self) -> None:
-        t, _ = v.time_grid(self.t, name=f"{self.name}: t", min_samples=3)
-        object.__setattr__(self, "t", t)
-        for col in ("torque", "w_motor", "w_load"):
-            arr = v.finite_array(f"{self.name}: {col}", getattr(self, col))
-            if arr.size != t.size:
-                raise InputError(
-                    f"{self.name}: {col} must have one sample per t ({t.size}), got {arr.size}"
-                )
-            object.__setattr__(self, col, arr)
-
-    @property
-    def ts(self) -> float:
-        """Sample time in s."""
-        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
-
-    @classmethod
-    def from_csv(cls, path: str | os.PathLike[str]) -> Record:
-        """Read a record from a CSV file with columns ``t,torque,w_motor,w_load`` (SI).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The file (e.g. written by ``backlashkit simulate --experiment``).
-
-        Returns
-        -------
-        Record
-            The record, named after the file.
-        """
-        from .io import read_csv_columns
-
-        cols = read_csv_columns(path, ("t", "torque", "w_motor", "w_load"), min_samples=3)
-        return cls(cols["t"], cols["torque"], cols["w_motor"], cols["w_load"], name=str(path))
-
-
-def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
-    if isinstance(rec, Record):
-        return rec
-    try:
-        t, torque, w_motor, w_load = rec
-    except (TypeError, ValueError):
-        raise InputError(
-            f"records[{i}] must be a Record or a tuple (t, torque, w_motor, w_load)"
-        ) from None
-    return Record(t, torque, w_motor, w_load, name=f"records[{i}]")
-
-
-def check_speeds_vary(rec: Record) -> None:
-    """Refuse a record with a constant speed: it cannot show the drive's response.
-
-    Parameters
-    ----------
-    rec : Record
-        The record (its ``name`` goes into the message).
-
-    Raises
-    ------
-    InputError
-        If ``w_motor`` or ``w_load`` takes one value only.
-    """
-    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
-        if not np.ptp(w) > 0:
-            raise InputError(
-                f"{rec.name}: {name} is constant ({float(w[0]):.6g} rad/s): the speeds "
-                "must respond to the torque; check the columns"
-            )
-
-
-#: A speed sample farther than this many noise std (and than SPIKE_RANGE of the
-#: speed's range) from the median of itself and its two neighbours is a spike.
-SPIKE_SIGMAS = 30.0
-SPIKE_RANGE = 0.2
-
-
-def check_spikes(rec: Record) -> None:
-    """Refuse a record with a single-sample spike in a speed (a glitch of the sensor).
-
-    The median of three consecutive samples follows steps and the drive's impacts but
-    not a lone sample off the curve; least squares would chase such a glitch.
-
-    Parameters
-    ----------
-    rec : Record
-        The record (its ``name`` goes into the message).
-
-    Raises
-    ------
-    InputError
-        If a sample of ``w_motor`` or ``w_load`` is off the median of itself and its
-        neighbours by more than :data:`SPIKE_SIGMAS` noise std (robust: median absolute
-        deviations; at least the quantum of quantised speeds) and :data:`SPIKE_RANGE`
-        of the speed's range.
-    """
-    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
-        if w.size < 3:
-            continue
-        with np.errstate(over="ignore", invalid="ignore"):
-            a, b, c = w[:-2], w[1:-1], w[2:]  # median of three, elementwise
-            mid = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
-            off = np.abs(w[1:-1] - mid)
-            # the noise from where the speed moves: a drive resting at exactly 0 (an
-            # encoder at standstill) would pull the median deviation to 0; quantised
-            # speeds (an encoder's counts) have their quantum as the floor
-            moving = ~((a == b) & (b == c))
-            sigma = 1.4826 * float(np.median(off[moving])) if moving.any() else 0.0
-            steps = np.abs(np.diff(w))
-            moves = steps[steps > 0]
-            quantum = float(moves.min()) if moves.size else 0.0
-            sigma = max(sigma, quantum)
-            lo, hi = np.percentile(w, [0.1, 99.9])
-            span = float(hi - lo)
-            bad = (off > SPIKE_SIGMAS * sigma) & (off > SPIKE_RANGE * span)
-        if bad.any():
-            k = int(np.argmax(off)) + 1
-            raise InputError(
-                f"{rec.name}: {name} has {int(bad.sum())} single-sample spike(s), the largest "
-                f"at t = {rec.t[k]:.6g} s (sample {k}: {w[k]:.6g} rad/s, its neighbours "
-                f"{w[k - 1]:.6g} and {w[k + 1]:.6g}): a sensor glitch; remove those samples "
-                "(empty cells, then --resample linear bridges them)"
-            )
-
-
-def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
-    """Refuse a record sampled too slowly to show the drive's ringing.
-
-    The ringing frequency ``sqrt(k_sh (1 / J_M + 1 / J_L))`` of the prior must lie below
-    the Nyquist frequency ``pi / Ts``: otherwise no sample sees an impact, and a time
-    column in ms read as s is the likely cause.
-
-    Parameters
-    ----------
-    prior : TwoMassDrive
-        The prior (its linear parameters).
-    rec : Record
-        The record (its ``name`` goes into the message).
-
-    Raises
-    ------
-    InputError
-        If ``Ts`` is longer than half the ringing period.
-    """
-    omega = math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
-    if rec.ts * omega > math.pi:
-        raise InputError(
-            f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "
-            f"at {omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s, from the prior's k_sh, "
-            f"J_M, J_L): sample faster than {math.pi / omega:.3g} s, or check the time unit "
-            "(a time column in ms reads as s) and the prior's units"
-        )
-
-
-def _as_records(records, what: str = "records", *, prior=None) -> list[Record]:
-    """Records of ``records``, each checked usable (and resolving ``prior``'s ringing)."""
-    if records is None or isinstance(records, (str, bytes, os.PathLike)):
-        hint = (" (a file? read it with backlashkit.read_records)"
-                if records is not None else "")
-        raise InputError(
-            f"{what} must be a Record or a sequence of Records, got "
-            f"{type(records).__name__}{hint}"
-        )
-    if isinstance(records, Record) or (
-        isinstance(records, tuple)
-        and len(records) == 4
-        and all(not isinstance(x, (Record, tuple)) and np.ndim(x) == 1 for x in records)
-    ):
-        records = [records]  # a single record
-    recs = list(records)
-    if not recs:
-        raise InputError(f"{what} must hold at least one record, got none")
-    out = [_as_record(r, i) for i, r in enumerate(recs)]
-    for rec in out:  # what no model can fit is refused rather than answered
-        check_not_clipped(rec)
-        check_speeds_vary(rec)
-        check_spikes(rec)
-        check_torque_noise(rec)
-        if prior is not None:
-            check_sampling(prior, rec)
-    return out
-
-
-def find_step_down(record: Record) -> tuple[int, float, float, float]:
-    """Locate the torque step-down of a record.
-
-    Parameters
-    ----------
-    record : Record
-        The experiment.
-
-    Returns
-    -------
-    i_s : int
-        Index of the first sample of the lower level.
-    t_s : float
-        Its time in s.
-    level_before, level_after : float
-        Torque in N m on the sample before the step and from ``i_s`` on.
-
-    Raises
-    ------
-    InputError
-        If the torque has no drop from a positive level (the method needs the shaft
-        to leave its positive flank), or none beyond the torque's noise.
-    """
-    u = record.torque
-    du = np.diff(u)
-    k = int(np.argmin(du))
-    scale = float(np.max(np.abs(u)))
-    if scale == 0.0 or not du[k] < -1e-9 * scale or not u[k] > 0:
-        j = int(np.argmax(du))
-        mirror = scale > 0.0 and du[j] > 1e-9 * scale and u[j] < 0
-        raise InputError(
-            f"{record.name}: the torque has no step-down (a drop from a positive level); "
-            "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
-            + ("; this one rises from a negative level: negate the torque and both speeds "
-               "(the mirror experiment)" if mirror else "")
-        )
-    noise = torque_noise_std(u)
-    if -du[k] <= JUMP_THRESHOLD * math.sqrt(2.0) * noise:
-        raise InputError(
-            f"{record.name}: the torque has no step-down beyond its noise (largest drop "
-            f"{-du[k]:.3g} N m at t = {record.t[k + 1]:.6g} s, noise std about {noise:.3g} N m); "
-            "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
-        )
-    i_s = k + 1
-    return i_s, float(record.t[i_s]), float(u[k]), float(u[i_s])
-
-
-def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
-    """How many times the prior's speed the record holds before its step-down.
-
-    Before the step-down the inertia-weighted speed ``v = (J_M w_M + J_L w_L) / J``
-    (``J = J_M + J_L``) follows the rigid body ``J v' = torque - (f_M + f_L) v``: the
-    shaft's forces cancel, and the backlash does not change where it settles. With
-    the prior's inertias and frictions, ``v = g r + a^k v_0`` is fitted by least
-    squares, ``r`` the body's response to the record's torque from rest (zero-order
-    hold, exact) and ``a^k`` the decay of an initial speed; ``g`` is returned. The
-    two-step and regression methods simulate the prior from the held speed: a ``g``
-    far from 1 means speeds or torque in other units (rpm read as rad/s gives about
-    9.55) or frictions that far off. (Swapped speed columns do not show here: both
-    speeds are equal on a held level.)
-
-    Parameters
-    ----------
-    record : Record
-        A step-down experiment.
-    prior : TwoMassDrive
-        The prior drive (its ``theta`` is not used).
-
-    Returns
-    -------
-    float
-        The least-squares gain ``g`` (1 when the record fits the prior's rigid body);
-        NaN when fewer than :data:`HELD_MIN_SAMPLES` samples precede the step-down.
-
-    Raises
-    ------
-    InputError
-        If ``record`` or ``prior`` is not one, the prior has no friction
-        (``f_M + f_L = 0``: no steady speed), or the record has no step-down (see
-        :func:`find_step_down`).
-    """
-    from itertools import accumulate
-
-    if not isinstance(record, Record):
-        raise InputError(f"record must be a Record, got {type(record).__name__}")
-    _check_prior(prior)
-    friction, inertia = prior.f_M + prior.f_L, prior.J_M + prior.J_L
-    if not friction > 0:
-        raise InputError(f"held_speed_gain needs f_M + f_L > 0 (a steady speed), got "
-                         f"{friction!r}")
-    i_s = find_step_down(record)[0]
-    if i_s < HELD_MIN_SAMPLES:
-        return math.nan
-    a = math.exp(-friction * record.ts / inertia)
-    b = (1.0 - a) / friction
-    # r[k] = a r[k-1] + b u[k-1], r[0] = 0 (scipy.signal.lfilter would cost its import)
-    rest = np.fromiter(accumulate((b * float(x) for x in record.torque[: i_s - 1]),
-                                  lambda r, x: a * r + x, initial=0.0), float, i_s)
-    v = (prior.J_M * record.w_motor[:i_s] + prior.J_L * record.w_load[:i_s]) / inertia
-    basis = np.column_stack([rest, a ** np.arange(i_s)])
-    # both sides scaled to 1 (speeds of 1e300 would overflow the squares, a torque of
-    # 1e-15 fall below lstsq's rank cut-off)
-    scale = float(np.max(np.abs(v))) or 1.0
-    col = float(np.max(np.abs(rest))) or 1.0
-    (gain, _), *_ = np.linalg.lstsq(basis / [col, 1.0], v / scale, rcond=None)
-    return float(gain) * scale / col
-
-
-def _far(ratio: float, factor: float = FAR_FROM_PRIOR) -> bool:
-    """Whether a ratio to the prior is more than ``factor`` off (either way)."""
-    return not 1.0 / factor <= ratio <= factor
-
-
-def _warn_held_speeds(recs: list[Record], prior: TwoMassDrive) -> list[float]:
-    """:func:`held_speed_gain` of every record; a PriorMismatchWarning for those far
-    off (:data:`FAR_FROM_PRIOR`)."""
-    import warnings
-
-    from .errors import PriorMismatchWarning
-
-    gains = [held_speed_gain(rec, prior) for rec in recs]
-    for rec, gain in zip(recs, gains, strict=True):
-        if math.isfinite(gain) and _far(gain):
-            warnings.warn(
-                f"{rec.name}: under the torque held before the step-down the speeds are "
-                f"{gain:.3g} times the prior's, and this method simulates the prior from "
-                "them: check the units of the speeds (rpm read as rad/s?) and of the "
-                "torque, and the prior's frictions",
-                PriorMismatchWarning, stacklevel=3)
-    return gains
-
 
 def _firwin_hamming(numtaps: int, cutoff: float) -> np.ndarray:
     """Hamming-windowed sinc low-pass taps, unit DC gain: ``scipy.signal.firwin(numtaps,
@@ -452,7 +106,6 @@ def _firwin_hamming(numtaps: int, cutoff: float) -> np.ndarray:
     m = np.arange(numtaps) - 0.5 * (numtaps - 1)
     taps = cutoff * np.sinc(cutoff * m) * np.hamming(numtaps)
     return taps / np.sum(taps)
-
 
 def fir_lowpass(
     x: ArrayLike, cutoff: float, ts: float, *, numtaps: int | None = None
@@ -497,7 +150,6 @@ def fir_lowpass(
     padded = np.pad(arr, half, mode="edge")
     return np.convolve(padded, taps, mode="valid")
 
-
 @dataclass(frozen=True)
 class Commutation:
     """Commutation instants found by eq. 9 and the windows used.
@@ -522,7 +174,6 @@ class Commutation:
     dt2: float
     dt3: float
 
-
 def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
     if width <= 1:
         return x.copy()
@@ -530,7 +181,6 @@ def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
     padded = np.pad(x, half, mode="edge")
     c = np.concatenate([[0.0], np.cumsum(padded)])
     return (c[2 * half + 1 :] - c[: -2 * half - 1]) / (2 * half + 1)
-
 
 def _impact_time(record: Record, i_s: int, search: float) -> float:
     """Rough impact instant (s after t_s) from the fastest rise of the motor speed."""
@@ -567,10 +217,8 @@ def _impact_time(record: Record, i_s: int, search: float) -> float:
         j -= 1
     return j * ts
 
-
 #: Shapes of the load speed before the contact loss in ``F_1`` of eq. 9.
 ONSETS = ("constant", "unloading")
-
 
 def _w_c(y: np.ndarray, tt: np.ndarray, alpha: float, anchor: str,
          onset: str = "constant") -> np.ndarray:
@@ -598,7 +246,6 @@ def _w_c(y: np.ndarray, tt: np.ndarray, alpha: float, anchor: str,
         out[c] = float(r @ r)
     return out
 
-
 def _w_b(y: np.ndarray, tt: np.ndarray, alpha: float, anchor: str) -> np.ndarray:
     """W_b(t_b) for every candidate index 0 .. len - 2 (free decay, then constant)."""
     m = y.size
@@ -610,7 +257,6 @@ def _w_b(y: np.ndarray, tt: np.ndarray, alpha: float, anchor: str) -> np.ndarray
         r = y - a * g
         out[c] = float(r @ r)
     return out
-
 
 def commutation_instants(
     record: Record,
@@ -706,7 +352,6 @@ def commutation_instants(
         )
     return Commutation(i_s, i_c, i_b, t_s, float(t[i_c]), float(t[i_b]), dt1, dt2, dt3)
 
-
 def pre_estimate(w_motor_f: ArrayLike, w_load_f: ArrayLike, ts: float, i_c: int, i_b: int) -> float:
     """Eq. 6: ``theta_ini = -0.5 * integral_{t_c}^{t_b} (w_Mf - w_Lf) dt``.
 
@@ -727,7 +372,6 @@ def pre_estimate(w_motor_f: ArrayLike, w_load_f: ArrayLike, ts: float, i_c: int,
     d = np.asarray(w_motor_f, float)[i_c : i_b + 1] - np.asarray(w_load_f, float)[i_c : i_b + 1]
     return float(-0.5 * ts * (d.sum() - 0.5 * (d[0] + d[-1])))
 
-
 @dataclass
 class _Segment:
     """The part of a record used by W_1: from t_s over dt_4, and the model start."""
@@ -737,7 +381,6 @@ class _Segment:
     w_motor: np.ndarray
     w0: float
     name: str = "record"
-
 
 def _segment(record: Record, dt4: float, level_window: float) -> _Segment:
     i_s, t_s, _, _ = find_step_down(record)
@@ -753,10 +396,9 @@ def _segment(record: Record, dt4: float, level_window: float) -> _Segment:
     sl = slice(i_s, i_s + n4 + 1)
     return _Segment(record.t[sl], record.torque[sl], record.w_motor[sl], w0, record.name)
 
-
 def _cost(prior: TwoMassDrive, segments: list[_Segment], thetas: np.ndarray, workers) -> np.ndarray:
     """Sum over segments of W_1(theta) for every theta (simulated in parallel)."""
-    from .simulate import simulate_batch
+    from ..simulate import simulate_batch
 
     total = np.zeros(thetas.size)
     for seg in segments:
@@ -775,7 +417,6 @@ def _cost(prior: TwoMassDrive, segments: list[_Segment], thetas: np.ndarray, wor
             e = seg.w_motor - r.w_motor
             total[j] += float(e @ e)
     return total
-
 
 def _search(prior, segments, lo: float, hi: float, n_grid: int, workers) -> tuple[float, float]:
     """Grid search of ``W_1`` over ``[lo, hi]``, then zoomed grids around the best point.
@@ -801,22 +442,8 @@ def _search(prior, segments, lo: float, hi: float, n_grid: int, workers) -> tupl
         step = float(zoom[1] - zoom[0])
     return best_theta, best_cost
 
-
 #: Candidates per zoomed grid of :func:`_search` (21: each zoom narrows the cell tenfold).
 ZOOM_POINTS = 21
-
-
-def _check_prior(prior: TwoMassDrive) -> TwoMassDrive:
-    if not isinstance(prior, TwoMassDrive):
-        raise InputError(f"prior must be a TwoMassDrive, got {type(prior).__name__}")
-    return prior
-
-
-def _check_int(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
 
 class TwoStepIdentifier:
     """Paper A's two-step backlash identification (Section 4.3, steps 4-8).
@@ -935,20 +562,20 @@ class TwoStepIdentifier:
             If a record's held speeds are more than :data:`FAR_FROM_PRIOR` times off
             the prior's response (:func:`held_speed_gain`).
         """
-        prior = _check_prior(self.prior)
+        prior = check_prior(self.prior)
         n_theta = v.positive("n_theta", self.n_theta)
         if not n_theta < 1:
             raise InputError(f"n_theta must be < 1, got {self.n_theta!r}")
         dt4 = v.positive("dt4", self.dt4)
         level_window = v.positive("level_window", self.level_window)
-        n_grid = _check_int("n_grid", self.n_grid, 2)
+        n_grid = v.integer("n_grid", self.n_grid, 2)
         # named here: the filter would only say "cutoff", not which one
         v.positive("cutoff_motor", self.cutoff_motor)
         v.positive("cutoff_load", self.cutoff_load)
-        recs = _as_records(records, prior=prior)
-        finals = recs if final_records is None else _as_records(final_records, "final_records",
+        recs = as_records(records, prior=prior)
+        finals = recs if final_records is None else as_records(final_records, "final_records",
                                                                 prior=prior)
-        gains = _warn_held_speeds(recs + [f for f in finals if all(f is not r for r in recs)],
+        gains = warn_held_speeds(recs + [f for f in finals if all(f is not r for r in recs)],
                                   prior)
         alpha = prior.f_L / prior.J_L
         comms, inis = [], []
@@ -987,7 +614,6 @@ class TwoStepIdentifier:
         self.bounds_ = (lo, hi)
         self.held_speed_gains_ = gains
         return self
-
 
 class RegressionIdentifier:
     """Paper A's baseline (Table 2): least squares on ``w_M`` over ``[0, theta_max]``.
@@ -1069,13 +695,13 @@ class RegressionIdentifier:
             If a record's held speeds are more than :data:`FAR_FROM_PRIOR` times off
             the prior's response (:func:`held_speed_gain`).
         """
-        prior = _check_prior(self.prior)
+        prior = check_prior(self.prior)
         theta_max = v.positive("theta_max", self.theta_max)
         dt4 = v.positive("dt4", self.dt4)
         level_window = v.positive("level_window", self.level_window)
-        n_grid = _check_int("n_grid", self.n_grid, 2)
-        recs = _as_records(records, prior=prior)
-        self.held_speed_gains_ = _warn_held_speeds(recs, prior)
+        n_grid = v.integer("n_grid", self.n_grid, 2)
+        recs = as_records(records, prior=prior)
+        self.held_speed_gains_ = warn_held_speeds(recs, prior)
         segments = [_segment(r, dt4, level_window) for r in recs]
         self.theta_, self.cost_ = _search(prior, segments, 0.0, theta_max, n_grid, self.workers)
         self.t_s_ = [find_step_down(r)[1] for r in recs]

@@ -44,7 +44,7 @@ Choices (documented, configurable where it matters)
   Filtered speed measurements have noise correlated from sample to sample, which the
   white-noise likelihood takes for information: ``noise_model=ARNoise(order)`` then
   fits an autoregressive model to the residuals of every record and channel and
-  refines the fit on the residuals whitened by it (:mod:`backlashkit.noise_models`);
+  refines the fit on the residuals whitened by it (:mod:`backlashkit.identify.noise`);
   ``residual_lag1_`` shows whether the residuals the likelihood treats as white are.
 * **Local minima.** The output error of this lightly damped drive (damping ratio
   about 0.013 for paper A's drive) is multimodal in ``theta`` and in the parameters
@@ -86,7 +86,7 @@ Choices (documented, configurable where it matters)
 * **Uncertainty.** Gauss-Newton / Fisher information at the optimum,
   ``cov(log p) = (J^T W J + P)^-1`` with ``P`` the prior's information; ``std_`` of
   ``theta`` by the delta method. The 95 % interval ``ci95_`` comes from the profile
-  likelihood of ``theta`` by default (:class:`~backlashkit.intervals.ProfileLikelihood`):
+  likelihood of ``theta`` by default (:class:`~backlashkit.identify.intervals.ProfileLikelihood`):
   where the shaft rattles (light loads: dozens of impacts per record) the likelihood
   is not quadratic at the scale of the standard error, and the Fisher interval
   ``theta_ +- 1.96 std_`` (``interval=FisherInterval()``) covers the truth less often
@@ -108,16 +108,22 @@ from dataclasses import dataclass, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import _validate as v
-from .errors import (
+from .. import validate as v
+from ..errors import (
     CorrelatedResidualsWarning,
     InputError,
     PriorMismatchWarning,
     SensitivityWarning,
 )
-from .identify import Record, TwoStepIdentifier, _as_records, _far, find_step_down
-from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, profile_crossing
-from .noise_models import (
+from ..plants import TwoMassDrive
+from ..signals import _noise_hp
+from .intervals import (
+    FisherInterval,
+    ParametricBootstrap,
+    ProfileLikelihood,
+    profile_crossing,
+)
+from .noise import (
     ARNoise,
     AutoNoise,
     WhiteNoise,
@@ -126,8 +132,9 @@ from .noise_models import (
     innovation_ratio,
     whiten,
 )
-from .plants import TwoMassDrive
-from .signals import _noise_hp
+from .record import Record, as_records
+from .step import find_step_down, is_far
+from .two_step import TwoStepIdentifier
 
 __all__ = [
     "CramerRaoBound",
@@ -352,7 +359,7 @@ def _simulate(p: np.ndarray, span: _Span, law, workers, end: int | None = None) 
 
 
 def _simulate_span(p: np.ndarray, span: _Span, law, workers, end: int | None) -> np.ndarray:
-    from .simulate import _simulate_packed
+    from ..simulate import _simulate_packed
 
     if span.hold is not None:  # from rest through the held torque, on a coarse grid
         n = max(2, math.ceil(span.hold / HOLD_STEP))
@@ -745,12 +752,12 @@ class JointIdentifier:
         then says to use ``ARNoise``).
     interval : ProfileLikelihood, FisherInterval or ParametricBootstrap, optional
         Where ``ci95_`` (and, for the bootstrap, ``std_``) comes from (module
-        :mod:`backlashkit.intervals`; default ``ProfileLikelihood()``). The profile
+        :mod:`backlashkit.identify.intervals`; default ``ProfileLikelihood()``). The profile
         search can move the estimate: a held-theta refit more than
         :data:`RECENTRE_MARGIN` below the estimate's cost restarts the final
         refinement from there.
     noise_model : WhiteNoise, ARNoise or AutoNoise, optional
-        The measurement noise (module :mod:`backlashkit.noise_models`; default
+        The measurement noise (module :mod:`backlashkit.identify.noise`; default
         ``AutoNoise()``: ``ARNoise(2)`` where the speeds' own noise is coloured on the
         level held before the step-down, ``WhiteNoise()`` otherwise; ``noise_model_``
         says which). ``ARNoise(order)`` whitens the residuals by an
@@ -949,24 +956,24 @@ class JointIdentifier:
 
     # -- validation ------------------------------------------------------------------
     def _check(self) -> None:
-        from .identify import _check_int, _check_prior
+        from .record import check_prior
 
-        _check_prior(self.prior)
+        check_prior(self.prior)
         if self.start not in ("auto", "rest", "steady"):
             raise InputError(f"start must be 'auto', 'rest' or 'steady', got {self.start!r}")
         v.positive("pre_window", self.pre_window)
         v.positive("theta_max", self.theta_max)
-        _check_int("n_grid", self.n_grid, 2)
+        v.integer("n_grid", self.n_grid, 2)
         for name in ("two_step_start", "misfit_restart"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        _check_int("n_starts", self.n_starts, 1)
-        _check_int("n_continue", self.n_continue, 1)
-        _check_int("ambiguity_starts", self.ambiguity_starts, 0)
-        _check_int("noise_iter", self.noise_iter, 0)
-        _check_int("screen_iter", self.screen_iter, 1)
-        _check_int("max_iter", self.max_iter, 1)
-        _check_int("stiffness_grid", self.stiffness_grid, 1)
+        v.integer("n_starts", self.n_starts, 1)
+        v.integer("n_continue", self.n_continue, 1)
+        v.integer("ambiguity_starts", self.ambiguity_starts, 0)
+        v.integer("noise_iter", self.noise_iter, 0)
+        v.integer("screen_iter", self.screen_iter, 1)
+        v.integer("max_iter", self.max_iter, 1)
+        v.integer("stiffness_grid", self.stiffness_grid, 1)
         if not v.positive("stiffness_span", self.stiffness_span) > 1.0:
             raise InputError(
                 f"stiffness_span must be > 1 (a factor), got {self.stiffness_span!r}"
@@ -979,12 +986,12 @@ class JointIdentifier:
                                           ParametricBootstrap)):
             raise InputError(
                 "interval must be a ProfileLikelihood, FisherInterval or ParametricBootstrap "
-                f"(backlashkit.intervals), got {type(self.interval).__name__}"
+                f"(backlashkit.identify.intervals), got {type(self.interval).__name__}"
             )
         if not isinstance(self.noise_model, (WhiteNoise, ARNoise, AutoNoise)):
             raise InputError(
                 "noise_model must be a WhiteNoise, ARNoise or AutoNoise "
-                f"(backlashkit.noise_models), got {type(self.noise_model).__name__}"
+                f"(backlashkit.identify.noise), got {type(self.noise_model).__name__}"
             )
         if isinstance(self.noise_model, ARNoise):
             if self.noise is not None:
@@ -1064,7 +1071,7 @@ class JointIdentifier:
         if message is not None:
             warnings.warn(message, CorrelatedResidualsWarning, stacklevel=2)
         self.far_from_prior_ = [name for name in self.estimated_[1:]
-                                if _far(self.params_[name] / getattr(self.prior, name))]
+                                if is_far(self.params_[name] / getattr(self.prior, name))]
         if self.far_from_prior_:
             ratios = ", ".join(f"{name} x{self.params_[name] / getattr(self.prior, name):.3g}"
                                for name in self.far_from_prior_)
@@ -1109,7 +1116,7 @@ class JointIdentifier:
         -------
         str or None
             A sentence naming the record and speed whose residual (whitened, with
-            :class:`~backlashkit.noise_models.ARNoise`) has the largest lag-1
+            :class:`~backlashkit.identify.noise.ARNoise`) has the largest lag-1
             autocorrelation, when it exceeds :data:`CORRELATED_LAG1` in magnitude
             (then the standard error and interval of ``theta`` are too narrow), and
             whether the noise or the model is to blame (``held_noise_lag1_``); None
@@ -1141,7 +1148,7 @@ class JointIdentifier:
         """One search and refinement; ``anchor`` replaces the prior as the search's
         starting point (grid, box, two-step start), not in the penalty."""
         prior = self.prior.with_theta(None)
-        recs = _as_records(records, prior=prior)
+        recs = as_records(records, prior=prior)
         ts_max = max(r.ts for r in recs)
         if self.final_horizon is not None and self.final_horizon < MIN_FINAL_SAMPLES * ts_max:
             raise InputError(
@@ -1731,7 +1738,7 @@ def cramer_rao_bound(
     speed ``c`` (motor, load) to the estimated parameters; with autoregressive noise
     (``noise_ar``) the sensitivities are whitened by ``A(q)`` first and ``s_c`` is the
     innovation's standard deviation (the likelihood of
-    :class:`~backlashkit.noise_models.ARNoise`, conditional on the first ``p`` samples).
+    :class:`~backlashkit.identify.noise.ARNoise`, conditional on the first ``p`` samples).
 
     Parameters
     ----------
@@ -1759,7 +1766,7 @@ def cramer_rao_bound(
         Relative central-difference step (default 1e-6).
     noise_ar : array_like, optional
         Coefficients ``a_1 .. a_p`` of ``A(q)`` of autoregressive noise (as
-        :class:`~backlashkit.noise_models.ARNoise` fits them, ``JointIdentifier.noise_ar_``):
+        :class:`~backlashkit.identify.noise.ARNoise` fits them, ``JointIdentifier.noise_ar_``):
         one row for both speeds or rows ``(w_M, w_L)``. ``noise_std`` and ``snr_db``
         then give the noise's own level, not its innovation's. Default: white noise.
 
@@ -1775,7 +1782,7 @@ def cramer_rao_bound(
         unknown, a parameter to estimate is 0, or ``noise_ar`` is not a stationary
         autoregression.
     """
-    from .simulate import simulate_batch
+    from ..simulate import simulate_batch
 
     if not isinstance(drive, TwoMassDrive):
         raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")

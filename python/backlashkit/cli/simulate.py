@@ -14,6 +14,7 @@ Two modes, exactly one of which is chosen:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import secrets
@@ -24,13 +25,20 @@ from typing import Any
 
 import numpy as np
 
-from . import _validate as v
-from . import signals
-from ._cli_files import add_file_options, file_options, reader_errors
-from .cli import missing_directory
-from .errors import InputError, SensitivityWarning
-from .io import check_plot_suffix, check_writable, read_drive_toml, write_csv
-from .laws import ShaftLaw
+from .. import signals
+from .. import validate as v
+from ..errors import InputError, SensitivityWarning
+from ..encoder import Encoder, measure_encoders
+from ..io import (
+    check_plot_suffix,
+    check_writable,
+    read_actuator_toml,
+    read_drive_toml,
+    write_csv,
+)
+from ..laws import ShaftLaw
+from .files import add_file_options, file_options, reader_errors
+from .main import missing_directory
 
 __all__ = ["add_parser", "run"]
 
@@ -142,8 +150,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--law",
         choices=[law.value for law in ShaftLaw],
         default=ShaftLaw.PAPER.value,
-        help="shaft contact law: paper (eq. 2 of paper A, default) or no-pull (the damper "
-        "never pulls, as Modelica's ElastoBacklash)",
+        help="shaft contact law: paper (eq. 2 of paper A, default), no-pull (the damper "
+        "never pulls: max(tau_c + tau_d, 0), Modelica's ElastoBacklash2) or modelica "
+        "(Modelica's ElastoBacklash: tau_c + min(tau_c, tau_d), 0 where tau_c + tau_d <= 0)",
+    )
+    enc = p.add_argument_group("measurement")
+    enc.add_argument(
+        "--encoder",
+        type=float,
+        metavar="N",
+        help="measure the speeds as an encoder of N counts per revolution (>= 1) does: "
+        "differences of counts over the sample time; adds columns count_motor, count_load",
+    )
+    enc.add_argument(
+        "--speed-filter",
+        type=float,
+        metavar="TAU",
+        help="with --encoder: first-order filter of the encoder speeds, time constant TAU "
+        "in s (the drive's speed observer; default none)",
     )
     exp = p.add_argument_group("experiment options (with --experiment)")
     exp.add_argument("--amplitude", type=float, metavar="A", help="torque level in N m (all)")
@@ -192,13 +216,31 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return p
 
 
+def _encoder(args: argparse.Namespace) -> Encoder | None:
+    """The --encoder / --speed-filter options as an Encoder (refusals in the library)."""
+    if args.encoder is None:
+        if args.speed_filter is not None:
+            raise InputError("--speed-filter only applies with --encoder N")
+        return None
+    if args.snr_motor is not None or args.snr_load is not None:
+        raise InputError(
+            "--snr-motor/--snr-load add white noise to exact speeds; with --encoder the "
+            "speeds are measured by the encoder: give one or the other"
+        )
+    try:
+        return Encoder(args.encoder, 0.0 if args.speed_filter is None else args.speed_filter)
+    except InputError as exc:
+        flag = "--speed-filter" if "tau_w" in str(exc) else "--encoder"
+        raise InputError(f"{flag}: {exc}") from None
+
+
 def _note(message: str) -> None:
     print(f"backlashkit: {message}", file=sys.stderr)
 
 
 def _read_torque(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]:
     """The --torque file, read as identify reads experiments (its advice as flags)."""
-    from .records import read_torque
+    from ..identify.readers import read_torque
 
     with reader_errors():
         return read_torque(args.torque, **file_options(args))
@@ -355,8 +397,10 @@ def run(args: argparse.Namespace) -> int:
         :func:`backlashkit.cli.main` reports on one line with status 2.
     """
     _check_source(args)
+    encoder = _encoder(args)
     out = _check_output(args)
     drive = read_drive_toml(args.drive, require_theta=True)
+    actuator = read_actuator_toml(args.drive)
 
     noisy = args.experiment is not None and (
         args.snr_motor is not None or args.snr_load is not None
@@ -384,7 +428,8 @@ def run(args: argparse.Namespace) -> int:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)
-        response = drive.simulate(t, torque, law=args.law)
+        response = drive.simulate(t, torque, law=args.law, actuator=actuator,
+                                  positions=encoder is not None)
 
     noise: dict[str, Any] | None = None
     if args.torque is not None:
@@ -408,6 +453,10 @@ def run(args: argparse.Namespace) -> int:
                 noise.update(snr_load_db=float(args.snr_load), measured_snr_load_db=measured)
         columns = {"t": response.t, "torque": response.torque, "w_motor": w_motor,
                    "w_load": w_load}
+    if encoder is not None:
+        columns = measure_encoders(response, encoder)
+        if args.torque is not None:
+            del columns["torque"]  # the input file holds it
     write_csv(out, columns, force=args.force)
     if args.plot is not None:
         response.plot().savefig(args.plot)
@@ -444,10 +493,7 @@ def run(args: argparse.Namespace) -> int:
             "t_start": float(response.t[0]),
             "t_end": float(response.t[-1]),
             "n_events": len(response.events),
-            "events": [
-                {"time": e.time, "shaft": e.shaft, "kind": e.kind, "flank": e.flank}
-                for e in response.events
-            ],
+            "events": [dataclasses.asdict(e) for e in response.events],
             "near_grazing": len(grazes),
             "near_grazing_events": [
                 {"time": g.time, "shaft": g.shaft, "margin": g.margin} for g in grazes

@@ -1,6 +1,6 @@
 """Self-contained HTML report pages: one stylesheet, figures, tables, the page.
 
-Shared by the identification report (:mod:`backlashkit.report_identify`) and the
+Shared by the identification report (:mod:`backlashkit.identify.report`) and the
 reproduction reports (``reproduce ravanbod2002``, ``reproduce tao1995``), so that every
 report looks alike and opens in any browser without a network (no scripts, no external
 files but the figures written beside the page).

@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 if TYPE_CHECKING:
-    from .identify import Record
+    from .record import Record
 
 __all__ = ["TORQUE_NOISE_LIMIT", "check_torque_noise", "torque_levels", "torque_noise_std"]
 

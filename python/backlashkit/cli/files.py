@@ -1,6 +1,6 @@
 """File-reading options shared by ``identify`` (experiments) and ``simulate --torque``.
 
-Both commands read their files with :mod:`backlashkit.records`; the options below map
+Both commands read their files with :mod:`backlashkit.identify.readers`; the options below map
 onto its keywords, and :func:`reader_errors` rewrites its advice (``pass
 sample_time=``) into the flags of the command line (``pass --sample-time TS``).
 """
@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = ["READER_FLAGS", "add_file_options", "file_options", "parse_columns",
            "reader_errors"]
@@ -42,7 +42,7 @@ def add_file_options(g: Any, *, columns_help: str) -> None:
 
 
 def file_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The keywords of :func:`backlashkit.records.read_records` given by the options.
+    """The keywords of :func:`backlashkit.identify.readers.read_records` given by the options.
 
     Parameters
     ----------

@@ -2,13 +2,13 @@
 
 Reads one or more experiment files (CSV, columns ``t,torque,w_motor,w_load`` in SI, as
 written by ``backlashkit simulate --experiment step-down``, or other layouts, units,
-``.mat`` and ``.npz`` through the options of :func:`backlashkit.records.read_records`)
+``.mat`` and ``.npz`` through the options of :func:`backlashkit.identify.readers.read_records`)
 and a prior drive file (``[drive]`` with the linear parameters; a ``theta`` in it is
 ignored; an optional ``[uncertainty]`` table gives relative standard deviations for the
 joint method), and runs the joint maximum-likelihood fit of theta and the linear
 parameters with its standard error (default), paper A's two-step method or its
 regression baseline. See
-:mod:`backlashkit.identify` and :mod:`backlashkit.identify_joint` for the methods and
+:mod:`backlashkit.identify` and :mod:`backlashkit.identify.joint` for the methods and
 their documented choices.
 """
 
@@ -24,18 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from ._cli_files import add_file_options, file_options, reader_errors
-from .cli import flag_names
-from .identify import (
-    Record,
-    RegressionIdentifier,
-    TwoStepIdentifier,
-    _far,
-    find_step_down,
-    held_speed_gain,
-)
-from .io import read_drive_toml, read_uncertainty_toml
-from .report_identify import add_report_option, check_report_directory, maybe_write_report
+from ..identify.record import Record
+from ..identify.report import add_report_option, check_report_directory, maybe_write_report
+from ..identify.step import find_step_down, held_speed_gain, is_far
+from ..identify.two_step import RegressionIdentifier, TwoStepIdentifier
+from ..io import read_drive_toml, read_uncertainty_toml
+from .files import add_file_options, file_options, reader_errors
+from .main import flag_names
 
 __all__ = ["add_parser", "run"]
 
@@ -209,8 +204,8 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     list of Record
         Every record of every file, in order.
     """
-    from .errors import InputError
-    from .records import read_records
+    from ..errors import InputError
+    from ..identify.readers import read_records
 
     options = file_options(args)
     out: list[Record] = []
@@ -233,8 +228,8 @@ def _check_step_down_experiment(rec: Record, prior: Any) -> int:
     ringing recorded after the step-down (the passage through the backlash takes about
     one; a record that ends at the step-down shows none). Returns the number of separate
     step-downs."""
-    from .errors import InputError
-    from .torque import JUMP_THRESHOLD, torque_noise_std
+    from ..errors import InputError
+    from ..identify.torque import JUMP_THRESHOLD, torque_noise_std
 
     i_s, t_s, _, _ = find_step_down(rec)
     period = 2.0 * math.pi / math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
@@ -278,7 +273,7 @@ def _check_step_down_experiment(rec: Record, prior: Any) -> int:
 def _refuse_duplicates(records: list[Record]) -> None:
     """Refuse a record given twice: the joint fit would count its data twice and
     report a standard error too small by sqrt(2)."""
-    from .errors import InputError
+    from ..errors import InputError
 
     seen: dict[bytes, str] = {}
     for rec in records:
@@ -308,7 +303,7 @@ NOISE_FREE = 1e-7
 def _far_from_prior(est, prior, factor: float) -> list[str]:
     """The estimated linear parameters more than ``factor`` times off the prior."""
     return [name for name in est.estimated_[1:]
-            if _far(est.params_[name] / getattr(prior, name), factor)]
+            if is_far(est.params_[name] / getattr(prior, name), factor)]
 
 
 _CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
@@ -321,7 +316,7 @@ def _check_held_speeds(records: list[Record], prior: Any, *, allow: bool) -> lis
     A :func:`~backlashkit.identify.held_speed_gain` more than ``REFUSE_FROM_PRIOR``
     times off 1 (or negative) is refused unless ``allow``, one more than
     ``FAR_FROM_PRIOR`` times off is noted. Returns the notes."""
-    from .errors import InputError
+    from ..errors import InputError
 
     notes = []
     for rec in records:
@@ -330,13 +325,13 @@ def _check_held_speeds(records: list[Record], prior: Any, *, allow: bool) -> lis
             continue
         what = (f"{rec.name}: under the torque held before the step-down at t = "
                 f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
-        if _far(gain, REFUSE_FROM_PRIOR) and not allow:
+        if is_far(gain, REFUSE_FROM_PRIOR) and not allow:
             raise InputError(
                 f"{what} (this method simulates the prior from them): {_CHECK_UNITS}; if "
                 "the prior's frictions are that far off, use --method joint (it estimates "
                 "them) or pass --allow-far-from-prior"
             )
-        if _far(gain):
+        if is_far(gain):
             notes.append(f"{what}: {_CHECK_UNITS}")
     return notes
 
@@ -422,7 +417,7 @@ def run(args: argparse.Namespace) -> int:
     flags = dict(_FLAGS)
     if args.prior_rel_std is not None:  # else the [uncertainty] table gave the values
         flags["prior_rel_std"] = "--prior-rel-std"
-    from .errors import PriorMismatchWarning
+    from ..errors import PriorMismatchWarning
 
     with flag_names(flags), warnings.catch_warnings():
         # the command notes or refuses a prior mismatch itself, with its flags
@@ -439,7 +434,7 @@ _FLAGS = {
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .errors import InputError
+    from ..errors import InputError
 
     if args.report is not None:  # before the fit, not after it
         if not args.report.strip():
@@ -451,7 +446,7 @@ def _run(args: argparse.Namespace) -> int:
     finals = None if not args.final else read_experiments(args, args.final)
     read_notes: list[str] = []
     if args.torque_levels:
-        from .torque import torque_levels
+        from ..identify.torque import torque_levels
 
         for group in (records, finals or []):
             for k, rec in enumerate(group):
@@ -498,13 +493,13 @@ def _run(args: argparse.Namespace) -> int:
     if args.seed is not None and args.bootstrap is None:
         raise InputError("--seed only applies with --bootstrap (the seed of its resamples)")
     if args.method != "joint":  # the joint fit estimates the frictions: checked after it
-        from .identify import _as_records
+        from ..identify.record import as_records
 
-        _as_records(records + (finals or []), prior=prior)  # the identifiers' checks first
+        as_records(records + (finals or []), prior=prior)  # the identifiers' checks first
         read_notes += _check_held_speeds(records + (finals or []), prior,
                                          allow=args.allow_far_from_prior)
     if args.method == "joint":
-        from .identify_joint import JointIdentifier
+        from ..identify.joint import JointIdentifier
 
         if args.prior_rel_std is not None:
             rel: Any = args.prior_rel_std
@@ -512,9 +507,9 @@ def _run(args: argparse.Namespace) -> int:
             rel = read_uncertainty_toml(args.drive) or None
         everything = records + (finals or [])
         _refuse_duplicates(everything)
-        from .errors import CorrelatedResidualsWarning
-        from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
-        from .noise_models import ARNoise, AutoNoise, WhiteNoise
+        from ..errors import CorrelatedResidualsWarning
+        from ..identify.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+        from ..identify.noise import ARNoise, AutoNoise, WhiteNoise
 
         seed = 0 if args.seed is None else args.seed
         if seed < 0:  # the library's message would offer a SeedSequence

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .. import validate as v
+from ..errors import InputError
 
 __all__ = ["ARNoise", "AutoNoise", "WhiteNoise", "fit_ar", "innovation_ratio", "whiten"]
 
@@ -109,9 +110,8 @@ class AutoNoise:
 
 
 def _check_order(order) -> None:
-    from .identify import _check_int
 
-    _check_int("order", order, 1)
+    v.integer("order", order, 1)
     if order > MAX_ORDER:
         raise InputError(f"order must be at most {MAX_ORDER}, got {order!r}")
 
@@ -141,10 +141,9 @@ def fit_ar(e, order: int) -> tuple[np.ndarray, float]:
     InputError
         If ``e`` is too short, not finite, or constant.
     """
-    from .identify import _check_int
 
     x = np.asarray(e, float)
-    order = _check_int("order", order, 1)
+    order = v.integer("order", order, 1)
     if x.ndim != 1 or x.size < 2 * order + 2:
         raise InputError(
             f"fit_ar needs a 1-D sequence of at least {2 * order + 2} samples for order "

@@ -18,7 +18,7 @@ Three estimators see the same data:
   pre-estimate (eq. 6) on step 1, least squares on step 2 around it;
 * ``regression`` (paper A, Table 2): :class:`~backlashkit.identify.RegressionIdentifier`
   on step 2, theta over [0, 15 deg];
-* ``joint``: :class:`~backlashkit.identify_joint.JointIdentifier` on both records,
+* ``joint``: :class:`~backlashkit.identify.joint.JointIdentifier` on both records,
   both speeds, theta and the six linear parameters refined from the data, with its
   standard error and 95 % interval (coverage counted).
 
@@ -45,12 +45,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import signals
-from ._parallel import process_pool
-from .errors import InputError, SensitivityWarning
-from .identify import Record, RegressionIdentifier, TwoStepIdentifier
-from .identify_joint import JointIdentifier, cramer_rao_bound
-from .plants import TwoMassDrive
+from .. import signals
+from ..errors import InputError, SensitivityWarning
+from ..identify.joint import JointIdentifier, cramer_rao_bound
+from ..identify.record import Record
+from ..identify.two_step import RegressionIdentifier, TwoStepIdentifier
+from ..parallel import process_pool
+from ..plants import TwoMassDrive
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -427,7 +428,7 @@ def run_cli(args: argparse.Namespace) -> int:
     int
         0 when the joint estimator meets every bar, 1 otherwise.
     """
-    from .cli import check_reproduce_outputs, flag_names
+    from ..cli.main import check_reproduce_outputs, flag_names
 
     json_path = args.json
     rep = check_reproduce_outputs(json_path, args.report, bool(args.force))
@@ -504,7 +505,13 @@ def plot_estimates(doc: dict[str, Any], *, ax: Axes | None = None) -> Figure:
 def _write_report(rep: Path, doc: dict[str, Any], text: str, body: str) -> None:
     """``index.html`` (tables beside the paper's, the bars of ``doc["checks"]``, the
     estimates' figure), the figure as PNG and SVG, and the JSON document, into ``rep``."""
-    from ._html import bars_table, figure, page, save_figure, table
+    from ..htmlpage import (
+        bars_table,
+        figure,
+        page,
+        save_figure,
+        table,
+    )
 
     rep.mkdir(parents=True, exist_ok=True)
     save_figure(plot_estimates(doc), rep, "estimates")

@@ -41,19 +41,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._html import figure, page, save_figure
-from .errors import InputError
-from .identify import (
+from ..errors import InputError
+from ..htmlpage import figure, page, save_figure
+from ..io import check_writable
+from ..plants import TwoMassDrive
+from .record import Record, as_records
+from .step import find_step_down
+from .two_step import (
     DEFAULT_DT4,
-    Record,
-    _as_records,
     _cost,
     _segment,
-    find_step_down,
     fir_lowpass,
 )
-from .io import check_writable
-from .plants import TwoMassDrive
 
 if TYPE_CHECKING:
     import matplotlib.axes
@@ -165,7 +164,7 @@ def cost_curve(
     numpy.ndarray
         ``W_1`` in (rad/s)^2 per entry of ``thetas``.
     """
-    recs = _as_records(records)
+    recs = as_records(records)
     th = np.asarray(thetas, float).reshape(-1)
     if th.size == 0 or not np.isfinite(th).all() or (th < 0).any():
         raise InputError("thetas must be a non-empty array of finite values >= 0 (rad)")
@@ -187,7 +186,7 @@ class _Fit:
 
 def _simulate_fit(prior: TwoMassDrive, rec: Record, theta: float, dt4: float,
                   level_window: float) -> _Fit:
-    from .simulate import simulate_batch
+    from ..simulate import simulate_batch
 
     seg = _segment(rec, dt4, level_window)
     i_s = find_step_down(rec)[0]
@@ -597,8 +596,8 @@ def write_identification_report(
     except OSError as exc:
         raise InputError(f"cannot create the report directory {out}: {exc.strerror}") from None
 
-    recs = _as_records(records)
-    finals = recs if final_records is None else _as_records(final_records, "final_records")
+    recs = as_records(records)
+    finals = recs if final_records is None else as_records(final_records, "final_records")
     dt4 = float(getattr(result, "dt4", DEFAULT_DT4))
     if not hasattr(result, "dt4"):  # the joint fit has no window: show what was recorded
         dt4 = min([dt4] + [r.t[-1] - find_step_down(r)[1] - r.ts for r in finals])

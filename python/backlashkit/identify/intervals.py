@@ -12,7 +12,7 @@ Configuration objects for ``JointIdentifier(interval=...)``:
 * :class:`ParametricBootstrap` -- refits of records simulated from the estimate.
 
 The search for the profile's crossings (:func:`profile_crossing`) is here too; the
-fit itself lives in :mod:`backlashkit.identify_joint`.
+fit itself lives in :mod:`backlashkit.identify.joint`.
 """
 
 from __future__ import annotations
@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .. import validate as v
+from ..errors import InputError
 
 __all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
 
@@ -60,7 +61,7 @@ class ProfileLikelihood:
     below, the estimate itself was not the nearby minimum: the joint fit refines all
     parameters again from that refit and searches the profile around the new estimate
     (at most twice; ``RECENTRE_MARGIN``, ``RECENTRE_MAX`` in
-    :mod:`backlashkit.identify_joint`). An end that does not reach 3.84 within a
+    :mod:`backlashkit.identify.joint`). An end that does not reach 3.84 within a
     factor ``max_factor`` of ``theta_`` is reported at that factor: the records do not
     bound ``theta`` there.
 
@@ -84,13 +85,11 @@ class ProfileLikelihood:
     max_factor: float = 10.0
 
     def __post_init__(self) -> None:
-        from .identify import _check_int
-
         if not (isinstance(self.tol, (int, float)) and 0.0 < self.tol < CHI2_95):
             raise InputError(f"tol must be in (0, {CHI2_95:.3f}) (chi-square units), "
                              f"got {self.tol!r}")
-        _check_int("max_evaluations", self.max_evaluations, 1)
-        _check_int("max_iter", self.max_iter, 1)
+        v.integer("max_evaluations", self.max_evaluations, 1)
+        v.integer("max_iter", self.max_iter, 1)
         if not (isinstance(self.max_factor, (int, float)) and self.max_factor > 1.0
                 and math.isfinite(self.max_factor)):
             raise InputError(f"max_factor must be a finite number > 1, got {self.max_factor!r}")
@@ -124,9 +123,7 @@ class ParametricBootstrap:
     seed: int | np.random.SeedSequence = 0
 
     def __post_init__(self) -> None:
-        from .identify import _check_int
-
-        _check_int("n_resamples", self.n_resamples, 2)
+        v.integer("n_resamples", self.n_resamples, 2)
         seed = self.seed
         if not isinstance(seed, np.random.SeedSequence) and (
                 isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import missing_directory
-from .errors import InputError
-from .io import check_plot_suffix, check_writable
+from ..errors import InputError
+from ..io import check_plot_suffix, check_writable
+from .main import missing_directory
 
 __all__ = ["add_parser", "run"]
 
@@ -81,7 +81,7 @@ def write_trace(path: Path, response) -> None:
     -------
     None
     """
-    from .control.closed_loop import TRACE_COLUMNS
+    from ..control.closed_loop import TRACE_COLUMNS
 
     np.savetxt(
         path,
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     int
         Exit status (0).
     """
-    from .control.scenario import load_scenario
+    from ..control.scenario import load_scenario
 
     trace = _check_out(args.trace, args.force, "--trace")
     plot = _check_out(args.plot, args.force, "--plot")
@@ -121,6 +121,9 @@ def run(args: argparse.Namespace) -> int:
     if plot is not None:
         resp.plot().savefig(plot)
     summary = resp.summary()
+    from ..delay.loops import mrc_delay_margin  # the linear loop, delay at the plant input
+
+    summary["delay_margin"] = mrc_delay_margin(resp.design).as_dict()
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -139,4 +142,8 @@ def run(args: argparse.Namespace) -> int:
         )
         print(f"RMS tracking error over the last third: {summary['rms_error_last']:.3e}")
         print(f"max |e| over the last third: {summary['max_abs_error_last']:.3e}")
+        h_max = summary["delay_margin"]["h_max"]
+        print("delay margin of the linear loop (delay at the plant input): "
+              + ("none, unstable without delay" if h_max == 0 else
+                 "stable for every delay" if h_max is None else f"{h_max:.6g} s"))
     return 0

@@ -105,3 +105,10 @@ def time_grid(
             f"step is {float(ts)!r} s; resample the data onto a uniform grid first"
         )
     return arr, float(ts)
+
+
+def integer(name: str, value: object, minimum: int) -> int:
+    """``value`` as an int, refused unless an integer (not a bool) of at least ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)

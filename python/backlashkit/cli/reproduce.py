@@ -12,12 +12,12 @@ import importlib
 #: target name -> (module, one-line description)
 TARGETS = {
     "ravanbod2002": (
-        "backlashkit.ravanbod2002",
+        "backlashkit.papers.ravanbod2002",
         "Ravanbod-Shirazi & Besancon-Voda 2002, Section 5: Tables 1 and 2 and the joint "
         "estimator",
     ),
     "tao1995": (
-        "backlashkit.control.tao1995",
+        "backlashkit.papers.tao1995",
         "Tao & Kokotovic 1995, Section IV: adaptive backlash inverse, Figs. 5 and 6",
     ),
 }

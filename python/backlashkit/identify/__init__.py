@@ -1,0 +1,65 @@
+"""Backlash identification from step-down experiments.
+
+One concept per module:
+
+* :mod:`~backlashkit.identify.record` -- :class:`Record` and the checks that refuse an
+  unusable record (library and command line alike);
+* :mod:`~backlashkit.identify.readers` -- measured files (CSV, ``.mat``, ``.npz``) to
+  Records;
+* :mod:`~backlashkit.identify.step` -- the torque step-down and the speed held before it;
+* :mod:`~backlashkit.identify.torque` -- a measured torque's noise and its levels;
+* :mod:`~backlashkit.identify.two_step` -- paper A's two-step method and its regression
+  baseline;
+* :mod:`~backlashkit.identify.joint` -- the joint maximum-likelihood estimator;
+* :mod:`~backlashkit.identify.intervals`, :mod:`~backlashkit.identify.noise` -- its
+  interval and noise models;
+* :mod:`~backlashkit.identify.report` -- the HTML identification report.
+
+Every ``theta`` is the backlash **half-width** in rad; units are SI.
+"""
+
+from __future__ import annotations
+
+from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+from .joint import LINEAR_PARAMS, CramerRaoBound, JointIdentifier, cramer_rao_bound
+from .noise import ARNoise, AutoNoise, WhiteNoise
+from .readers import read_records, read_torque
+from .record import Record, as_records
+from .step import FAR_FROM_PRIOR, find_step_down, held_speed_gain, is_far
+from .torque import torque_levels
+from .two_step import (
+    Commutation,
+    RegressionIdentifier,
+    TwoStepIdentifier,
+    commutation_instants,
+    fir_lowpass,
+    pre_estimate,
+)
+
+__all__ = [
+    "ARNoise",
+    "AutoNoise",
+    "Commutation",
+    "CramerRaoBound",
+    "FAR_FROM_PRIOR",
+    "FisherInterval",
+    "JointIdentifier",
+    "LINEAR_PARAMS",
+    "ParametricBootstrap",
+    "ProfileLikelihood",
+    "Record",
+    "RegressionIdentifier",
+    "TwoStepIdentifier",
+    "WhiteNoise",
+    "as_records",
+    "commutation_instants",
+    "cramer_rao_bound",
+    "find_step_down",
+    "fir_lowpass",
+    "held_speed_gain",
+    "is_far",
+    "pre_estimate",
+    "read_records",
+    "read_torque",
+    "torque_levels",
+]

@@ -1,0 +1,219 @@
+"""Measured experiments and the checks that refuse an unusable one.
+
+A :class:`Record` holds one uniformly sampled experiment: the motor torque and the two
+measured speeds. :func:`as_records` turns what a user passes (a Record, a tuple
+``(t, torque, w_motor, w_load)`` or a sequence of them) into checked Records; every
+estimator calls it, so the library and the command line refuse the same records.
+
+Units are SI: s, N m, rad/s.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import validate as v
+from ..errors import InputError
+from ..plants import TwoMassDrive
+from .clipping import check_not_clipped
+from .torque import check_torque_noise
+
+__all__ = [
+    "Record",
+    "as_records",
+    "check_prior",
+    "check_sampling",
+    "check_speeds_vary",
+    "check_spikes",
+]
+
+ArrayLike = Sequence[float] | np.ndarray
+
+@dataclass(frozen=True, eq=False)
+class Record:
+    """One step-down experiment: uniformly sampled torque and measured speeds.
+
+    Parameters
+    ----------
+    t : array_like
+        Uniform, strictly increasing time grid in s.
+    torque : array_like
+        Motor torque in N m (zero-order hold), one sample per ``t``.
+    w_motor, w_load : array_like
+        Measured motor and load speeds in rad/s.
+    name : str, optional
+        Name used in messages (e.g. the file name).
+    """
+
+    t: np.ndarray
+    torque: np.ndarray
+    w_motor: np.ndarray
+    w_load: np.ndarray
+    name: str = field(default="record")
+
+    def __post_init__(self) -> None:
+        t, _ = v.time_grid(self.t, name=f"{self.name}: t", min_samples=3)
+        object.__setattr__(self, "t", t)
+        for col in ("torque", "w_motor", "w_load"):
+            arr = v.finite_array(f"{self.name}: {col}", getattr(self, col))
+            if arr.size != t.size:
+                raise InputError(
+                    f"{self.name}: {col} must have one sample per t ({t.size}), got {arr.size}"
+                )
+            object.__setattr__(self, col, arr)
+
+    @property
+    def ts(self) -> float:
+        """Sample time in s."""
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+
+def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
+    if isinstance(rec, Record):
+        return rec
+    try:
+        t, torque, w_motor, w_load = rec
+    except (TypeError, ValueError):
+        raise InputError(
+            f"records[{i}] must be a Record or a tuple (t, torque, w_motor, w_load)"
+        ) from None
+    return Record(t, torque, w_motor, w_load, name=f"records[{i}]")
+
+def check_speeds_vary(rec: Record) -> None:
+    """Refuse a record with a constant speed: it cannot show the drive's response.
+
+    Parameters
+    ----------
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If ``w_motor`` or ``w_load`` takes one value only.
+    """
+    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
+        if not np.ptp(w) > 0:
+            raise InputError(
+                f"{rec.name}: {name} is constant ({float(w[0]):.6g} rad/s): the speeds "
+                "must respond to the torque; check the columns"
+            )
+
+#: A speed sample farther than this many noise std (and than SPIKE_RANGE of the
+#: speed's range) from the median of itself and its two neighbours is a spike.
+SPIKE_SIGMAS = 30.0
+
+SPIKE_RANGE = 0.2
+
+def check_spikes(rec: Record) -> None:
+    """Refuse a record with a single-sample spike in a speed (a glitch of the sensor).
+
+    The median of three consecutive samples follows steps and the drive's impacts but
+    not a lone sample off the curve; least squares would chase such a glitch.
+
+    Parameters
+    ----------
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If a sample of ``w_motor`` or ``w_load`` is off the median of itself and its
+        neighbours by more than :data:`SPIKE_SIGMAS` noise std (robust: median absolute
+        deviations; at least the quantum of quantised speeds) and :data:`SPIKE_RANGE`
+        of the speed's range.
+    """
+    for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
+        if w.size < 3:
+            continue
+        with np.errstate(over="ignore", invalid="ignore"):
+            a, b, c = w[:-2], w[1:-1], w[2:]  # median of three, elementwise
+            mid = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+            off = np.abs(w[1:-1] - mid)
+            # the noise from where the speed moves: a drive resting at exactly 0 (an
+            # encoder at standstill) would pull the median deviation to 0; quantised
+            # speeds (an encoder's counts) have their quantum as the floor
+            moving = ~((a == b) & (b == c))
+            sigma = 1.4826 * float(np.median(off[moving])) if moving.any() else 0.0
+            steps = np.abs(np.diff(w))
+            moves = steps[steps > 0]
+            quantum = float(moves.min()) if moves.size else 0.0
+            sigma = max(sigma, quantum)
+            lo, hi = np.percentile(w, [0.1, 99.9])
+            span = float(hi - lo)
+            bad = (off > SPIKE_SIGMAS * sigma) & (off > SPIKE_RANGE * span)
+        if bad.any():
+            k = int(np.argmax(off)) + 1
+            raise InputError(
+                f"{rec.name}: {name} has {int(bad.sum())} single-sample spike(s), the largest "
+                f"at t = {rec.t[k]:.6g} s (sample {k}: {w[k]:.6g} rad/s, its neighbours "
+                f"{w[k - 1]:.6g} and {w[k + 1]:.6g}): a sensor glitch; remove those samples "
+                "(empty cells, then --resample linear bridges them)"
+            )
+
+def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
+    """Refuse a record sampled too slowly to show the drive's ringing.
+
+    The ringing frequency ``sqrt(k_sh (1 / J_M + 1 / J_L))`` of the prior must lie below
+    the Nyquist frequency ``pi / Ts``: otherwise no sample sees an impact, and a time
+    column in ms read as s is the likely cause.
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        The prior (its linear parameters).
+    rec : Record
+        The record (its ``name`` goes into the message).
+
+    Raises
+    ------
+    InputError
+        If ``Ts`` is longer than half the ringing period.
+    """
+    omega = math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    if rec.ts * omega > math.pi:
+        raise InputError(
+            f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "
+            f"at {omega:.4g} rad/s (period {2 * math.pi / omega:.3g} s, from the prior's k_sh, "
+            f"J_M, J_L): sample faster than {math.pi / omega:.3g} s, or check the time unit "
+            "(a time column in ms reads as s) and the prior's units"
+        )
+
+def as_records(records, what: str = "records", *, prior=None) -> list[Record]:
+    """Records of ``records``, each checked usable (and resolving ``prior``'s ringing)."""
+    if records is None or isinstance(records, (str, bytes, os.PathLike)):
+        hint = (" (a file? read it with backlashkit.read_records)"
+                if records is not None else "")
+        raise InputError(
+            f"{what} must be a Record or a sequence of Records, got "
+            f"{type(records).__name__}{hint}"
+        )
+    if isinstance(records, Record) or (
+        isinstance(records, tuple)
+        and len(records) == 4
+        and all(not isinstance(x, (Record, tuple)) and np.ndim(x) == 1 for x in records)
+    ):
+        records = [records]  # a single record
+    recs = list(records)
+    if not recs:
+        raise InputError(f"{what} must hold at least one record, got none")
+    out = [_as_record(r, i) for i, r in enumerate(recs)]
+    for rec in out:  # what no model can fit is refused rather than answered
+        check_not_clipped(rec)
+        check_speeds_vary(rec)
+        check_spikes(rec)
+        check_torque_noise(rec)
+        if prior is not None:
+            check_sampling(prior, rec)
+    return out
+
+def check_prior(prior: TwoMassDrive) -> TwoMassDrive:
+    if not isinstance(prior, TwoMassDrive):
+        raise InputError(f"prior must be a TwoMassDrive, got {type(prior).__name__}")
+    return prior
