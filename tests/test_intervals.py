@@ -1,5 +1,5 @@
 """Interval configurations and the profile-likelihood crossing search
-(``backlashkit.intervals``); the intervals of fitted drives are tested in
+(``backlashkit.identify.intervals``); the intervals of fitted drives are tested in
 ``tests/test_identify_joint.py``."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import pytest
 
 import backlashkit as bk
 from backlashkit.errors import InputError
-from backlashkit.intervals import CHI2_95, profile_crossing
+from backlashkit.identify.intervals import CHI2_95, profile_crossing
 
 
 def test_chi2_quantile():
-    scipy_stats = pytest.importorskip("scipy.stats")
+    import scipy.stats as scipy_stats
     assert CHI2_95 == pytest.approx(scipy_stats.chi2.ppf(0.95, 1), rel=1e-12)
 
 
@@ -89,6 +89,6 @@ def test_profile_likelihood_validated(kwargs, pattern):
 def test_configurations_are_exported():
     assert bk.ProfileLikelihood() == bk.ProfileLikelihood()
     assert bk.FisherInterval() == bk.FisherInterval()
-    from backlashkit import identify_joint
+    from backlashkit.identify import joint as identify_joint
 
     assert identify_joint.ParametricBootstrap is bk.ParametricBootstrap

@@ -1,4 +1,4 @@
-"""Reading measured files into Records (``backlashkit.records.read_records``)."""
+"""Reading measured files into Records (``backlashkit.identify.readers.read_records``)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from scipy import io as sio
 
 from backlashkit.errors import InputError
 from backlashkit.identify import Record
-from backlashkit.records import read_records
+from backlashkit.identify.readers import read_records
 
 TS = 1e-3
 N = 50
@@ -184,7 +184,7 @@ def test_mat_v5_suffixed_with_mapping(tmp_path):
 
 
 def test_mat_v73(tmp_path):
-    h5py = pytest.importorskip("h5py")
+    import h5py  # a test dependency (.mat v7.3)
     a, b = channels(), channels(64)
     path = tmp_path / "v73.mat"
     with h5py.File(path, "w", userblock_size=512) as fh:
@@ -444,7 +444,7 @@ def test_missing_file_and_directory(tmp_path):
 )
 def test_csv_fast_path_matches_line_reader(tmp_path, monkeypatch, text):
     """The numpy.loadtxt path and the line-by-line reader read a file identically."""
-    import backlashkit.records as records
+    import backlashkit.identify._csv_reader as records
 
     path = tmp_path / "x.csv"
     path.write_text(text, encoding="utf-8")
@@ -468,7 +468,7 @@ def test_csv_fast_path_keeps_line_numbers(tmp_path):
 def test_resampling_bridges_short_gaps_only(tmp_path):
     """``resample="linear"`` bridges up to MAX_BRIDGE missing samples in a row; a longer
     gap (or run of NaN) would hide an impact: an error naming it."""
-    from backlashkit.records import MAX_BRIDGE
+    from backlashkit.identify.readers import MAX_BRIDGE
 
     cols = channels(200)
     for gap in (MAX_BRIDGE, MAX_BRIDGE + 1):
@@ -502,7 +502,7 @@ def test_wrong_delimiter_is_named(tmp_path):
 
 
 def test_mat_structs_missing_a_field_and_complex_v73(tmp_path):
-    h5py = pytest.importorskip("h5py")
+    import h5py  # a test dependency (.mat v7.3)
     t = np.arange(10) * 1e-3
     sio.savemat(tmp_path / "s5.mat", {"exp": {"t": t, "torque": t, "w_motor": t}})
     with pytest.raises(InputError) as exc:

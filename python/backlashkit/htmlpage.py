@@ -31,14 +31,42 @@ pre{background:#f7f7f7;padding:.6em;overflow-x:auto;font-size:.85em}
 
 
 def save_figure(fig: Any, directory: Path, stem: str) -> str:
-    """Write ``stem.png`` (shown) and ``stem.svg`` (linked) into ``directory``."""
+    """Write ``stem.png`` (shown) and ``stem.svg`` (linked) into ``directory``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    directory : pathlib.Path
+        An existing folder.
+    stem : str
+        File name without suffix.
+
+    Returns
+    -------
+    str
+        ``stem``, for :func:`figure`.
+    """
     fig.savefig(directory / f"{stem}.png", dpi=110)
     fig.savefig(directory / f"{stem}.svg")
     return stem
 
 
 def figure(stem: str, caption: str) -> str:
-    """A figure written by :func:`save_figure`: the PNG, linking to the SVG."""
+    """A figure written by :func:`save_figure`: the PNG, linking to the SVG.
+
+    Parameters
+    ----------
+    stem : str
+        File name without suffix, as passed to :func:`save_figure`.
+    caption : str
+        Caption (plain text; escaped).
+
+    Returns
+    -------
+    str
+        The HTML ``<figure>`` element.
+    """
     return (
         f'<figure><a href="{stem}.svg"><img src="{stem}.png" alt="{html.escape(caption)}">'
         f"</a><figcaption>{html.escape(caption)} (<a href=\"{stem}.svg\">SVG</a>)"
@@ -49,7 +77,19 @@ def figure(stem: str, caption: str) -> str:
 def table(header: Sequence[str], rows: Iterable[Sequence[Any]], *, left: int = 1) -> str:
     """A table of already formatted cells; the first ``left`` columns align left.
 
-    Cells are escaped; a cell given as ``("text", "css-class")`` gets that class.
+    Parameters
+    ----------
+    header : sequence of str
+        Column headings.
+    rows : iterable of sequences
+        Cells, escaped; a cell given as ``("text", "css-class")`` gets that class.
+    left : int, optional
+        How many leading columns align left (default 1).
+
+    Returns
+    -------
+    str
+        The HTML ``<table>`` element.
     """
 
     def cell(tag: str, k: int, value: Any) -> str:
@@ -66,14 +106,38 @@ def table(header: Sequence[str], rows: Iterable[Sequence[Any]], *, left: int = 1
 
 
 def bars_table(checks: Iterable[tuple[str, Any, bool]]) -> str:
-    """The table of a reproduction's bars: ``(bar, measured value, met)`` rows."""
+    """The table of a reproduction's bars.
+
+    Parameters
+    ----------
+    checks : iterable of (str, object, bool)
+        ``(bar, measured value, met)`` per bar.
+
+    Returns
+    -------
+    str
+        The HTML table, "MET" or "MISSED" in the last column.
+    """
     return table(("bar", "measured", "met"),
                  ((b, v, ("MET", "met") if m else ("MISSED", "miss")) for b, v, m in checks),
                  left=2)
 
 
 def page(title: str, sections: Iterable[str]) -> str:
-    """A whole HTML document: ``title`` and the sections (HTML fragments) in order."""
+    """A whole HTML document: ``title`` and the sections in order.
+
+    Parameters
+    ----------
+    title : str
+        Page title (plain text; escaped).
+    sections : iterable of str
+        HTML fragments, in order.
+
+    Returns
+    -------
+    str
+        The self-contained document (inline stylesheet, no scripts).
+    """
     return (
         '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         f"<title>{html.escape(title)}</title>\n<style>{CSS}</style>\n</head>\n<body>\n"

@@ -174,10 +174,13 @@ def as_state_space(
     Returns
     -------
     A : numpy.ndarray, shape (n, n)
+        State matrix.
     b : numpy.ndarray, shape (n,)
+        Input vector.
     c : numpy.ndarray, shape (n,)
+        Output vector.
     d : float
-        ``dx/dt = A x + b u``, ``y = c x + d u``. State-space inputs keep their own
+        Feedthrough: ``dx/dt = A x + b u``, ``y = c x + d u``. State-space inputs keep their own
         realisation; transfer functions get scipy's controllable canonical form.
 
     Raises

@@ -12,7 +12,7 @@ details; the compiled kernel (``crates/core/src/control.rs``) is the same algori
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -224,7 +224,6 @@ class ClosedLoopResponse:
     n_switches: int = 0
     step: float = 0.0
     plant_state: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)
 
     def _last(self, fraction: float) -> np.ndarray:
         t0 = self.t[0] + (1.0 - fraction) * (self.t[-1] - self.t[0])

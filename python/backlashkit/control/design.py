@@ -107,9 +107,11 @@ def companion(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     Returns
     -------
     A : numpy.ndarray, shape (q, q)
+        State matrix (companion form).
     b : numpy.ndarray, shape (q,)
+        Input vector.
     c : numpy.ndarray, shape (q,)
-        ``dx/dt = A x + b u``, ``y = c x``.
+        Output vector: ``dx/dt = A x + b u``, ``y = c x``.
     """
     den = np.asarray(den, dtype=float)
     q = den.size - 1

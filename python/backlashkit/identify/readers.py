@@ -43,41 +43,28 @@ naming the file, where (line, variable, sample) and what to do.
 
 from __future__ import annotations
 
-import csv
 import errno
-import io
 import math
-import os
-import re
-import warnings
-import zipfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
+from ._csv_reader import DELIMITERS, FIELDS, PathLike, _from_csv
+from ._mat_reader import _from_mat, _from_npz
 from .record import Record
 
 __all__ = ["FIELDS", "read_records", "read_torque"]
 
-PathLike = str | os.PathLike[str]
 
-#: Our names of a record's channels, in order.
-FIELDS = ("t", "torque", "w_motor", "w_load")
 #: Accepted speed units and their factor to rad/s.
 SPEED_UNITS = {"rad/s": 1.0, "rpm": 2.0 * math.pi / 60.0}
-DELIMITERS = (",", ";", "\t")
+
 #: Longest run of missing samples (a time gap or NaN) that ``resample="linear"``
 #: bridges; a longer one hides the drive's response (an impact lasts a few samples).
 MAX_BRIDGE = 10
-_SUFFIX = re.compile(r"^(.*)_(\d+)$")
-
-# (name of the record, raw channels (t may be absent), label of sample i, time precision)
-_Raw = tuple[str, dict[str, np.ndarray], Callable[[int], str], float]
-
 
 def read_records(
     path: PathLike,
@@ -138,7 +125,6 @@ def read_records(
             for rec_name, t, data in _read(path, FIELDS, columns, sample_time, delimiter,
                                            decimal, resample)]
 
-
 def read_torque(
     path: PathLike,
     *,
@@ -186,7 +172,6 @@ def read_torque(
                          "record")
     _, t, data = recs[0]
     return t, data["torque"]
-
 
 def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
           keep_time=False):
@@ -239,7 +224,6 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
                                keep_time))
             for rec_name, cols, label, precision in raws]
 
-
 def _check_columns(columns: Mapping[str, str] | None,
                    fields: Sequence[str] = FIELDS) -> dict[str, str]:
     out = {f: f for f in FIELDS}
@@ -265,447 +249,6 @@ def _check_columns(columns: Mapping[str, str] | None,
                 "each to its own column"
             )
     return out
-
-
-# --- CSV -------------------------------------------------------------------------
-
-
-def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, decimal) -> _Raw:
-    with open(name, "rb") as fh:
-        head = fh.read(2)
-    # Excel's "Unicode text" export is UTF-16 with a byte-order mark
-    encoding = "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
-    if encoding != "utf-16" and b"\x00" in head:
-        raise InputError(
-            f"{name}: holds NUL bytes: UTF-16 text without a byte-order mark? save it as "
-            "UTF-8 CSV (or UTF-16 with its mark)"
-        )
-    try:
-        with open(name, encoding=encoding, newline="") as fh:
-            text = fh.read()
-    except UnicodeDecodeError as exc:
-        raise InputError(
-            f"{name}: not a UTF-8 text file ({exc.reason} at byte {exc.start}); save it as "
-            "UTF-8 CSV"
-        ) from None
-    fast = _fast_csv(name, text, mapping, need, delimiter, decimal)
-    if fast is not None:
-        return fast
-    lines = [
-        (k + 1, line)
-        for k, line in enumerate(text.splitlines())
-        if line.strip() and not line.lstrip().startswith("#")
-    ]
-    if not lines:
-        raise InputError(f"{name}: the file is empty; expected a header line naming the columns")
-    header_no, header_text = lines[0]
-    delimiter = delimiter or _sniff_delimiter(header_text)
-    try:
-        reader = csv.reader(io.StringIO("\n".join(line for _, line in lines)),
-                            delimiter=delimiter)
-        rows = list(reader)
-    except csv.Error as exc:
-        raise InputError(f"{name}: not a valid CSV file: {exc}") from None
-    if len(rows) != len(lines):  # quoted line breaks: not a table of numbers
-        raise InputError(f"{name}: a quoted field spans several lines; remove the line breaks")
-    header = [c.strip() for c in rows[0]]
-    data, numbers = rows[1:], [n for n, _ in lines[1:]]
-    if decimal is None:
-        decimal = "," if delimiter != "," and any("," in c for row in data for c in row) else "."
-    if decimal == "," and delimiter == ",":
-        raise InputError(f"{name}: decimal ',' needs another delimiter (';' or a tab)")
-    if all(_is_number(c, decimal) for c in header):
-        raise InputError(
-            f"{name}: line {header_no} holds numbers, not column names; add a header line "
-            f"naming the columns (e.g. {delimiter.join(mapping[f] for f in need)!r})"
-        )
-    for col in header:
-        if header.count(col) > 1:
-            raise InputError(f"{name}: line {header_no}: column {col!r} appears twice")
-    missing = [mapping[f] for f in need if mapping[f] not in header]
-    others = [d for d in DELIMITERS if d != delimiter and len(header) == 1 and d in header[0]]
-    if missing and others:  # one column holding another separator: the wrong delimiter
-        sep = {"\t": "tab", ",": "','", ";": "';'"}
-        raise InputError(
-            f"{name}: the header (line {header_no}) is one column {header[0]!r} with "
-            f"{sep[others[0]]} in it: the columns are separated by {sep[others[0]]}, not "
-            f"{sep[delimiter]}; pass delimiter={others[0]!r}"
-        )
-    if missing:
-        sep = {"\t": "tab", ",": "','", ";": "';'"}[delimiter]
-        raise InputError(
-            f"{name}: no column {', '.join(map(repr, missing))} in the header (line "
-            f"{header_no}, separator {sep}: {header!r}); map the file's names with "
-            "columns={" + ", ".join(f"{f!r}: ..." for f in FIELDS if f in need or f == "t")
-            + "}"
-            + (" or pass sample_time= if there is no time column" if "t" in need else "")
-        )
-    if "t" not in need and mapping["t"] in header:
-        need = ["t", *need]  # read it so that the conflict with sample_time is reported
-    width = len(header)
-    for r, row in enumerate(data):
-        if len(row) != width:
-            raise InputError(
-                f"{name}: line {numbers[r]} has {len(row)} field(s) but the header has {width}; "
-                f"check the separator (delimiter={delimiter!r}) and the decimal mark"
-            )
-    cols = {}
-    for f in need:
-        j = header.index(mapping[f])
-        cols[f] = _parse_cells(name, mapping[f], [row[j] for row in data], numbers, decimal)
-    return name, cols, lambda i: f"line {numbers[i]}", 0.0
-
-
-def _sniff_delimiter(header: str) -> str:
-    """``;`` if the header line holds one, else a tab if it holds one, else ``,``."""
-    return next((d for d in (";", "\t") if d in header), ",")
-
-
-def _fast_csv(name: str, text: str, mapping: dict[str, str], need: list[str], delimiter,
-              decimal) -> _Raw | None:
-    """A well-formed numeric table read by :func:`numpy.loadtxt` (C speed), or None.
-
-    None sends the file to the line-by-line reader below, which reads the same files
-    the same way and names the line and column of whatever is wrong; this path only
-    takes files with nothing to report (plain header, no comment after it, every cell
-    a finite number or ``nan``, the same number of fields on every line).
-    """
-    pos, header_no = 0, 0
-    while pos < len(text):  # the header: the first line neither blank nor a comment
-        end = text.find("\n", pos)
-        end = len(text) if end < 0 else end + 1
-        header_no += 1
-        line = text[pos:end].strip()
-        pos = end
-        if line and not line.startswith("#"):
-            break
-    else:
-        return None
-    delimiter = delimiter or _sniff_delimiter(line)
-    header = [c.strip() for c in line.split(delimiter)]
-    body = text[pos:]
-    if decimal is None:
-        decimal = "," if delimiter != "," and "," in body else "."
-    if ('"' in line or (decimal == "," and delimiter == ",") or len(set(header)) < len(header)
-            or any(mapping[f] not in header for f in need)):
-        return None
-    if all(_is_number(c, decimal) for c in header):
-        return None
-    if "_" in body or (decimal == "," and "." in body):
-        return None  # cells float() would misread: the checked reader says which
-    try:
-        with warnings.catch_warnings():  # an empty body: the checked reader says so
-            warnings.simplefilter("ignore", UserWarning)
-            table = np.loadtxt(io.StringIO(body.replace(",", ".") if decimal == "," else body),
-                               delimiter=delimiter, comments=None, ndmin=2, dtype=float)
-    except ValueError:
-        return None
-    if table.shape[0] == 0 or table.shape[1] != len(header) or np.isinf(table).any():
-        return None
-    if "t" not in need and mapping["t"] in header:
-        need = ["t", *need]  # read it so that the conflict with sample_time is reported
-    cols = {f: np.ascontiguousarray(table[:, header.index(mapping[f])]) for f in need}
-    numbers: list[int] = []
-
-    def label(i: int) -> str:  # line numbers only when a message needs one
-        if not numbers:  # blank lines are skipped by loadtxt, comments are not taken
-            numbers.extend(header_no + k + 1 for k, ln in enumerate(body.splitlines())
-                           if ln.strip())
-        return f"line {numbers[i]}"
-
-    return name, cols, label, 0.0
-
-
-#: A date (2024-01-31, 31/01/2024, 31.01.2024) or a clock time (12:30:05).
-_DATE_TIME = re.compile(r"\d{1,4}[-/.]\d{1,2}[-/.]\d{1,4}|\d{1,2}:\d{2}")
-_MISSING = {"", "nan", "na", "n/a", "null"}
-
-
-def _is_number(cell: str, decimal: str) -> bool:
-    try:
-        float(cell.strip().replace(decimal, ".") if decimal == "," else cell.strip())
-    except ValueError:
-        return False
-    return True
-
-
-def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
-    out = np.empty(len(cells))
-    for r, raw in enumerate(cells):
-        cell = raw.strip()
-        if cell.lower() in _MISSING:
-            out[r] = np.nan
-            continue
-        bad = None
-        if "_" in cell:
-            bad = "has an underscore, which is no number format of a measurement file"
-        elif decimal == "," and "." in cell:
-            bad = ("has a '.' but the decimal mark is ','; thousands separators are not "
-                   "read: remove them (or pass decimal='.' if '.' is the decimal mark)")
-        if bad is not None:
-            raise InputError(f"{name}: line {numbers[r]}, column {column!r}: {raw!r} {bad}")
-        if decimal == ",":
-            cell = cell.replace(",", ".")
-        try:
-            out[r] = float(cell)
-        except ValueError:
-            hint = (
-                "; for decimal commas pass decimal=',' with delimiter ';' or a tab"
-                if "," in raw and decimal == "."
-                else ""
-            )
-            if _DATE_TIME.search(cell):
-                hint = ("; a date or clock time is no time in s: convert the column to "
-                        "seconds, or remove it and pass sample_time=")
-            raise InputError(
-                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number{hint}"
-            ) from None
-        if math.isinf(out[r]):
-            raise InputError(
-                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is infinite; fix the file"
-            )
-    return out
-
-
-# --- NPZ and MAT -----------------------------------------------------------------
-
-
-def _vector(name: str, var: str, value: Any) -> np.ndarray:
-    if hasattr(value, "toarray"):  # a scipy.sparse matrix (MATLAB's sparse)
-        raise InputError(f"{name}: variable {var!r} is a sparse matrix; save it as a full "
-                         "numeric vector (full(x) in MATLAB)")
-    arr = np.asarray(value)
-    if arr.dtype == object:
-        raise InputError(f"{name}: variable {var!r} holds a cell array or other objects, not "
-                         "numbers; save it as a numeric vector")
-    if arr.dtype == bool:  # a MATLAB logical: a mask or a flag saved by mistake
-        raise InputError(f"{name}: variable {var!r} holds true/false values, not "
-                         "measurements; save the signal itself (double(x) in MATLAB if "
-                         "0 and 1 are meant)")
-    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-        raise InputError(f"{name}: variable {var!r} must hold real numbers, got {arr.dtype}")
-    if arr.ndim != 1:
-        if sum(s > 1 for s in arr.shape) > 1:
-            raise InputError(
-                f"{name}: variable {var!r} must be a vector, got shape {arr.shape}; store one "
-                "vector per channel (or suffix _1, _2, ... per experiment)"
-            )
-        arr = arr.reshape(-1)
-    return arr
-
-
-def _precision(arr: np.ndarray) -> float:
-    if arr.dtype == np.float32:
-        return 4.0 * float(np.finfo(np.float32).eps) * float(np.max(np.abs(arr), initial=0.0))
-    return 0.0
-
-
-def _sample_label(var: str) -> Callable[[int], str]:
-    return lambda i: f"sample {i} (0-based) of {var!r}"
-
-
-def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, str],
-                    need: list[str], what: str) -> list[_Raw]:
-    """Records from a flat set of named arrays (plain or suffixed names)."""
-    want = {mapping[f]: f for f in FIELDS}
-    # numbered channels (a shared plain time is allowed beside them)
-    suffixed = sorted(v for v in variables if (m := _SUFFIX.match(v))
-                      and m.group(1) in want and m.group(1) != mapping["t"])
-    if all(mapping[f] in variables for f in need):
-        if suffixed:  # one plain record and numbered ones: which did the user mean?
-            raise InputError(
-                f"{name}: holds both plain {what}s ({', '.join(mapping[f] for f in need)}) "
-                f"and numbered ones ({', '.join(map(repr, suffixed[:4]))}"
-                f"{', ...' if len(suffixed) > 4 else ''}); keep one naming scheme"
-            )
-        present = [f for f in FIELDS if mapping[f] in variables]
-        cols = {f: _vector(name, mapping[f], variables[mapping[f]]) for f in present}
-        prec = _precision(cols["t"]) if "t" in cols else 0.0
-        var_t = mapping["t"]
-        return [(name, {f: c.astype(float) for f, c in cols.items()}, _sample_label(var_t),
-                 prec)]
-    groups: dict[int, dict[str, str]] = {}
-    for var in variables:
-        m = _SUFFIX.match(var)
-        if m and m.group(1) in want:
-            groups.setdefault(int(m.group(2)), {})[want[m.group(1)]] = var
-    if not groups:
-        missing = [mapping[f] for f in need if mapping[f] not in variables]
-        raise InputError(
-            f"{name}: no {what} {', '.join(map(repr, missing))} (found: "
-            f"{', '.join(map(repr, sorted(variables))) or 'none'}); name them "
-            f"{', '.join(mapping[f] for f in need)} (or with suffixes _1, _2, ...), or map "
-            "them with columns={...}"
-            + (" (or pass sample_time= if there is no time)" if "t" in need else "")
-        )
-    out = []
-    for k in sorted(groups):
-        g = groups[k]
-        if "t" not in g and mapping["t"] in variables:
-            g["t"] = mapping["t"]
-        missing = [f"{mapping[f]}_{k}" for f in need if f not in g]
-        if missing:
-            raise InputError(
-                f"{name}: experiment _{k} has no {what} {', '.join(map(repr, missing))}; every "
-                f"suffix needs {', '.join(mapping[f] for f in need if f != 't')} (and a time "
-                f"{mapping['t']}_{k} or a shared {mapping['t']})"
-            )
-        cols = {f: _vector(name, g[f], variables[g[f]]) for f in g}
-        prec = _precision(cols["t"]) if "t" in cols else 0.0
-        out.append((f"{name}:_{k}", {f: c.astype(float) for f, c in cols.items()},
-                    _sample_label(g.get("t", f"w_motor_{k}")), prec))
-    return out
-
-
-def _from_npz(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
-    if not zipfile.is_zipfile(name):  # else NumPy would talk of unpickling it
-        raise InputError(f"{name}: not a NumPy .npz archive (no zip file); save the arrays "
-                         "with numpy.savez, or give the file its real extension")
-    try:
-        with np.load(name, allow_pickle=False) as npz:
-            variables = {k: npz[k] for k in npz.files}
-    except ValueError as exc:
-        raise InputError(
-            f"{name}: cannot read the .npz archive ({exc}); save plain numeric arrays with "
-            "numpy.savez"
-        ) from None
-    except (OSError, EOFError) as exc:
-        raise InputError(f"{name}: not a NumPy .npz archive ({exc})") from None
-    return _from_variables(name, variables, mapping, need, "array")
-
-
-def _is_mat73(name: str) -> bool:
-    with open(name, "rb") as fh:
-        head = fh.read(520)
-    return b"MATLAB 7.3" in head[:128] or head[512:520] == b"\x89HDF\r\n\x1a\n" or (
-        head[:8] == b"\x89HDF\r\n\x1a\n"
-    )
-
-
-def _from_mat(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
-    if _is_mat73(name):
-        return _from_mat73(name, mapping, need)
-    from scipy import io as sio
-
-    try:
-        raw = sio.loadmat(name, squeeze_me=False, struct_as_record=True)
-    except NotImplementedError:  # v7.3 not recognised by the header check
-        return _from_mat73(name, mapping, need)
-    except Exception as exc:  # scipy raises many types for a corrupt file
-        raise InputError(
-            f"{name}: not a readable MATLAB .mat file ({type(exc).__name__}: {exc}); save it "
-            "with MATLAB's save (-v7 or -v7.3)"
-        ) from None
-    variables = {k: v for k, v in raw.items() if not k.startswith("__")}
-    flat = {k: v for k, v in variables.items() if v.dtype.names is None}
-    structs = {k: v for k, v in variables.items() if v.dtype.names is not None}
-    fieldset = {mapping[f] for f in need}
-    usable = {k: v for k, v in structs.items() if fieldset <= set(v.dtype.names)}
-    if usable and not all(mapping[f] in flat for f in need):
-        out = []
-        for var in sorted(usable):
-            arr = usable[var].reshape(-1, order="F")
-            for i, elem in enumerate(arr):
-                fields = {fn: elem[fn] for fn in arr.dtype.names}
-                rec_name = f"{name}:{var}({i + 1})" if arr.size > 1 or len(usable) > 1 else name
-                recs = _from_variables(rec_name, fields, mapping, need, f"field of {var!r}")
-                out.extend(recs)
-        return out
-    _refuse_partial_struct(name, {k: set(v.dtype.names) for k, v in structs.items()}, flat,
-                           mapping, need)
-    return _from_variables(name, flat, mapping, need, "variable")
-
-
-def _refuse_partial_struct(name: str, structs: dict[str, set[str]], flat, mapping,
-                           need: list[str]) -> None:
-    """A struct holding some of the channels but not all: name the missing fields."""
-    if all(mapping[f] in flat for f in need):
-        return
-    for var, fields in sorted(structs.items()):
-        have = [mapping[f] for f in need if mapping[f] in fields]
-        if have:
-            missing = [mapping[f] for f in need if mapping[f] not in fields]
-            raise InputError(
-                f"{name}: struct {var!r} has no field {', '.join(map(repr, missing))} (it has "
-                f"{', '.join(map(repr, sorted(fields)))}); add the channel or map the names "
-                "with columns={...}"
-            )
-
-
-def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
-    try:
-        import h5py
-    except ImportError:
-        raise InputError(
-            f"{name}: a MATLAB v7.3 (HDF5) file needs the optional package h5py; install it "
-            "(pip install h5py) or save the file with save(..., '-v7')"
-        ) from None
-    try:
-        fh = h5py.File(name, "r")
-    except OSError as exc:
-        raise InputError(f"{name}: not a readable MATLAB v7.3 (HDF5) file ({exc})") from None
-    with fh:
-        flat: dict[str, np.ndarray] = {}
-        odd: dict[str, str] = {}  # datasets that are no real numeric arrays -> what they are
-        groups: dict[str, set[str]] = {}
-        structs: dict[str, list[dict[str, np.ndarray]]] = {}
-        for key, obj in fh.items():
-            if key.startswith("#"):
-                continue  # MATLAB's #refs# group
-            if isinstance(obj, h5py.Dataset):
-                if obj.dtype.kind in "iuf":
-                    flat[key] = obj[()]
-                elif obj.dtype.kind == "c" or (obj.dtype.names is not None
-                                               and {"real", "imag"} <= set(obj.dtype.names)):
-                    odd[key] = "complex numbers"  # MATLAB stores them as (real, imag)
-                else:
-                    odd[key] = ("a cell array" if obj.dtype == h5py.ref_dtype
-                                else f"data of type {obj.dtype}")
-            elif isinstance(obj, h5py.Group):
-                groups[key] = set(obj.keys())
-                elems = _h5_struct(fh, obj)
-                if elems:
-                    structs[key] = elems
-    fieldset = {mapping[f] for f in need}
-    usable = {k: e for k, e in structs.items() if all(fieldset <= set(x) for x in e)}
-    if usable and not all(mapping[f] in flat for f in need):
-        out = []
-        for var in sorted(usable):
-            elems = usable[var]
-            for i, fields in enumerate(elems):
-                rec_name = f"{name}:{var}({i + 1})" if len(elems) > 1 or len(usable) > 1 else name
-                out.extend(_from_variables(rec_name, fields, mapping, need, f"field of {var!r}"))
-        return out
-    for f in need:
-        if mapping[f] not in flat and mapping[f] in odd:
-            raise InputError(
-                f"{name}: variable {mapping[f]!r} holds {odd[mapping[f]]}, not real numbers; "
-                "save it as a real numeric array"
-            )
-    _refuse_partial_struct(name, groups, flat, mapping, need)
-    return _from_variables(name, flat, mapping, need, "variable")
-
-
-def _h5_struct(fh, group) -> list[dict[str, np.ndarray]]:
-    """Elements of a v7.3 struct: fields are datasets (scalar) or references (array)."""
-    import h5py
-
-    fields = {k: d for k, d in group.items() if isinstance(d, h5py.Dataset)}
-    if not fields:
-        return []
-    if all(d.dtype.kind in "iuf" for d in fields.values()):
-        return [{k: d[()] for k, d in fields.items()}]
-    if all(d.dtype == h5py.ref_dtype for d in fields.values()):
-        refs = {k: np.asarray(d[()]).reshape(-1, order="F") for k, d in fields.items()}
-        n = {r.size for r in refs.values()}
-        if len(n) != 1:
-            return []
-        return [{k: fh[r[i]][()] for k, r in refs.items()} for i in range(n.pop())]
-    return []
-
-
-# --- checks, snapping and resampling ----------------------------------------------
-
 
 def _build(rec_name, cols, label, precision, sample_time, resample,
            mapping, keep_time=False) -> tuple[np.ndarray, dict[str, np.ndarray]]:
