@@ -18,16 +18,16 @@ import importlib
 import os
 import sys
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import Diagnostic, InputError, Option
 
-__all__ = ["flag_names", "main"]
+__all__ = ["flag_names", "main", "spell", "word"]
 
 #: Modules that register subcommands, in the order they are listed by ``--help``.
-SUBCOMMAND_MODULES = ("simulate", "identify", "control", "reproduce")
+SUBCOMMAND_MODULES = ("simulate", "identify", "control", "reproduce", "delay_margin", "fleet")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -57,32 +57,90 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-@contextmanager
-def flag_names(flags: Mapping[str, str]) -> Iterator[None]:
-    """Name the command-line flag, not the library parameter, in input errors.
+#: A flag spelled from a library parameter: the flag (``--resample``; an advised value
+#: follows it, ``--resample linear``), or a function of the option that words it.
+Flag = str | Callable[[Option], str]
 
-    The library validates its parameters and names them (``final_horizon must be >
-    0``); a CLI user typed ``--final-horizon``. Inside this context an
-    :class:`InputError` whose message starts with a parameter of ``flags`` is raised
-    again with the flag in its place.
+#: The innermost flags of :func:`flag_names`, used to word the library's warnings too.
+_ACTIVE_FLAGS: list[Mapping[str, Flag]] = []
+
+
+def spell(option: Option, flags: Mapping[str, Flag]) -> str | None:
+    """The command line's words for a library option (None: not one of ``flags``).
 
     Parameters
     ----------
-    flags : mapping of str to str
+    option : Option
+        The option a library message names or advises.
+    flags : mapping of str to Flag
+        Library parameter -> flag.
+
+    Returns
+    -------
+    str or None
+    """
+    flag = flags.get(option.name)
+    if flag is None or not isinstance(flag, str):
+        return None if flag is None else flag(option)
+    if option.value is None or option.value is True:
+        return flag
+    return f"{flag} {option.value}"
+
+
+def word(exc: Diagnostic, flags: Mapping[str, Flag]) -> str:
+    """A library diagnostic in the command line's words.
+
+    Every :class:`~backlashkit.errors.Option` of the message is spelled as its flag;
+    a validation message without options names its parameter first
+    (``final_horizon must be > 0``), and that name becomes the flag.
+
+    Parameters
+    ----------
+    exc : Diagnostic
+        An error or warning of the library.
+    flags : mapping of str to Flag
+        Library parameter -> flag, e.g. ``{"final_horizon": "--final-horizon"}``.
+
+    Returns
+    -------
+    str
+        The message, one line.
+    """
+    text = exc.worded(lambda option: spell(option, flags))
+    if not exc.options():
+        for name, flag in flags.items():
+            if isinstance(flag, str) and text.startswith(name + " "):
+                return flag + text[len(name):]
+    return text
+
+
+@contextmanager
+def flag_names(flags: Mapping[str, Flag]) -> Iterator[None]:
+    """Name the command-line flags, not the library parameters, in errors and warnings.
+
+    Inside this context an :class:`InputError` is raised again in the command line's
+    words (:func:`word`), and the library's warnings printed by :func:`main` are
+    worded alike.
+
+    Parameters
+    ----------
+    flags : mapping of str to Flag
         Library parameter name -> flag, e.g. ``{"final_horizon": "--final-horizon"}``.
 
     Yields
     ------
     None
     """
+    _ACTIVE_FLAGS.append(flags)
     try:
         yield
     except InputError as exc:
-        message = str(exc)
-        for name, flag in flags.items():
-            if message.startswith(name + " "):
-                raise InputError(flag + message[len(name):]) from exc
-        raise
+        said = word(exc, flags)
+        if said == str(exc):
+            raise
+        raise InputError(said) from exc
+    finally:
+        _ACTIVE_FLAGS.pop()
 
 
 def missing_directory(flag: str, out: Path) -> str:
@@ -93,47 +151,10 @@ def missing_directory(flag: str, out: Path) -> str:
     return f"{flag} {out}: directory {out.parent} does not exist"
 
 
-def check_reproduce_outputs(json_path: str | None, report: str | None,
-                            force: bool) -> Path | None:
-    """Refuse, before any run, the ``--json FILE`` and ``--report DIR`` of a ``reproduce``
-    target that exist (without ``--force``), sit in a missing directory or cannot be
-    written; return the report directory.
-
-    Parameters
-    ----------
-    json_path : str or None
-        ``--json`` (``"-"``: standard output).
-    report : str or None
-        ``--report``.
-    force : bool
-        ``--force``.
-
-    Returns
-    -------
-    pathlib.Path or None
-        The report directory.
-    """
-    from ..io import check_writable
-
-    if json_path not in (None, "-"):
-        if Path(json_path).exists() and not force:
-            raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
-        if not Path(json_path).parent.is_dir():
-            raise InputError(missing_directory("--json", Path(json_path)))
-        check_writable(json_path, "--json")
-    if report is None:
-        return None
-    rep = Path(report)
-    if rep.exists() and not rep.is_dir():
-        raise InputError(f"--report {rep} exists and is not a directory")
-    if rep.exists() and any(rep.iterdir()) and not force:
-        raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
-    check_writable(rep, "--report", directory=True)
-    return rep
-
-
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A library warning as the command line's notes are: one line on stderr."""
+    if isinstance(message, Diagnostic) and _ACTIVE_FLAGS:
+        message = word(message, _ACTIVE_FLAGS[-1])
     print(f"backlashkit: note: {' '.join(str(message).split())}", file=sys.stderr)
 
 
