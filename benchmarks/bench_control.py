@@ -12,8 +12,8 @@ import time
 from backlashkit.control.adaptive import AdaptiveLaw
 from backlashkit.control.closed_loop import SumOfSines, build_problem, run_problem
 from backlashkit.control.design import design_mrc
-from backlashkit.control.tao1995 import PAPER, VARIANTS
 from backlashkit.nonlinearities import Backlash
+from backlashkit.papers.tao1995 import PAPER, VARIANTS
 
 
 def _median(fn, repeats):

@@ -21,9 +21,9 @@
 
 5. The Gauss-Newton product ``J^T J`` of the joint fit's final stage (320 010 x 7, the
    shape on these records) with the BLAS library's default threads and with one
-   (why ``JointIdentifier.fit`` and the worker pools run one, ``backlashkit._parallel``).
+   (why ``JointIdentifier.fit`` and the worker pools run one, ``backlashkit.parallel``).
 
-``--stiffness-grid N`` times ``JointIdentifier(stiffness_grid=N)`` in 2. instead.
+``--stiffness-grid N`` times ``ThetaGrid(stiffness_points=N)`` in 2. instead.
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
@@ -55,10 +55,11 @@ from backlashkit.identify import (
     TwoStepIdentifier,
     commutation_instants,
 )
-from backlashkit.identify_joint import JointIdentifier
-from backlashkit.intervals import FisherInterval
-from backlashkit.noise_models import ARNoise
-from backlashkit.ravanbod2002 import A1, A2, P_TRUE, T_S, THETA, TS, protocol_records
+from backlashkit.identify.intervals import FisherInterval
+from backlashkit.identify.joint import JointIdentifier
+from backlashkit.identify.noise import ARNoise
+from backlashkit.identify.search import JointSearch, Restarts, ThetaGrid
+from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, T_S, THETA, TS, protocol_records
 
 
 def _median(fn, repeats: int) -> float:
@@ -100,24 +101,21 @@ def main() -> None:
 
         t_cli = _median(run_cli, args.repeats)
     recs = [rec1, rec2]
-    t_joint = _median(lambda: JointIdentifier(prior, workers=1,
-                                              stiffness_grid=args.stiffness_grid).fit(recs),
-                      args.repeats)
-    t_fisher = _median(lambda: JointIdentifier(prior, workers=1, interval=FisherInterval(),
-                                               stiffness_grid=args.stiffness_grid).fit(recs),
-                       args.repeats)
+    grid = ThetaGrid(stiffness_points=args.stiffness_grid)
+
+    def fit_with(**kwargs) -> None:
+        search = JointSearch(grid=grid, **kwargs.pop("search", {}))
+        JointIdentifier(prior, workers=1, search=search, **kwargs).fit(recs)
+
+    t_joint = _median(fit_with, args.repeats)
+    t_fisher = _median(lambda: fit_with(interval=FisherInterval()), args.repeats)
     # the earlier restarts (README, "Away from paper A's drive"), and an option left out
     # of the default for its cost ("Coloured noise")
-    t_narrow = _median(lambda: JointIdentifier(prior, workers=1,
-                                               stiffness_grid=args.stiffness_grid,
-                                               stiffness_restarts=(0.15,)).fit(recs),
+    t_narrow = _median(lambda: fit_with(search={"restarts": Restarts(stiffness=(0.15,))}),
                        args.repeats)
-    t_nofric = _median(lambda: JointIdentifier(prior, workers=1,
-                                               stiffness_grid=args.stiffness_grid,
-                                               friction_restarts=()).fit(recs),
+    t_nofric = _median(lambda: fit_with(search={"restarts": Restarts(friction=())}),
                        args.repeats)
-    t_ar = _median(lambda: JointIdentifier(prior, workers=1, stiffness_grid=args.stiffness_grid,
-                                           noise_model=ARNoise(2)).fit(recs), args.repeats)
+    t_ar = _median(lambda: fit_with(noise_model=ARNoise(2)), args.repeats)
     t_two = _median(lambda: TwoStepIdentifier(prior, workers=1).fit(rec1, final_records=rec2),
                     args.repeats)
     t_reg = _median(lambda: RegressionIdentifier(prior, workers=1).fit(rec2), args.repeats)
@@ -125,7 +123,7 @@ def main() -> None:
     print(f"{'backlashkit identify (joint), whole command, 1 core':<55} {t_cli:7.2f} s "
           f"(target < 2 s; {how})")
     print(f"{'  JointIdentifier.fit, in process, workers=1':<55} {t_joint:7.2f} s"
-          f"{f' (stiffness_grid={args.stiffness_grid})' if args.stiffness_grid > 1 else ''}")
+          f"{f' (stiffness_points={args.stiffness_grid})' if args.stiffness_grid > 1 else ''}")
     print(f"{'    of which the profile-likelihood interval':<55} {t_joint - t_fisher:7.2f} s "
           "(the same fit with interval=FisherInterval())")
     print(f"{'    with stiffness_restarts=(0.15,) (before 0.4, 0.8)':<55} {t_narrow:7.2f} s")

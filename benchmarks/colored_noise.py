@@ -36,11 +36,11 @@ import numpy as np
 from scipy.signal import lfilter
 
 from backlashkit import JointIdentifier, TwoMassDrive, cramer_rao_bound, signals
-from backlashkit._parallel import process_pool
 from backlashkit.errors import CorrelatedResidualsWarning, SensitivityWarning
 from backlashkit.identify import Record
-from backlashkit.noise_models import ARNoise, WhiteNoise
-from backlashkit.ravanbod2002 import A1, A2, P_TRUE, T_S, THETA, TS
+from backlashkit.identify.noise import ARNoise, WhiteNoise
+from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, T_S, THETA, TS
+from backlashkit.parallel import process_pool
 
 
 def colored(signal: np.ndarray, snr_db: float, corr: float, rng) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Joint ML identification (``JointIdentifier``) on paper A's protocol versus the CRB.
 
 Protocol (paper A, Section 5; project NOTES), built by
-:func:`backlashkit.ravanbod2002.protocol_records` with the seeds of ``backlashkit
+:func:`backlashkit.papers.ravanbod2002.protocol_records` with the seeds of ``backlashkit
 reproduce ravanbod2002``: the paper drive (theta* = 2 deg =
 3.49e-2 rad half-width, Ts = 1 ms); step 1: ``C_M = a_1 = 0.157`` N m for 40 s from
 rest, then 0 (80 s record), SNR 17.4 dB on ``w_M`` and 6.43 dB on ``w_L``; step 2: the
@@ -19,7 +19,7 @@ or the penalty's information with ``--penalty``).
 Issue 3 bars: |mean error| <= 2 % of theta, std <= 1.0e-3 rad, std within 1.5x of
 the CRB (joint).
 
-``--final-horizon H`` fits with ``JointIdentifier(final_horizon=H)`` (the final stage on
+``--final-horizon H`` fits with ``JointSearch(final_horizon=H)`` (the final stage on
 H s after the start and after the step-down of each record); the CRB stays that of the
 whole records.
 
@@ -37,8 +37,20 @@ import numpy as np
 
 import backlashkit as bk
 from backlashkit import signals
-from backlashkit.identify_joint import JointIdentifier, cramer_rao_bound
-from backlashkit.ravanbod2002 import A1, A2, P_TRUE, SNR1, SNR2, T_S, THETA, TS, protocol_records
+from backlashkit.identify.crb import cramer_rao_bound
+from backlashkit.identify.joint import JointIdentifier
+from backlashkit.identify.search import JointSearch
+from backlashkit.papers.ravanbod2002 import (
+    A1,
+    A2,
+    P_TRUE,
+    SNR1,
+    SNR2,
+    T_S,
+    THETA,
+    TS,
+    protocol_records,
+)
 
 
 def main() -> None:
@@ -50,7 +62,7 @@ def main() -> None:
     ap.add_argument("--penalty", action="store_true",
                     help="prior as a Gaussian penalty with rel. std Err_p / sqrt(3)")
     ap.add_argument("--final-horizon", type=float, default=None,
-                    help="JointIdentifier(final_horizon=...) in s (default: whole records)")
+                    help="JointSearch(final_horizon=...) in s (default: whole records)")
     args = ap.parse_args()
     truth = bk.TwoMassDrive(**P_TRUE, theta=THETA)
     t = signals.time_grid(2 * T_S, TS)
@@ -75,7 +87,8 @@ def main() -> None:
         for ss in seeds:  # the seeds of `backlashkit reproduce ravanbod2002`
             rec1, rec2, prior = protocol_records(err, ss)
             fit = JointIdentifier(prior, prior_rel_std=rel,
-                                  final_horizon=args.final_horizon).fit([rec1, rec2])
+                                  search=JointSearch(final_horizon=args.final_horizon)
+                                  ).fit([rec1, rec2])
             est.append(fit.theta_)
             std.append(fit.std_)
             cover += fit.ci95_[0] <= THETA <= fit.ci95_[1]

@@ -27,9 +27,9 @@ import numpy as np
 import robustness_joint as rj
 
 import backlashkit as bk
-from backlashkit._parallel import process_pool
 from backlashkit.errors import SensitivityWarning
-from backlashkit.identify_joint import JointIdentifier
+from backlashkit.identify.joint import JointIdentifier
+from backlashkit.parallel import process_pool
 
 NAMES = ("theta", "J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
 FD_STEP = 1e-5

@@ -6,7 +6,7 @@ errors ``Err_p`` up to 40 % (``P_hat = P* (1 - Err_p X)``, ``X ~ U[-1, 1]`` per 
 parameter). Each trial simulates paper A's two experiments on the drive (80 s
 records from rest, torque ``0.1 a_max`` then ``0.6 a_max`` held 40 s, then 0; Ts =
 1 ms; white noise at the SNR over the whole record, :func:`signals.add_noise`) and
-fits :class:`~backlashkit.identify_joint.JointIdentifier` with its defaults (the
+fits :class:`~backlashkit.identify.joint.JointIdentifier` with its defaults (the
 linear parameters refined from the data, no penalty).
 
 Reported per scenario: the Cramér-Rao bound of theta relative to theta (all seven
@@ -63,11 +63,13 @@ import numpy as np
 
 import backlashkit as bk
 from backlashkit import signals
-from backlashkit._parallel import process_pool
 from backlashkit.errors import PriorMismatchWarning, SensitivityWarning
 from backlashkit.identify import Record
-from backlashkit.identify_joint import JointIdentifier, cramer_rao_bound
-from backlashkit.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+from backlashkit.identify.crb import cramer_rao_bound
+from backlashkit.identify.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
+from backlashkit.identify.joint import JointIdentifier
+from backlashkit.identify.search import Continuation, FirstHorizon, JointSearch, Restarts, ThetaGrid
+from backlashkit.parallel import process_pool
 
 BASE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 #: load inertia -> label (ratio J_L / J_M about 2, 14, 50)
@@ -172,26 +174,26 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--err-p", type=float, default=0.4)
     ap.add_argument("--stiffness-grid", type=int, default=1,
-                    help="JointIdentifier(stiffness_grid=...) (default 1, its default)")
+                    help="ThetaGrid(stiffness_points=...) (default 1, its default)")
     ap.add_argument("--split-shifts", default="0.5",
-                    help="JointIdentifier(split_shifts=...), comma-separated ('' for none)")
+                    help="FirstHorizon(split_shifts=...), comma-separated ('' for none)")
     ap.add_argument("--stiffness-restarts", default="0.15,0.4,0.8",
-                    help="JointIdentifier(stiffness_restarts=...), log-shifts of k_sh, "
+                    help="Restarts(stiffness=...), log-shifts of k_sh, "
                     "comma-separated ('' for none)")
     ap.add_argument("--friction-restarts", default="1.0",
-                    help="JointIdentifier(friction_restarts=...), log-shifts of f_M / f_L, "
+                    help="Restarts(friction=...), log-shifts of f_M / f_L, "
                     "comma-separated ('' for none, the code before them)")
     ap.add_argument("--no-misfit-restart", action="store_true",
-                    help="JointIdentifier(misfit_restart=False) (the code before it)")
+                    help="Restarts(misfit=False) (the code before it)")
     ap.add_argument("--search-factor", default="3",
-                    help="JointIdentifier(search_factor=...) ('none' for unbounded)")
+                    help="FirstHorizon(search_factor=...) ('none' for unbounded)")
     ap.add_argument("--final-horizon", type=float, default=None,
-                    help="JointIdentifier(final_horizon=...) in s (default: whole record)")
+                    help="JointSearch(final_horizon=...) in s (default: whole record)")
     ap.add_argument("--fine-horizons", default="0.25,0.6,1.6",
-                    help="JointIdentifier(fine_horizons=...), comma-separated ('' for one "
+                    help="Continuation(fine_horizons=...), comma-separated ('' for one "
                     "continuation path, the code before it)")
     ap.add_argument("--ambiguity-starts", type=int, default=4,
-                    help="JointIdentifier(ambiguity_starts=...) (default 4, its default; 0: "
+                    help="Continuation(ambiguity_starts=...) (default 4, its default; 0: "
                     "off, the code before it)")
     ap.add_argument("--interval", choices=("profile", "fisher"), default="profile",
                     help="JointIdentifier(interval=...) (default profile, its default)")
@@ -211,18 +213,23 @@ def main() -> None:
     ap.add_argument("--dump", metavar="FILE", default=None,
                     help="also write every trial (scenario, estimate, std, ci95) as JSON")
     args = ap.parse_args()
+    def floats(text: str) -> tuple[float, ...]:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+
+    search = JointSearch(
+        grid=ThetaGrid(stiffness_points=args.stiffness_grid),
+        first=FirstHorizon(
+            split_shifts=floats(args.split_shifts),
+            search_factor=None if args.search_factor == "none" else float(args.search_factor)),
+        continuation=Continuation(fine_horizons=floats(args.fine_horizons),
+                                  ambiguity_starts=args.ambiguity_starts),
+        restarts=Restarts(stiffness=floats(args.stiffness_restarts),
+                          friction=floats(args.friction_restarts),
+                          misfit=not args.no_misfit_restart),
+        final_horizon=args.final_horizon,
+    )
     options = {
-        "stiffness_grid": args.stiffness_grid,
-        "split_shifts": tuple(float(x) for x in args.split_shifts.split(",") if x.strip()),
-        "stiffness_restarts": tuple(float(x) for x in args.stiffness_restarts.split(",")
-                                    if x.strip()),
-        "friction_restarts": tuple(float(x) for x in args.friction_restarts.split(",")
-                                   if x.strip()),
-        "misfit_restart": not args.no_misfit_restart,
-        "search_factor": None if args.search_factor == "none" else float(args.search_factor),
-        "final_horizon": args.final_horizon,
-        "fine_horizons": tuple(float(x) for x in args.fine_horizons.split(",") if x.strip()),
-        "ambiguity_starts": args.ambiguity_starts,
+        "search": search,
         "interval": ProfileLikelihood() if args.interval == "profile" else FisherInterval(),
     }
     if args.noise != "auto":

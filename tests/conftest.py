@@ -14,7 +14,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 def _one_blas_thread():
     """One BLAS thread per test process: ``pytest -n auto`` already runs one process per
     core, and more threads than cores make the joint fits several times slower (the
-    same reason as :mod:`backlashkit._parallel`)."""
+    same reason as :mod:`backlashkit.parallel`)."""
     with threadpool_limits(limits=1, user_api="blas"):
         yield
 

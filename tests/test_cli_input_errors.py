@@ -19,7 +19,9 @@ import pytest
 from backlashkit.cli import main
 from backlashkit.errors import InputError
 from backlashkit.identify import Record
-from backlashkit.identify_joint import JointIdentifier, _lm, _LMState
+from backlashkit.identify._lm import LMState as _LMState
+from backlashkit.identify._lm import lm as _lm
+from backlashkit.identify.joint import JointIdentifier
 from backlashkit.io import read_drive_toml, write_csv
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -198,7 +200,7 @@ def test_speeds_in_rpm_read_as_rad_per_s_are_refused(exp_csv, tmp_path, capsys):
     assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
                  "--allow-far-from-prior"]) == 0
     out, _ = capsys.readouterr()
-    assert "note: J_M x0.1" in out and "rpm read as rad/s?" in out
+    assert "note: the fit moved J_M x0.1" in out and "rpm read as rad/s?" in out
     err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML,
                                    "--interval", "fisher", "--columns",
                                    "w_motor=w_load,w_load=w_motor"])
@@ -240,14 +242,16 @@ def test_held_speed_far_from_the_priors_steady_state_is_refused(exp_csv, tmp_pat
 
 
 def test_the_library_warns_of_a_prior_mismatch(exp):
-    """What ``identify`` refuses, the library answers with a PriorMismatchWarning and
-    says in ``held_speed_gains_`` / ``far_from_prior_``: speeds in rpm are 9.55 times
-    the prior's held speed, and the joint fit moves J_M x0.1."""
+    """The library refuses what ``identify`` refuses: speeds in rpm are 9.55 times the
+    prior's held speed (beyond REFUSE_FROM_PRIOR); with ``allow_far_from_prior=True``
+    it answers with a PriorMismatchWarning and says so in ``held_speed_gains_``. The
+    joint fit moves J_M x0.1: refused, or with ``allow_far_from_prior=True`` warned
+    (``far_from_prior_``)."""
     from scipy.signal import lfilter
 
     from backlashkit import PriorMismatchWarning, RegressionIdentifier, TwoStepIdentifier
     from backlashkit.identify import find_step_down, held_speed_gain
-    from backlashkit.intervals import FisherInterval
+    from backlashkit.identify.intervals import FisherInterval
 
     prior = read_drive_toml(DRIVE_TOML, require_theta=False).with_theta(None)
     rpm = 60 / (2 * np.pi)
@@ -264,22 +268,30 @@ def test_the_library_warns_of_a_prior_mismatch(exp):
     assert gain == pytest.approx(1.0, abs=0.02)  # paper_drive.toml is the record's drive
     assert held_speed_gain(bad, prior) == pytest.approx(rpm * gain, rel=1e-9)
     for cls in (TwoStepIdentifier, RegressionIdentifier):
+        with pytest.raises(InputError, match=r"^rpm\.csv: .* 9\.\d+ times the prior's.*"
+                                             r"use JointIdentifier .* allow_far_from_prior=True$"):
+            cls(prior).fit(bad)
         with pytest.warns(PriorMismatchWarning, match=r"^rpm\.csv: .* 9\.\d+ times the "
                                                       r"prior's.*rpm read as rad/s\?"):
-            est = cls(prior).fit(bad)
+            est = cls(prior, allow_far_from_prior=True).fit(bad)
         assert est.held_speed_gains_ == [pytest.approx(rpm * gain, rel=1e-9)]
         with warnings.catch_warnings():
             warnings.simplefilter("error", PriorMismatchWarning)
             assert cls(prior).fit(exp).held_speed_gains_ == [pytest.approx(gain, rel=1e-9)]
+    joint = JointIdentifier(prior, interval=FisherInterval())
+    with pytest.raises(InputError, match=r"^the fit moved J_M x0\.1.*allow_far_from_prior=True$"):
+        joint.fit(bad)
+    assert not hasattr(joint, "theta_")  # refused before it holds an answer
     with pytest.warns(PriorMismatchWarning, match=r"the fit moved J_M x0\.1"):
-        est = JointIdentifier(prior, interval=FisherInterval()).fit(bad)
+        est = JointIdentifier(prior, interval=FisherInterval(),
+                              allow_far_from_prior=True).fit(bad)
     assert "J_M" in est.far_from_prior_
     # a tiny torque (units) is still answered, the same record as records and as
     # final_records warns once; bad arguments are named, a too-short hold gives NaN
     tiny = Record(exp.t, 1e-15 * exp.torque, exp.w_motor, exp.w_load)
     assert held_speed_gain(tiny, prior) == pytest.approx(1e15 * gain, rel=1e-6)
     with pytest.warns(PriorMismatchWarning) as caught:
-        TwoStepIdentifier(prior).fit([bad], final_records=[bad])
+        TwoStepIdentifier(prior, allow_far_from_prior=True).fit([bad], final_records=[bad])
     assert len([w for w in caught if w.category is PriorMismatchWarning]) == 1
     with pytest.raises(InputError, match=r"needs f_M \+ f_L > 0"):
         held_speed_gain(exp, prior.__class__(**{**prior.__dict__, "f_M": 0.0, "f_L": 0.0}))
@@ -478,7 +490,7 @@ def test_a_speed_glitch_is_refused(exp):
         JointIdentifier(prior).fit(Record(exp.t, exp.torque, w, exp.w_load, name="exp.csv"))
     # an encoder's counts (4096 per turn at 1 kHz: 1.53 rad/s steps) dither by a count or
     # two with most samples equal to their neighbours: no spike
-    from backlashkit.identify import check_spikes
+    from backlashkit.identify.record import check_spikes
 
     q = 2 * np.pi * 1000 / 4096
     check_spikes(Record(exp.t, exp.torque, np.round(exp.w_motor / q) * q,
@@ -503,7 +515,7 @@ def test_wrong_types_in_the_python_api_are_named(exp):
                                          r"backlashkit\.read_records\)"):
         JointIdentifier(prior).fit("exp.csv")
     with pytest.raises(InputError, match="^final_horizon must be a real number, got '1'$"):
-        JointIdentifier(prior, final_horizon="1").fit(exp)
+        JointIdentifier(prior, search=bk.JointSearch(final_horizon="1")).fit(exp)
     with pytest.raises(InputError, match="^J_M must be a real number, got '0.1'$"):
         bk.TwoMassDrive(J_M="0.1", J_L=1.0, k_sh=1.0, f_M=0.0, f_L=0.0, f_sh=0.0)
 
@@ -580,7 +592,7 @@ def test_no_glitch_in_the_robustness_drives(j_l):
     and rattling are no single-sample spikes."""
     import backlashkit as bk
     from backlashkit import signals
-    from backlashkit.identify import check_spikes
+    from backlashkit.identify.record import check_spikes
 
     p = read_drive_toml(DRIVE_TOML, require_theta=False)
     t = signals.time_grid(80.0, 1e-3)
@@ -628,3 +640,41 @@ def test_noise_free_records_are_said_so(tmp_path, capsys):
     (note,) = [n for n in doc["notes"] if "spread" in n]
     assert "(noise-free, simulated records?)" in note
     assert not any("--noise ar" in n for n in doc["notes"])
+
+
+def test_the_library_holds_the_contract(exp):
+    """What ``identify`` refuses, the library refuses with the same rule: a record given
+    twice, a record that is no step-down experiment (a PRBS), a prior 5 times off; the
+    advice names the Python option, and the command line words the same error with its
+    flag (one rule, two wordings)."""
+    import pickle
+
+    from backlashkit import TwoStepIdentifier
+    from backlashkit.cli.main import word
+    from backlashkit.errors import Option, PriorMismatchWarning, StepDownWarning
+    from backlashkit.identify import as_records, check_fit_near_prior, check_step_downs
+
+    prior = read_drive_toml(DRIVE_TOML, require_theta=False).with_theta(None)
+    with pytest.raises(InputError, match="exp.csv holds the same data as exp.csv"):
+        as_records([exp, exp])
+    prbs = Record(exp.t, np.where(np.sin(7.0 * exp.t) > 0, 0.5, -0.5), exp.w_motor,
+                  exp.w_load, name="prbs")
+    with pytest.raises(InputError, match=r"^prbs: the torque steps down 4 times"):
+        TwoStepIdentifier(prior).fit(prbs)
+    two = Record(exp.t, np.where(exp.t < 1.85, 0.942, np.where(exp.t < 2.0, 0.6, 0.0)),
+                 exp.w_motor, exp.w_load, name="two")
+    with pytest.warns(StepDownWarning, match=r"^two: the torque steps down more than once"):
+        assert check_step_downs([two], prior) == [2]
+    far = {"J_M": 0.1 * prior.J_M, "k_sh": 3.5 * prior.k_sh}
+    with pytest.raises(InputError, match=r"moved J_M x0\.1 from the prior") as info:
+        check_fit_near_prior(far, prior)
+    assert str(info.value).endswith("pass allow_far_from_prior=True")
+    flags = {"allow_far_from_prior": "--allow-far-from-prior"}
+    assert word(info.value, flags).endswith("pass --allow-far-from-prior")
+    back = pickle.loads(pickle.dumps(info.value))  # a worker process's error keeps its parts
+    assert word(back, flags) == word(info.value, flags)
+    with pytest.warns(PriorMismatchWarning, match=r"J_M x0\.1, k_sh x3\.5 from the prior"):
+        assert check_fit_near_prior(far, prior, allow_far_from_prior=True) == ["J_M", "k_sh"]
+    error = InputError("final_horizon must be > 0, got -1")  # a validation message
+    assert word(error, {"final_horizon": "--final-horizon"}).startswith("--final-horizon must")
+    assert str(InputError("a ", Option("resample", "linear"))) == "a resample='linear'"

@@ -15,7 +15,8 @@ import pytest
 import backlashkit as bk
 from backlashkit import signals
 from backlashkit.cli import main
-from backlashkit.io import read_csv_columns, read_drive_toml, read_torque_csv
+from backlashkit.identify.readers import read_torque
+from backlashkit.io import read_drive_toml
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 DRIVE = str(EXAMPLES / "paper_drive.toml")
@@ -34,9 +35,11 @@ def run(argv, capsys):
 
 
 def read(path) -> dict[str, np.ndarray]:
+    """The columns of a CSV file written by the command (parsed exactly)."""
     with open(path) as fh:
         header = fh.readline().strip().split(",")
-    return read_csv_columns(path, header)
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return {name: data[:, k] for k, name in enumerate(header)}
 
 
 def header(path) -> str:
@@ -53,7 +56,7 @@ def test_torque_file_gives_exact_columns_on_the_same_grid(tmp_path, capsys):
     assert code == 0 and stdout == "" and "wrote" in err
     assert header(out) == "t,w_motor,w_load,phi_d"
     cols = read(out)
-    t, u = read_torque_csv(TORQUE)
+    t, u = read_torque(TORQUE)
     ref = read_drive_toml(DRIVE).simulate(t, u)
     # written at full precision: bit-for-bit equal to the library's result
     assert np.array_equal(cols["t"], t)
@@ -67,7 +70,7 @@ def test_json_summary(tmp_path, capsys):
     code, stdout, _ = run([DRIVE, "--torque", TORQUE, "--out", str(out), "--json"], capsys)
     assert code == 0
     summary = json.loads(stdout)
-    t, u = read_torque_csv(TORQUE)
+    t, u = read_torque(TORQUE)
     ref = read_drive_toml(DRIVE).simulate(t, u)
     assert summary["n_samples"] == t.size
     assert summary["output"] == str(out)
@@ -83,7 +86,7 @@ def test_no_pull_law_is_used(tmp_path, capsys):
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     assert run([DRIVE, "--torque", TORQUE, "--out", str(a)], capsys)[0] == 0
     assert run([DRIVE, "--torque", TORQUE, "--out", str(b), "--law", "no-pull"], capsys)[0] == 0
-    t, u = read_torque_csv(TORQUE)
+    t, u = read_torque(TORQUE)
     ref = read_drive_toml(DRIVE).simulate(t, u, law="no-pull")
     assert np.array_equal(read(b)["w_load"], ref.w_load)
     assert not np.array_equal(read(a)["w_load"], read(b)["w_load"])
@@ -332,6 +335,25 @@ BAD = {
     "amplitude not a number": (
         {}, [DRIVE, "--experiment", "step", "--amplitude", "abc"], "--amplitude"),
     "no output option": ({}, [DRIVE, "--torque", TORQUE, "--out"], "--out"),
+    "encoder under one count": (
+        {}, [DRIVE, "--torque", TORQUE, "--encoder", "0.5"], "--encoder: counts_per_rev"),
+    "speed filter without encoder": (
+        {}, [DRIVE, "--torque", TORQUE, "--speed-filter", "1e-3"], "--speed-filter only"),
+    "negative speed filter": (
+        {}, [DRIVE, "--torque", TORQUE, "--encoder", "1000", "--speed-filter", "-1"],
+        "--speed-filter: tau_w must be >= 0"),
+    "encoder with noise": (
+        {}, [DRIVE, *PAPER_EXPERIMENT, "--encoder", "1000", "--snr-motor", "30"],
+        "give one or the other"),
+    "breakaway below Coulomb": (
+        drive_with(GOOD_TOML + "fc_M = 0.02\nfs_M = 0.01\n"),
+        ["{d}/drive.toml", "--torque", TORQUE], "fs_M must be >= fc_M"),
+    "negative Coulomb friction": (
+        drive_with(GOOD_TOML + "fc_L = -0.02\n"),
+        ["{d}/drive.toml", "--torque", TORQUE], "fc_L must be >= 0"),
+    "non-finite current loop": (
+        drive_with(GOOD_TOML + "[actuator]\ntau_i = inf\n"),
+        ["{d}/drive.toml", "--torque", TORQUE], "tau_i must be finite"),
 }
 
 
@@ -355,6 +377,40 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys, case):
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
+def test_encoder_records(tmp_path, capsys):
+    # --encoder N: the speeds an encoder of N counts/rev delivers (differences of counts
+    # over the sample time), with the counts; the format identify reads plus two columns.
+    out = tmp_path / "enc.csv"
+    argv = [DRIVE, "--experiment", "step-down", "--amplitude", "0.157", "--hold", "2",
+            "--encoder", "4096", "--speed-filter", "2e-3", "--out", str(out), "--json"]
+    code, stdout, _ = run(argv, capsys)
+    assert code == 0
+    assert header(out) == "t,torque,w_motor,w_load,count_motor,count_load"
+    cols = read(out)
+    drive = read_drive_toml(DRIVE)
+    resp = drive.simulate(cols["t"], cols["torque"], positions=True)
+    expect = bk.measure_encoders(resp, bk.Encoder(4096, tau_w=2e-3))
+    for name in ("w_motor", "w_load", "count_motor", "count_load"):
+        assert np.array_equal(cols[name], expect[name]), name
+    assert np.array_equal(cols["count_motor"], np.floor(resp.phi_motor / (2 * np.pi / 4096)))
+    assert json.loads(stdout)["columns"] == list(expect)
+
+
+def test_drive_file_friction_and_actuator(tmp_path, capsys):
+    path = tmp_path / "drive.toml"
+    path.write_text(GOOD_TOML + "fc_M = 0.01\nfc_L = 0.02\nfs_L = 0.03\n"
+                    "[actuator]\ntau_i = 1e-3\n")
+    out = tmp_path / "r.csv"
+    code, _, _ = run([str(path), "--torque", TORQUE, "--out", str(out)], capsys)
+    assert code == 0
+    cols = read(out)
+    t, u = read_torque(TORQUE)
+    drive = read_drive_toml(path)
+    assert (drive.fc_M, drive.fc_L, drive.fs_M, drive.fs_L) == (0.01, 0.02, None, 0.03)
+    ref = drive.simulate(t, u, actuator=bk.CurrentLoop(1e-3))
+    assert np.array_equal(cols["w_motor"], ref.w_motor)
+
+
 def test_output_equal_to_input_is_refused_even_with_force(tmp_path, capsys):
     torque = tmp_path / "t.csv"
     torque.write_text(GOOD_CSV)
@@ -371,7 +427,7 @@ def test_python_dash_m_entry_point(tmp_path):
            "--out", str(out), "--json"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout)["n_samples"] == read_torque_csv(TORQUE)[0].size
+    assert json.loads(proc.stdout)["n_samples"] == read_torque(TORQUE)[0].size
     assert header(out) == "t,w_motor,w_load,phi_d"
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 2 and again.stdout == ""
@@ -382,7 +438,7 @@ def test_python_dash_m_entry_point(tmp_path):
 def test_torque_files_are_read_as_identify_reads_experiments(tmp_path, capsys):
     """A European export (';', decimal commas, other names) with --columns, and .npz:
     the same response as the plain CSV; reader options without --torque are refused."""
-    t, u = read_torque_csv(TORQUE)
+    t, u = read_torque(TORQUE)
     ref = read_drive_toml(DRIVE).simulate(t, u)
     eu = tmp_path / "eu.csv"
     eu.write_text("Zeit;Moment\n" + "".join(f"{a:.17g};{b:.17g}\n".replace(".", ",")

@@ -16,11 +16,11 @@ import pytest
 
 import backlashkit as bk
 from backlashkit import signals
-from backlashkit._clipping import find_clipping
 from backlashkit.cli import main
 from backlashkit.errors import InputError, SensitivityWarning
 from backlashkit.identify import Record, RegressionIdentifier, TwoStepIdentifier
-from backlashkit.identify_joint import JointIdentifier
+from backlashkit.identify.clipping import find_clipping
+from backlashkit.identify.joint import JointIdentifier
 from backlashkit.io import write_csv
 
 P_TRUE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)

@@ -1,6 +1,5 @@
 """``backlashkit control`` and the ``reproduce tao1995`` runner."""
 
-import argparse
 import json
 from pathlib import Path
 
@@ -8,7 +7,6 @@ import numpy as np
 import pytest
 
 from backlashkit.cli import main
-from backlashkit.control import tao1995
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tao1995.toml"
 COLUMNS = "t,r,y,y_m,e,u_d,v,u,mc_r_hat,m_hat,mc_l_hat"
@@ -71,12 +69,9 @@ def test_bad_scenarios_one_line_errors(tmp_path, capsys, edit, needle):
 
 
 def test_reproduce_runner(tmp_path, capsys):
-    p = argparse.ArgumentParser()
-    tao1995.add_arguments(p)
     out = tmp_path / "r.json"
-    assert (
-        tao1995.run_cli(p.parse_args(["--json", str(out), "--report", str(tmp_path / "rep")])) == 0
-    )
+    assert main(["reproduce", "tao1995", "--json", str(out), "--report",
+                 str(tmp_path / "rep")]) == 0
     doc = json.loads(out.read_text())
     assert set(doc["variants"]) == {"exact", "smooth-filter", "none", "gain-only"}
     for v in doc["variants"].values():
@@ -88,5 +83,6 @@ def test_reproduce_runner(tmp_path, capsys):
     page = (rep / "index.html").read_text(encoding="utf-8")
     assert 'src="fig6_smooth_inverse_alpha6.png"' in page and "MET" in page
     assert "MISSED" not in page  # the runner returned 0: every bar met
-    with pytest.raises(Exception, match="already exists"):
-        tao1995.run_cli(p.parse_args(["--json", str(out)]))
+    capsys.readouterr()
+    assert main(["reproduce", "tao1995", "--json", str(out)]) == 2
+    assert "already exists" in capsys.readouterr().err

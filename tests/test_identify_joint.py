@@ -1,4 +1,4 @@
-"""Joint ML identification (``backlashkit.identify_joint``) and its Cramér-Rao bound.
+"""Joint ML identification (``backlashkit.identify.joint``) and its Cramér-Rao bound.
 
 Protocol as in ``tests/test_identify.py`` (paper A's drive, theta* = 2 deg half-width,
 Ts = 1 ms). The calibration and efficiency checks use a short experiment (0.942 N m
@@ -20,11 +20,14 @@ from backlashkit import signals
 from backlashkit.cli import main
 from backlashkit.errors import InputError
 from backlashkit.identify import Record
-from backlashkit.identify_joint import (
-    LINEAR_PARAMS,
-    CramerRaoBound,
-    JointIdentifier,
-    cramer_rao_bound,
+from backlashkit.identify.crb import CramerRaoBound, cramer_rao_bound
+from backlashkit.identify.joint import LINEAR_PARAMS, JointIdentifier
+from backlashkit.identify.search import (
+    Continuation,
+    FirstHorizon,
+    JointSearch,
+    Restarts,
+    ThetaGrid,
 )
 from backlashkit.io import write_csv
 
@@ -243,7 +246,7 @@ def test_model_commutation_instants_on_noise_free_data(short):
 def test_resplit_keeps_sums_and_ringing_frequency():
     """A split restart moves J_M / J_L (or f_M / f_L) by e^shift and keeps the sum and
     k_sh (1/J_M + 1/J_L)."""
-    from backlashkit.identify_joint import _resplit
+    from backlashkit.identify._search import resplit as _resplit
 
     free = list(LINEAR_PARAMS)
     z = np.log([THETA, *(P_TRUE[n] for n in free)])
@@ -299,7 +302,8 @@ def test_stiffness_grid_starts(short):
     truth's ringing frequency, and the fit still recovers theta and k_sh."""
     _, _, clean = short
     prior = bk.TwoMassDrive(**{**P_TRUE, "k_sh": 0.6 * P_TRUE["k_sh"]})
-    e = JointIdentifier(prior, stiffness_grid=5).fit(_noisy(clean, 60, 5))
+    search = JointSearch(grid=ThetaGrid(stiffness_points=5))
+    e = JointIdentifier(prior, search=search).fit(_noisy(clean, 60, 5))
     assert e.theta_ == pytest.approx(THETA, rel=1e-2)
     assert e.params_["k_sh"] == pytest.approx(P_TRUE["k_sh"], rel=1e-2)
     assert len(e.theta_starts_) >= 2
@@ -322,13 +326,14 @@ def test_steady_start(short):
     u = signals.step_down(t, A2, t_s=1.0)
     clean = TRUE.simulate(t, u, initial_state=TRUE.steady_state(A2))
     e = JointIdentifier(bk.TwoMassDrive(**P_TRUE), prior_rel_std=0.05,
-                        pre_window=0.5).fit(_noisy(clean, 40, 5))
+                        search=JointSearch(pre_window=0.5)).fit(_noisy(clean, 40, 5))
     assert e.model_start_ == ["steady"]
     assert e.residuals_[0][0].size == 2501
     assert abs(e.theta_ - THETA) < 4 * e.std_ and e.std_ < 0.02 * THETA
     with pytest.raises(InputError, match="pre_window"):
-        JointIdentifier(bk.TwoMassDrive(**P_TRUE), start="steady",
-                        pre_window=2.0).fit(_noisy(clean, 40, 5))
+        JointIdentifier(bk.TwoMassDrive(**P_TRUE),
+                        search=JointSearch(start="steady", pre_window=2.0)
+                        ).fit(_noisy(clean, 40, 5))
 
 
 def test_paper_protocol_quick():
@@ -389,8 +394,10 @@ def test_stiffness_restarts_escape_a_wrong_ringing_phase():
     restart at a 16 % higher stiffness reaches the minimum near the truth (so does the
     finer continuation path, switched off here to test the restarts alone)."""
     drive, recs, prior = _robustness_trial(4, 3, 1, 6, 2.0, 20.0)
-    stuck = JointIdentifier(prior, stiffness_restarts=(), fine_horizons=()).fit(recs)
-    fit = JointIdentifier(prior, fine_horizons=()).fit(recs)
+    one_path = Continuation(fine_horizons=())
+    stuck = JointIdentifier(prior, search=JointSearch(
+        restarts=Restarts(stiffness=()), continuation=one_path)).fit(recs)
+    fit = JointIdentifier(prior, search=JointSearch(continuation=one_path)).fit(recs)
     assert stuck.theta_ < 0.94 * drive.theta and stuck.params_["k_sh"] < 0.85 * drive.k_sh
     assert abs(fit.theta_ / drive.theta - 1) < 0.05
     assert abs(fit.params_["k_sh"] / drive.k_sh - 1) < 0.1
@@ -404,9 +411,10 @@ def test_wide_stiffness_restarts_reach_the_truths_basin():
     ``RESTART_SCREEN_ITER`` iterations) reaches the minimum near the truth."""
     drive, recs, prior = _robustness_trial(5, 3, 17, 20, 2.0, 20.0)
     fisher = bk.FisherInterval()  # the restarts come before the interval
-    narrow = JointIdentifier(prior, stiffness_restarts=(0.15,), interval=fisher).fit(recs)
+    narrow = JointIdentifier(prior, search=JointSearch(restarts=Restarts(stiffness=(0.15,))),
+                             interval=fisher).fit(recs)
     fit = JointIdentifier(prior, interval=fisher).fit(recs)
-    assert fit.stiffness_restarts == (0.15, 0.4, 0.8)  # the default
+    assert fit.search.restarts.stiffness == (0.15, 0.4, 0.8)  # the default
     assert narrow.theta_ < 0.93 * drive.theta and narrow.params_["k_sh"] < 0.6 * drive.k_sh
     assert abs(fit.theta_ / drive.theta - 1) < 0.02
     assert abs(fit.params_["k_sh"] / drive.k_sh - 1) < 0.05
@@ -423,10 +431,10 @@ def test_friction_restarts_cross_the_ridge_of_a_wrong_split():
     fisher = bk.FisherInterval()
     # without the second search too, which also leaves this minimum (misfit_restart)
     with pytest.warns(bk.CorrelatedResidualsWarning):
-        stuck = JointIdentifier(prior, friction_restarts=(), misfit_restart=False,
-                                interval=fisher).fit(recs)
+        stuck = JointIdentifier(prior, search=JointSearch(
+            restarts=Restarts(friction=(), misfit=False)), interval=fisher).fit(recs)
     fit = JointIdentifier(prior, interval=fisher).fit(recs)
-    assert fit.friction_restarts == (1.0,)  # the default
+    assert fit.search.restarts.friction == (1.0,)  # the default
     assert not fit.misfit_restarted_  # the friction restart alone reached it
     assert stuck.params_["f_M"] < 0.7 * drive.f_M and stuck.theta_ < 0.98 * drive.theta
     assert abs(stuck.theta_ - drive.theta) > 5 * stuck.std_
@@ -447,12 +455,13 @@ def test_misfit_restart_leaves_a_stiff_shaft_without_backlash():
     fisher = bk.FisherInterval()
     with pytest.warns(bk.CorrelatedResidualsWarning,
                       match=r"lag-1 .*the model misfits, since the noise itself is white"):
-        stuck = JointIdentifier(prior, misfit_restart=False, interval=fisher).fit(recs)
+        stuck = JointIdentifier(prior, search=JointSearch(restarts=Restarts(misfit=False)),
+                                interval=fisher).fit(recs)
     assert np.all(np.abs(stuck.held_noise_lag1_) < 0.1)  # the speeds' own noise: white
     fit = JointIdentifier(prior, interval=fisher).fit(recs)
-    assert fit.misfit_restart is True  # the default
-    with pytest.raises(bk.InputError, match="misfit_restart must be True or False, got 'no'"):
-        JointIdentifier(prior, misfit_restart="no").fit(recs)
+    assert fit.search.restarts.misfit is True  # the default
+    with pytest.raises(bk.InputError, match="Restarts.misfit must be True or False, got 'no'"):
+        Restarts(misfit="no")
     assert not stuck.misfit_restarted_ and stuck.theta_ < 0.2 * drive.theta
     assert np.max(np.abs(stuck.residual_lag1_)) > 0.2
     assert fit.misfit_restarted_ and fit.misfit_restart_won_
@@ -469,7 +478,9 @@ def test_fine_horizons_avoid_a_wrong_basin():
     record. (The wide stiffness restarts, switched off here to test the path alone,
     reach it from the wrong basin too.)"""
     drive, recs, prior = _robustness_trial(5, 6, 9, 20, 5.0, 20.0)
-    one_path = JointIdentifier(prior, fine_horizons=(), stiffness_restarts=(0.15,)).fit(recs)
+    one_path = JointIdentifier(prior, search=JointSearch(
+        continuation=Continuation(fine_horizons=()), restarts=Restarts(stiffness=(0.15,)))
+    ).fit(recs)
     fit = JointIdentifier(prior).fit(recs)
     assert one_path.theta_ < 0.9 * drive.theta
     assert abs(fit.theta_ / drive.theta - 1) < 0.02
@@ -484,7 +495,8 @@ def test_ambiguity_starts_continue_more_candidates():
     its interval; continuing more first-horizon solutions finds a lower minimum
     whose interval covers the truth."""
     drive, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
-    usual = JointIdentifier(prior, ambiguity_starts=0).fit(recs)
+    usual = JointIdentifier(prior, search=JointSearch(
+        continuation=Continuation(ambiguity_starts=0))).fit(recs)
     fit = JointIdentifier(prior).fit(recs)
     assert usual.ambiguous_ and fit.ambiguous_  # detected either way; acted on if asked
     assert usual.theta_ < 0.8 * drive.theta and usual.params_["k_sh"] > 1.3 * drive.k_sh
@@ -556,15 +568,15 @@ def test_profile_search_recentres_the_estimate(monkeypatch):
     theta 2 deg, 30 dB): a held-theta refit of the profile search ends 0.9 below the
     estimate's cost; refined from there, the estimate moves to a lower minimum, closer
     to the truth."""
-    from backlashkit import identify_joint
+    from backlashkit.identify import _search
 
     drive, recs, prior = _robustness_trial(5, 4, 15, 20, 2.0, 30.0)
     fit = JointIdentifier(prior).fit(recs)
-    monkeypatch.setattr(identify_joint, "RECENTRE_MAX", 0)
+    monkeypatch.setattr(_search, "RECENTRE_MAX", 0)
     stopped = JointIdentifier(prior).fit(recs)
-    assert stopped.profile_[:, 1].min() < -identify_joint.RECENTRE_MARGIN
+    assert stopped.profile_[:, 1].min() < -_search.RECENTRE_MARGIN
     assert fit.profile_[:, 1].min() == 0.0  # the new estimate is its profile's minimum
-    assert fit.cost_ < stopped.cost_ - identify_joint.RECENTRE_MARGIN
+    assert fit.cost_ < stopped.cost_ - _search.RECENTRE_MARGIN
     assert abs(fit.theta_ / drive.theta - 1) < 0.6 * abs(stopped.theta_ / drive.theta - 1)
 
 
@@ -593,13 +605,13 @@ def test_final_horizon(short):
     rec = _noisy(clean, 30, 5)
     whole = JointIdentifier(prior).fit(rec)
     assert not whole.ambiguous_  # paper A's drive: the continuation paths agree
-    long = JointIdentifier(prior, final_horizon=10.0).fit(rec)
+    long = JointIdentifier(prior, search=JointSearch(final_horizon=10.0)).fit(rec)
     assert long.theta_ == pytest.approx(whole.theta_, rel=1e-6)
     assert long.std_ == pytest.approx(whole.std_, rel=1e-4)
     np.testing.assert_allclose(long.noise_std_, whole.noise_std_, rtol=1e-6)
     with warnings.catch_warnings():  # only the fitted samples count for the whiteness
         warnings.simplefilter("error", bk.CorrelatedResidualsWarning)
-        short_h = JointIdentifier(prior, final_horizon=0.3).fit(rec)
+        short_h = JointIdentifier(prior, search=JointSearch(final_horizon=0.3)).fit(rec)
     assert short_h.std_ > 1.2 * whole.std_
     assert abs(short_h.theta_ - THETA) < 4 * short_h.std_
     np.testing.assert_allclose(short_h.noise_std_, whole.noise_std_, rtol=0.1)
@@ -612,33 +624,100 @@ def test_final_horizon(short):
         ({"prior_rel_std": {"J_X": 0.1}}, "unknown parameter 'J_X'"),
         ({"prior_rel_std": -0.1}, "prior_rel_std must be >= 0"),
         ({"prior_rel_std": {"J_M": -1}}, r"prior_rel_std\['J_M'\] must be >= 0"),
-        ({"start": "middle"}, "start must be 'auto', 'rest' or 'steady'"),
         ({"noise": (1.0,)}, "noise must be a pair"),
         ({"noise": (1.0, 0.0)}, r"noise\[1\] \(s_L\) must be > 0"),
-        ({"n_grid": 1}, "n_grid must be an integer >= 2"),
-        ({"fd_step": 0.5}, "fd_step must be < 0.1"),
-        ({"theta_max": 0}, "theta_max must be > 0"),
-        ({"stiffness_grid": 0}, "stiffness_grid must be an integer >= 1"),
-        ({"stiffness_span": 1.0}, "stiffness_span must be > 1"),
-        ({"split_shifts": (0.5, -1.0)}, r"split_shifts\[\.\.\.\] must be > 0"),
-        ({"split_shifts": 0.5}, "split_shifts must be a sequence of numbers > 0"),
-        ({"search_factor": 1.0}, "search_factor must be > 1"),
-        ({"search_factor": -2.0}, "search_factor must be > 0"),
         ({"interval": 30}, "interval must be a ProfileLikelihood, FisherInterval or "
-         r"ParametricBootstrap \(backlashkit.intervals\), got int"),
+         r"ParametricBootstrap \(backlashkit.identify.intervals\), got int"),
         ({"interval": "fisher"}, "interval must be .* got str"),
-        ({"final_horizon": 0.0}, "final_horizon must be > 0"),
-        ({"stiffness_restarts": (0.1, 0.0)}, r"stiffness_restarts\[\.\.\.\] must be > 0"),
-        ({"fine_horizons": (0.3, -1.0)}, r"fine_horizons\[\.\.\.\] must be > 0"),
-        ({"ambiguity_starts": -1}, "ambiguity_starts must be an integer >= 0, got -1"),
-        ({"stiffness_restarts": 0.1}, "stiffness_restarts must be a sequence of numbers > 0"),
-        ({"friction_restarts": (-1.0,)}, r"friction_restarts\[\.\.\.\] must be > 0"),
+        ({"search": {"n_grid": 61}}, r"search must be a JointSearch "
+         r"\(backlashkit.identify.search\), got dict"),
     ],
 )
 def test_parameters_validated(short, kwargs, pattern):
     _, _, clean = short
     with pytest.raises(InputError, match=pattern):
         JointIdentifier(bk.TwoMassDrive(**P_TRUE), **kwargs).fit(_noisy(clean, 30, 1))
+
+
+@pytest.mark.parametrize(
+    "make, pattern",
+    [
+        (lambda: JointSearch(start="middle"), "start must be 'auto', 'rest' or 'steady'"),
+        (lambda: JointSearch(fd_step=0.5), "fd_step must be < 0.1"),
+        (lambda: JointSearch(final_horizon=0.0), "final_horizon must be > 0, got 0.0"),
+        (lambda: JointSearch(max_iter=0), "max_iter must be an integer >= 1, got 0"),
+        (lambda: JointSearch(grid=(61,)), "grid must be a ThetaGrid, got tuple"),
+        (lambda: JointSearch(first=FirstHorizon(horizon=0.5)),
+         r"continuation.horizons must start after first.horizon \(0.5 s\)"),
+        (lambda: ThetaGrid(points=1), "ThetaGrid.points must be an integer >= 2, got 1"),
+        (lambda: ThetaGrid(theta_max=0), "ThetaGrid.theta_max must be > 0, got 0"),
+        (lambda: ThetaGrid(stiffness_points=0), "ThetaGrid.stiffness_points must be an "
+         "integer >= 1"),
+        (lambda: ThetaGrid(stiffness_span=1.0), "ThetaGrid.stiffness_span must be > 1"),
+        (lambda: ThetaGrid(two_step_start=1), "ThetaGrid.two_step_start must be True or "
+         "False, got 1"),
+        (lambda: FirstHorizon(split_shifts=(0.5, -1.0)),
+         r"FirstHorizon.split_shifts\[1\] must be > 0, got -1.0"),
+        (lambda: FirstHorizon(split_shifts=0.5), "FirstHorizon.split_shifts must be a "
+         "sequence of numbers > 0, got 0.5"),
+        (lambda: FirstHorizon(search_factor=1.0), "FirstHorizon.search_factor must be > 1"),
+        (lambda: FirstHorizon(search_factor=-2.0), "FirstHorizon.search_factor must be > 0"),
+        (lambda: Continuation(fine_horizons=(0.3, -1.0)),
+         r"Continuation.fine_horizons\[1\] must be > 0"),
+        (lambda: Continuation(horizons=(1.0, 0.4)), r"Continuation.horizons must increase"),
+        (lambda: Continuation(ambiguity_starts=-1), "Continuation.ambiguity_starts must be "
+         "an integer >= 0, got -1"),
+        (lambda: Restarts(stiffness=(0.1, 0.0)), r"Restarts.stiffness\[1\] must be > 0"),
+        (lambda: Restarts(stiffness=0.1), "Restarts.stiffness must be a sequence of "
+         "numbers > 0"),
+        (lambda: Restarts(friction=(-1.0,)), r"Restarts.friction\[0\] must be > 0"),
+    ],
+)
+def test_search_configuration_validated(make, pattern):
+    with pytest.raises(InputError, match=pattern):
+        make()
+
+
+def test_search_configuration_defaults_and_repr():
+    """The configuration objects are frozen, equal by value, normalise sequences to
+    tuples of floats, and print only what differs from the defaults."""
+    s = JointSearch()
+    assert s == JointSearch() and repr(s) == "JointSearch()"
+    assert s.first.horizon == 0.15 and s.continuation.horizons == (0.4, 1.0, 3.0)
+    assert s.continuation.paths(0.15) == [[0.4, 1.0, 3.0], [0.25, 0.4, 0.6, 1.0, 1.6, 3.0]]
+    assert Continuation(fine_horizons=()).paths(0.15) == [[0.4, 1.0, 3.0]]
+    assert s.grid.bounds == (np.deg2rad(15.0) / 61, np.deg2rad(15.0))
+    custom = JointSearch(restarts=Restarts(stiffness=[1]), final_horizon=1)
+    assert custom.restarts.stiffness == (1.0,) and isinstance(custom.final_horizon, float)
+    assert repr(custom) == "JointSearch(restarts=Restarts(stiffness=(1.0,)), final_horizon=1.0)"
+    with pytest.raises(AttributeError):
+        s.max_iter = 3  # frozen
+    est = JointIdentifier(TRUE.with_theta(None), search=custom, workers=1)
+    assert repr(est).startswith("JointIdentifier(TwoMassDrive(")
+    assert repr(est).endswith(", search=JointSearch(restarts=Restarts(stiffness=(1.0,)), "
+                              "final_horizon=1.0), workers=1)")
+
+
+def test_repr_after_fit_is_one_line(trials):
+    text = repr(trials[0])
+    assert "\n" not in text and f"theta_ = {trials[0].theta_:.4g} rad" in text
+    assert text.endswith("[profile]") and "prior_rel_std=0.1" in text
+
+
+def test_help_is_short_and_has_examples():
+    """``help(JointIdentifier)`` fits on two screens and its Examples run as written."""
+    import doctest
+    import pydoc
+
+    text = pydoc.render_doc(JointIdentifier, renderer=pydoc.plaintext)
+    assert len(text.splitlines()) <= 110, len(text.splitlines())
+    assert "Examples\n" in text
+    finder = doctest.DocTestFinder(recurse=False)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    for test in finder.find(JointIdentifier):
+        runner.run(test)
+    assert runner.summarize(verbose=False).failed == 0
+    assert runner.summarize(verbose=False).attempted >= 8
 
 
 def test_prior_type_validated(short):

@@ -89,6 +89,24 @@ def test_profile_likelihood_validated(kwargs, pattern):
 def test_configurations_are_exported():
     assert bk.ProfileLikelihood() == bk.ProfileLikelihood()
     assert bk.FisherInterval() == bk.FisherInterval()
-    from backlashkit.identify import joint as identify_joint
+    from backlashkit import identify
 
-    assert identify_joint.ParametricBootstrap is bk.ParametricBootstrap
+    assert identify.ParametricBootstrap is bk.ParametricBootstrap
+
+
+def test_each_interval_computes_its_own():
+    """Fisher's and the bootstrap's intervals from what a fit hands them (the profile's
+    is checked on fitted drives in tests/test_identify_joint.py)."""
+    import numpy as np
+
+    from backlashkit.identify.intervals import IntervalInputs
+
+    draws = iter([0.9, 1.1, 1.0])
+    fit = IntervalInputs(theta=1.0, std=0.6, z=np.zeros(1), cov_z=np.eye(1), cost=0.0,
+                         residual=None, fd_step=1e-6, refit=lambda rng: next(draws))
+    fisher = bk.FisherInterval()._interval(fit)
+    assert fisher.kind == "fisher" and fisher.ci95 == (0.0, 1.0 + 1.96 * 0.6)  # cut at 0
+    boot = bk.ParametricBootstrap(3)._interval(fit)
+    assert boot.kind == "bootstrap" and boot.std == pytest.approx(0.1)
+    assert boot.ci95 == pytest.approx((1.0 - 4.3027 * 0.1, 1.0 + 4.3027 * 0.1), rel=1e-4)
+    assert boot.bootstrap_thetas.tolist() == [0.9, 1.1, 1.0] and boot.lowest_rise == 0.0

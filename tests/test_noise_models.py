@@ -1,4 +1,4 @@
-"""Noise models of the joint estimator (``backlashkit.noise_models``).
+"""Noise models of the joint estimator (``backlashkit.identify.noise``).
 
 The fits use the short experiment of ``tests/test_identify_joint.py`` (paper A's drive,
 theta* = 2 deg half-width, 0.942 N m from rest for 2 s, then 0; 4 s at Ts = 1 ms),
@@ -20,16 +20,19 @@ from backlashkit import signals
 from backlashkit.cli import main
 from backlashkit.errors import CorrelatedResidualsWarning, InputError
 from backlashkit.identify import Record
-from backlashkit.identify_joint import CORRELATED_LAG1, JointIdentifier, _held_noise_lag1
-from backlashkit.io import write_csv
-from backlashkit.noise_models import (
+from backlashkit.identify.joint import CORRELATED_LAG1, JointIdentifier
+from backlashkit.identify.noise import (
     ARNoise,
     AutoNoise,
     WhiteNoise,
     fit_ar,
+    held_noise_lag1,
     innovation_ratio,
+    sample_noise,
     whiten,
 )
+from backlashkit.identify.search import JointSearch
+from backlashkit.io import write_csv
 
 P_TRUE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 THETA = 3.49e-2
@@ -120,7 +123,8 @@ def test_bad_input(call, pattern):
     [
         ({"noise_model": "ar"}, r"noise_model must be a WhiteNoise, ARNoise or AutoNoise"),
         ({"noise_model": ARNoise(), "noise": (0.1, 0.1)}, r"give one or the other"),
-        ({"noise_model": ARNoise(), "final_horizon": 0.5}, r"cannot be combined with "
+        ({"noise_model": ARNoise(), "search": JointSearch(final_horizon=0.5)},
+         r"cannot be combined with "
          r"final_horizon \(got 0\.5\)"),
     ],
 )
@@ -190,7 +194,8 @@ def test_ar_cost_is_the_whitened_likelihood_computed_independently(colored_fits)
 
 def test_bootstrap_draws_the_fitted_autoregression(colored_fits):
     _, _, ar, _ = colored_fits
-    e = ar._noise_sample(np.random.default_rng(0), 0, 1, 100_000)
+    e = sample_noise(np.random.default_rng(0), ar.noise_innovation_std_[0, 1],
+                     ar.noise_ar_[0, 1], 100_000)
     a, var = fit_ar(e, 2)
     assert a == pytest.approx(ar.noise_ar_[0, 1], abs=0.02)
     assert np.sqrt(var) == pytest.approx(ar.noise_innovation_std_[0, 1], rel=0.02)
@@ -288,16 +293,17 @@ def test_auto_noise_is_the_default(tmp_path, capsys):
     averaged = [x + 0.01 * np.std(x) * np.convolve(rng.standard_normal(x.size + 9),
                                                     np.ones(10) / 10, "valid") * np.sqrt(10)
                 for x in (long.w_motor, long.w_load)]
-    held, _ = _held_noise_lag1([Record(t, long.torque, *averaged)], PRIOR)
+    held, _ = held_noise_lag1([Record(t, long.torque, *averaged)], PRIOR)
     assert np.all(held > 0.8)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CorrelatedResidualsWarning)
-        short = JointIdentifier(PRIOR, final_horizon=1.0, interval=fisher).fit(rec)
+        short = JointIdentifier(PRIOR, search=JointSearch(final_horizon=1.0),
+                                interval=fisher).fit(rec)
         fixed = JointIdentifier(PRIOR, noise=(0.1, 0.1), interval=fisher).fit(rec)
     assert short.noise_model_ == WhiteNoise() and fixed.noise_model_ == WhiteNoise()
     t6 = t[:6000]  # held 4 s, less than the 7 s of ringing decay: no window
     brief = _record(TRUE.simulate(t6, signals.step_down(t6, 0.942, t_s=4.0)), CORR, 3)
-    assert np.all(np.isnan(_held_noise_lag1([brief], PRIOR)[0]))
+    assert np.all(np.isnan(held_noise_lag1([brief], PRIOR)[0]))
     with pytest.raises(InputError, match="order must be an integer >= 1, got 0"):
         AutoNoise(0)
     path = tmp_path / "long.csv"

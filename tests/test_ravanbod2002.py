@@ -16,7 +16,7 @@ import pytest
 
 from backlashkit import cli
 from backlashkit.errors import InputError
-from backlashkit.ravanbod2002 import (
+from backlashkit.papers.ravanbod2002 import (
     BAR_BIAS,
     BAR_CRB,
     BAR_STD,
@@ -158,7 +158,7 @@ def test_cli_json_and_report(tmp_path, capsys):
 def test_a_refused_fit_is_recorded_not_fatal(monkeypatch):
     """A method that refuses a run's data counts as a failure; the study goes on and
     the joint bars report the refusal as a miss."""
-    import backlashkit.ravanbod2002 as rv
+    import backlashkit.papers.ravanbod2002 as rv
 
     def refuse(self, records):
         raise InputError("refused on purpose")

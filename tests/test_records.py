@@ -549,3 +549,56 @@ def test_npz_with_plain_and_numbered_channels_is_refused(tmp_path):
     with pytest.raises(InputError) as exc:
         read_records(tmp_path / "both.npz")
     one_line(exc, "holds both plain arrays", "'w_motor_1'", "keep one naming scheme")
+
+
+# --- torque files (the cases of the former second reader, backlashkit.io) ----------
+
+BAD_TORQUE_CSV = {
+    "missing column": ("t,tau\n0,1\n0.1,1\n0.2,1\n", r"no column 'torque' in the header"),
+    "missing t": ("time,torque\n0,1\n0.1,1\n0.2,1\n", r"no column 't' in the header"),
+    "no separator": ("t torque\n0 1\n0.1 1\n", r"no column 't', 'torque'.*\['t torque'\]"),
+    "empty": ("", "the file is empty"),
+    "header only": ("t,torque\n", r"too few samples \(0\)"),
+    "one sample": ("t,torque\n0,1\n", r"too few samples \(1\)"),
+    "non numeric": ("t,torque\n0,1\n0.1,abc\n0.2,1\n", r"line 3, column 'torque': 'abc' is not a"),
+    "nan": ("t,torque\n0,1\n0.1,nan\n0.2,1\n", r"line 3: 'torque' is missing"),
+    "inf": ("t,torque\n0,1\n0.1,1\n0.2,-inf\n", r"line 4, column 'torque': '-inf' is infinite"),
+    "non monotonic": ("t,torque\n0,1\n0.2,1\n0.1,1\n", r"line 4: the time 't' = 0\.1 does not "
+                      "increase"),
+    "non uniform": ("t,torque\n0,1\n0.1,1\n0.25,1\n0.3,1\n", r"non-uniform step .* line 3"),
+    "ragged row": ("t,torque\n0,1\n0.1,1,5\n", r"line 3 has 3 field\(s\) but the header has 2"),
+    "duplicate column": ("t,torque,t\n0,1,0\n0.1,1,0.1\n", "column 't' appears twice"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_TORQUE_CSV), ids=list(BAD_TORQUE_CSV))
+def test_bad_torque_file(tmp_path, case):
+    from backlashkit.identify.readers import read_torque
+
+    text, culprit = BAD_TORQUE_CSV[case]
+    path = tmp_path / "torque.csv"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match=culprit) as info:
+        read_torque(path)
+    msg = str(info.value)
+    assert msg.startswith(str(path)) and "\n" not in msg
+
+
+def test_torque_file_by_name_with_extras_and_separators(tmp_path):
+    from backlashkit.identify.readers import read_torque
+
+    path = tmp_path / "torque.csv"
+    path.write_text("\ufeff# a comment\nw_motor, torque ,t\n1,0.5,0.0\n\n2,0.25,0.001\n"
+                    "3,-1e-3,0.002\n", encoding="utf-8")
+    t, u = read_torque(path)
+    np.testing.assert_array_equal(t, [0.0, 0.001, 0.002])
+    np.testing.assert_array_equal(u, [0.5, 0.25, -1e-3])
+    for sep in (";", "\t"):
+        path.write_text(f"t{sep}torque\n0{sep}1\n0.1{sep}0.5\n0.2{sep}0.5\n")
+        t, u = read_torque(path)
+        np.testing.assert_allclose(t, [0.0, 0.1, 0.2])
+        np.testing.assert_array_equal(u, [1.0, 0.5, 0.5])
+    path.write_bytes(b"t,torque\n0,\xff\n")
+    with pytest.raises(InputError, match="not a UTF-8"):
+        read_torque(path)
+

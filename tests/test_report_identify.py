@@ -1,4 +1,4 @@
-"""HTML identification report (``backlashkit.report_identify``)."""
+"""HTML identification report (``backlashkit.identify.report``)."""
 
 from __future__ import annotations
 
@@ -13,21 +13,20 @@ import pytest
 
 import backlashkit as bk
 from backlashkit import signals
+from backlashkit.cli.report import add_report_option, maybe_write_report
 from backlashkit.errors import InputError
 from backlashkit.identify import Record, RegressionIdentifier, TwoStepIdentifier
-from backlashkit.report_identify import (
-    add_report_option,
+from backlashkit.identify.plots import (
     autocorrelation,
-    cost_curve,
     fit_percent,
-    maybe_write_report,
     plot_commutation,
     plot_cost,
     plot_profile,
     plot_residual_acf,
     plot_speed_fit,
-    write_identification_report,
 )
+from backlashkit.identify.report import write_identification_report
+from backlashkit.identify.two_step import cost_curve
 
 P = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 PRIOR = bk.TwoMassDrive(**P)

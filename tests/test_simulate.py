@@ -136,6 +136,20 @@ def test_paper_experiment_events_and_relation_4():
     # speeds settle to a1 * g_s = 0.157 * 100 = 15.7 rad/s before t_s (Section 5)
     assert abs(r.w_motor[39999] - 15.7) < 0.1
     assert r.near_grazing == ()
+    # relation (4) itself: integral_{t_c}^{t_b} (w_M - w_L) dt = -2 theta, the speeds
+    # integrated by the trapezoidal rule on a 1 us grid between the located events
+    t_c, t_b = after[0].time, after[1].time
+    i0 = 39_990  # restart 10 ms before t_s from the state on the grid
+    x0 = [r.w_motor[i0], r.w_load[i0], r.phi_d[i0]]
+    fine = t[i0] + np.arange(int(round((t_b + 1e-3 - t[i0]) / 1e-6)) + 1) * 1e-6
+    rf = drive.simulate(fine, np.where(fine < 40.0, 0.157, 0.0), initial_state=x0)
+    d = rf.w_motor - rf.w_load
+    inside = (fine > t_c) & (fine < t_b)
+    ends = np.interp([t_c, t_b], fine, d)
+    tt = np.concatenate([[t_c], fine[inside], [t_b]])
+    dd = np.concatenate([[ends[0]], d[inside], [ends[1]]])
+    integral = float(np.sum(0.5 * (dd[1:] + dd[:-1]) * np.diff(tt)))
+    assert abs(integral + 2 * THETA) < 1e-6 * THETA, integral
 
 
 def _tangent_case(margin_rel: float):

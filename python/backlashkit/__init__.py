@@ -7,6 +7,7 @@ the dead zone (the total gap is ``2 * theta``).
 
 from __future__ import annotations
 
+from .actuator import CurrentLoop
 from .control import (
     AdaptiveLaw,
     DiscreteAdaptiveController,
@@ -15,17 +16,22 @@ from .control import (
     design_mrc,
     simulate_closed_loop,
 )
+from .encoder import Encoder, measure_encoders
 from .errors import (
     CorrelatedResidualsWarning,
     InputError,
     PriorMismatchWarning,
+    SearchEdgeWarning,
     SensitivityWarning,
+    StepDownWarning,
 )
+from .identify.crb import CramerRaoBound, cramer_rao_bound
 from .identify.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
-from .identify.joint import CramerRaoBound, JointIdentifier, cramer_rao_bound
+from .identify.joint import JointIdentifier
 from .identify.noise import ARNoise, AutoNoise, WhiteNoise
 from .identify.readers import read_records, read_torque
 from .identify.record import Record
+from .identify.search import Continuation, FirstHorizon, JointSearch, Restarts, ThetaGrid
 from .identify.torque import torque_levels
 from .identify.two_step import RegressionIdentifier, TwoStepIdentifier
 from .laws import ShaftLaw
@@ -38,8 +44,6 @@ from .nonlinearities import (
     SmoothFilterInverse,
     SmoothRampInverse,
 )
-from .actuator import CurrentLoop
-from .encoder import Encoder, measure_encoders
 from .plants import DriveChain, TwoMassDrive
 from .simulate import (
     ContactEvent,
@@ -86,10 +90,17 @@ __all__ = [
     "FisherInterval",
     "InputError",
     "JointIdentifier",
+    "JointSearch",
+    "Restarts",
+    "ThetaGrid",
+    "FirstHorizon",
+    "Continuation",
     "NearGrazing",
     "Sensitivity",
     "PriorMismatchWarning",
+    "SearchEdgeWarning",
     "SensitivityWarning",
+    "StepDownWarning",
     "ShaftLaw",
     "TwoMassDrive",
     "TwoStepIdentifier",

@@ -13,37 +13,38 @@
     theta = 3.49e-2   # backlash HALF-width, rad (>= 0); total gap is 2 * theta
 
 ``theta`` may be left out when the backlash is what is to be identified
-(``require_theta=False``). Besides ``[drive]`` the file may hold an optional
+(``require_theta=False``). Optional friction keys: ``fc_M``, ``fc_L`` (Coulomb
+friction torques, N m, >= 0) and ``fs_M``, ``fs_L`` (breakaway torques, N m, >= the
+Coulomb torque; default equal to it). An optional ``[actuator]`` table with ``tau_i``
+(current-loop time constant, s, >= 0) is read by :func:`read_actuator_toml`.
+Besides ``[drive]`` the file may hold an optional
 ``[uncertainty]`` table of relative (fractional) uncertainties of the same
 parameters, e.g. ``J_L = 0.1`` for +-10 %, read by :func:`read_uncertainty_toml`;
 :func:`read_drive_toml` accepts and ignores it. Any other table or key is an error
 (a misspelt key would otherwise be silently dropped).
 
-**Data files (CSV).** Comma-separated (or semicolon- or tab-separated when the header
-line holds no comma; the decimal mark is '.'), one header line of column names, then one
-line of numbers per sample; blank lines and lines starting with ``#`` are skipped.
-Columns are found by name (their order and any extra columns do not matter). A
-column ``t`` holds the time in s and must be finite, strictly increasing and
-uniform. :func:`write_csv` writes every float with :func:`repr`, the shortest text
-that reads back to the same float, so a write/read round trip is exact.
+**Data files (CSV).** :func:`write_csv` writes one header line of column names, then
+one line per sample, every float with :func:`repr`, the shortest text that reads back to
+the same float, so a write/read round trip is exact. Measured files are read by
+:mod:`backlashkit.identify.readers`.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import os
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import _validate as v
 from .errors import InputError
 from .plants import TwoMassDrive
+
+if TYPE_CHECKING:
+    from .actuator import CurrentLoop
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -53,9 +54,8 @@ else:  # pragma: no cover - Python 3.10
 __all__ = [
     "DRIVE_KEYS",
     "load_toml",
-    "read_csv_columns",
+    "read_actuator_toml",
     "read_drive_toml",
-    "read_torque_csv",
     "read_uncertainty_toml",
     "write_csv",
 ]
@@ -64,8 +64,12 @@ PathLike = str | os.PathLike[str]
 
 #: Keys of the ``[drive]`` table, in file order.
 DRIVE_KEYS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta")
+#: Optional friction keys of the ``[drive]`` table.
+FRICTION_KEYS = ("fc_M", "fc_L", "fs_M", "fs_L")
+#: Keys of the optional ``[actuator]`` table.
+ACTUATOR_KEYS = ("tau_i",)
 #: Top-level tables a drive file may hold.
-TOP_LEVEL_TABLES = ("drive", "uncertainty")
+TOP_LEVEL_TABLES = ("drive", "uncertainty", "actuator")
 
 
 def _fmt_keys(keys: Sequence[str]) -> str:
@@ -173,11 +177,11 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
     _check_top_level(doc, path)
     table = _table(doc, "drive", path, required=True)
     assert table is not None
-    unknown = [k for k in table if k not in DRIVE_KEYS]
+    unknown = [k for k in table if k not in DRIVE_KEYS + FRICTION_KEYS]
     if unknown:
         raise InputError(
             f"{path}: unknown key(s) {_fmt_keys(unknown)} in [drive]; allowed keys: "
-            f"{_fmt_keys(DRIVE_KEYS)}"
+            f"{_fmt_keys(DRIVE_KEYS + FRICTION_KEYS)}"
         )
     required = DRIVE_KEYS if require_theta else DRIVE_KEYS[:-1]
     missing = [k for k in required if k not in table]
@@ -191,11 +195,50 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
             f"{path}: missing key(s) {_fmt_keys(missing)} in [drive]{hint}; required keys: "
             f"{_fmt_keys(required)}"
         )
-    values = {k: _number(path, "drive", k, table[k]) for k in DRIVE_KEYS if k in table}
+    keys = DRIVE_KEYS + FRICTION_KEYS
+    values = {k: _number(path, "drive", k, table[k]) for k in keys if k in table}
     try:
         return TwoMassDrive(**values)
     except InputError as exc:
         raise InputError(f"{path}: [drive] {exc}") from None
+
+
+def read_actuator_toml(path: PathLike) -> CurrentLoop | None:
+    """Read the optional ``[actuator]`` table of a drive file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file; ``[actuator]`` holds ``tau_i``, the current loop's time
+        constant in s (>= 0; 0 applies the torque exactly).
+
+    Returns
+    -------
+    CurrentLoop or None
+        The current loop, or None when the file has no ``[actuator]`` table.
+
+    Raises
+    ------
+    InputError
+        An unknown or missing key, or a ``tau_i`` that is not a finite number >= 0.
+    """
+    from .actuator import CurrentLoop
+
+    table = _table(load_toml(path), "actuator", path, required=False)
+    if table is None:
+        return None
+    unknown = [k for k in table if k not in ACTUATOR_KEYS]
+    missing = [k for k in ACTUATOR_KEYS if k not in table]
+    if unknown or missing:
+        raise InputError(
+            f"{path}: [actuator] takes exactly the key(s) {_fmt_keys(ACTUATOR_KEYS)} "
+            f"(tau_i: current-loop time constant in s); got {_fmt_keys(list(table))}"
+        )
+    tau_i = _number(path, "actuator", "tau_i", table["tau_i"])
+    try:
+        return CurrentLoop(tau_i=tau_i)
+    except InputError as exc:
+        raise InputError(f"{path}: [actuator] {exc}") from None
 
 
 def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
@@ -247,170 +290,6 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
             )
         out[key] = x
     return out
-
-
-def read_csv_columns(
-    path: PathLike,
-    columns: Sequence[str],
-    *,
-    min_samples: int = 2,
-) -> dict[str, np.ndarray]:
-    """Read named numeric columns from a CSV file with a header line.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The file (format in the module docstring).
-    columns : sequence of str
-        Names of the columns to return; other columns of the file are not parsed. If
-        ``"t"`` is among them it must be a uniform, strictly increasing time grid.
-    min_samples : int, optional
-        Fewest data lines accepted (default 2).
-
-    Returns
-    -------
-    dict of str to numpy.ndarray
-        One float64 array per requested column, in the order of ``columns``.
-
-    Raises
-    ------
-    InputError
-        If the file is empty, lacks a requested column, has a line with the wrong
-        number of fields, a cell that is not a number (the message gives the line
-        and the column), a NaN or infinite value, fewer than ``min_samples`` data
-        lines, or a time column that is not strictly increasing and uniform.
-    FileNotFoundError
-        If the file does not exist.
-    """
-    name = str(path)
-    numbers: list[int] = []
-    rows: list[list[str]] = []
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            text = fh.read()
-        # the separator of the header line: ',' unless it has none and ';' or a tab
-        head = next((ln for ln in text.splitlines()
-                     if ln.strip() and not ln.lstrip().startswith("#")), "")
-        delimiter = next((d for d in (";", "\t") if "," not in head and d in head), ",")
-        reader = csv.reader(io.StringIO(text), delimiter=delimiter)
-        for row in reader:
-            if not row or row[0].lstrip().startswith("#"):
-                continue  # blank line or comment
-            if len(row) == 1 and not row[0].strip():
-                continue  # whitespace only
-            numbers.append(reader.line_num)
-            rows.append(row)
-    except UnicodeDecodeError as exc:
-        raise InputError(
-            f"{name}: not a UTF-8 text file ({exc.reason} at byte {exc.start})"
-        ) from None
-    except csv.Error as exc:
-        raise InputError(f"{name}: not a valid CSV file: {exc}") from None
-    expected = ",".join(columns)
-    if not rows:
-        raise InputError(f"{name}: the file is empty; expected a header line '{expected}'")
-    header_line, header = numbers[0], [cell.strip() for cell in rows[0]]
-    seen = set()
-    for col in header:
-        if col in seen:
-            raise InputError(
-                f"{name}: line {header_line}: column '{col}' appears twice in the header"
-            )
-        seen.add(col)
-    missing = [c for c in columns if c not in header]
-    if missing:
-        hint = (" (columns must be separated by commas, semicolons or tabs)"
-                if len(header) == 1 else "")
-        raise InputError(
-            f"{name}: no column {', '.join(repr(c) for c in missing)} in the header "
-            f"(line {header_line}: {','.join(header)!r}){hint}; expected columns '{expected}'"
-        )
-    data, lines = rows[1:], numbers[1:]
-    if len(data) < min_samples:
-        raise InputError(
-            f"{name}: too few samples: {len(data)} data line(s), at least {min_samples} needed"
-        )
-    width = len(header)
-    ragged = next((r for r, row in enumerate(data) if len(row) != width), None)
-    if ragged is not None:
-        raise InputError(
-            f"{name}: line {lines[ragged]} has {len(data[ragged])} field(s) but the header "
-            f"has {width}"
-        )
-    fields = list(zip(*data, strict=True))
-    out = {c: _parse_column(name, c, fields[header.index(c)], lines) for c in columns}
-    if "t" in out:
-        _check_time(name, out["t"], lines)
-    return out
-
-
-def _parse_column(
-    name: str, column: str, cells: Sequence[str], lines: Sequence[int]
-) -> np.ndarray:
-    try:  # fast path; any failure is located (and reported) by the slow one
-        values = np.array(cells, dtype=np.float64)
-    except ValueError:
-        values = np.empty(len(cells))
-        for r, cell in enumerate(cells):
-            try:
-                values[r] = float(cell)
-            except ValueError:
-                raise InputError(
-                    f"{name}: line {lines[r]}, column '{column}': {cell!r} is not a number"
-                ) from None
-    bad = ~np.isfinite(values)
-    if bad.any():
-        r = int(np.argmax(bad))
-        raise InputError(
-            f"{name}: line {lines[r]}, column '{column}': value {cells[r]!r} is not finite; "
-            "remove or fill NaN/inf samples"
-        )
-    return values
-
-
-def _check_time(name: str, t: np.ndarray, lines: Sequence[int]) -> None:
-    dt = np.diff(t)
-    if not (dt > 0).all():
-        i = int(np.argmax(~(dt > 0)))
-        raise InputError(
-            f"{name}: column 't' must be strictly increasing; line {lines[i + 1]} has "
-            f"t = {float(t[i + 1])!r} after t = {float(t[i])!r} on line {lines[i]}"
-        )
-    ts = float((t[-1] - t[0]) / (t.size - 1))
-    dev = np.abs(dt - ts)
-    if dev.max() > v.uniform_tolerance(t, ts):
-        i = int(np.argmax(dev))
-        raise InputError(
-            f"{name}: column 't' must be uniformly sampled; the step from line {lines[i]} to "
-            f"line {lines[i + 1]} is {float(dt[i])!r} s but the mean step is {ts!r} s; resample "
-            "the data onto a uniform grid first"
-        )
-
-
-def read_torque_csv(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read a motor-torque record (columns ``t`` in s and ``torque`` in N m).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        CSV file with a header line naming at least the columns ``t`` and ``torque``
-        (other columns are ignored; an experiment file written by
-        ``backlashkit simulate --experiment`` qualifies).
-
-    Returns
-    -------
-    t : numpy.ndarray
-        Uniform, strictly increasing time grid in s, at least 2 samples.
-    torque : numpy.ndarray
-        Motor torque in N m, one per sample.
-
-    Raises
-    ------
-    InputError
-        See :func:`read_csv_columns`.
-    """
-    cols = read_csv_columns(path, ("t", "torque"))
-    return cols["t"], cols["torque"]
 
 
 def write_csv(

@@ -28,10 +28,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _validate as v
+from . import validate as v
 from .errors import InputError
 
 if TYPE_CHECKING:
+    from .actuator import CurrentLoop
     from .laws import ShaftLaw
     from .simulate import DriveResponse
 
@@ -39,6 +40,19 @@ __all__ = ["DriveChain", "TwoMassDrive"]
 
 #: Largest chain the compiled kernel handles (state dimension 2 N - 1 = 15).
 MAX_INERTIAS = 8
+
+
+def _breakaway(fs_name: str, fs: float | None, fc_name: str, fc: float) -> float:
+    """The breakaway torque ``fs`` (``None``: equal to ``fc``), checked ``>= fc``."""
+    if fs is None:
+        return fc
+    fs = v.nonnegative(fs_name, fs)
+    if fs < fc:
+        raise InputError(
+            f"{fs_name} must be >= {fc_name} = {fc!r} N m (the breakaway torque is at least "
+            f"the Coulomb torque), got {fs!r}"
+        )
+    return fs
 
 
 def _vector(name: str, values: Sequence[float], size: int | None, check) -> tuple[float, ...]:
@@ -60,6 +74,8 @@ class _Simulates:
         *,
         law: ShaftLaw | str = "paper",
         initial_state: Sequence[float] | np.ndarray | None = None,
+        actuator: CurrentLoop | None = None,
+        positions: bool = False,
     ) -> DriveResponse:
         """Simulate the drive under a zero-order-hold motor torque.
 
@@ -68,11 +84,17 @@ class _Simulates:
         t : array_like
             Uniform, strictly increasing time grid in s.
         torque : array_like
-            Motor torque in N m, one sample per entry of ``t`` (held over the sample).
-        law : {"paper", "no-pull"} or ShaftLaw, optional
+            Motor torque set-point in N m, one sample per entry of ``t`` (held over the
+            sample).
+        law : {"paper", "no-pull", "modelica"} or ShaftLaw, optional
             Contact law of the shafts, default ``"paper"``.
         initial_state : array_like, optional
             State at ``t[0]``; default rest with every twist 0.
+        actuator : CurrentLoop, optional
+            Current loop between set-point and motor torque; default none (exact).
+        positions : bool, optional
+            Track the absolute angles in the same run (see
+            :attr:`~backlashkit.simulate.DriveResponse.phi_motor`); default False.
 
         Returns
         -------
@@ -81,18 +103,22 @@ class _Simulates:
         """
         from .simulate import simulate_drive
 
-        return simulate_drive(self, t, torque, law=law, initial_state=initial_state)
+        return simulate_drive(
+            self, t, torque, law=law, initial_state=initial_state, actuator=actuator,
+            positions=positions,
+        )
 
 
 @dataclass(frozen=True)
 class DriveChain(_Simulates):
     """A chain of ``N`` inertias joined by ``N - 1`` elastic shafts with backlash.
 
-    Inertia ``i`` obeys ``J_i dw_i/dt = -f_i w_i + T_{i-1} - T_i`` (plus the input
-    torque on inertia 1), where ``T_j`` is the torque carried by shaft ``j``: zero while
-    the twist ``phi_j`` is inside the gap ``(-theta_j, theta_j)``, and
-    ``k_j (phi_j -+ theta_j) + d_j dphi_j/dt`` in contact (see :class:`ShaftLaw` for
-    the two contact laws).
+    Inertia ``i`` obeys ``J_i dw_i/dt = -f_i w_i - fc_i sign(w_i) + T_{i-1} - T_i``
+    (plus the input torque on inertia 1), where ``T_j`` is the torque carried by shaft
+    ``j``: zero while the twist ``phi_j`` is inside the gap ``(-theta_j, theta_j)``, and
+    ``k_j (phi_j -+ theta_j) + d_j dphi_j/dt`` in contact (see :class:`ShaftLaw` for the
+    contact laws). An inertia with a breakaway torque ``fs_i > 0`` sticks (``w_i = 0``)
+    when its speed reaches zero with the rest of its torque within ``fs_i``.
 
     Parameters
     ----------
@@ -107,6 +133,13 @@ class DriveChain(_Simulates):
     theta : sequence of float
         Backlash half-widths ``theta_1 .. theta_{N-1}`` in rad, each >= 0 (the total
         gap of shaft ``j`` is ``2 theta_j``).
+    fc : sequence of float, optional
+        Coulomb friction torques ``fc_1 .. fc_N`` in N m, each >= 0: a slipping inertia
+        feels ``-fc_i sign(w_i)``. Default none (all 0).
+    fs : sequence of float, optional
+        Breakaway (static friction) torques ``fs_1 .. fs_N`` in N m, ``fs_i >= fc_i``.
+        An inertia whose speed crosses zero sticks while the torque on it stays within
+        ``fs_i`` and breaks away when it exceeds it. Default ``fc``.
     """
 
     J: tuple[float, ...]
@@ -114,6 +147,8 @@ class DriveChain(_Simulates):
     k: tuple[float, ...]
     d: tuple[float, ...]
     theta: tuple[float, ...] = field(default=())
+    fc: tuple[float, ...] = field(default=())
+    fs: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         J = _vector("J", self.J, None, v.positive)
@@ -125,6 +160,16 @@ class DriveChain(_Simulates):
         object.__setattr__(self, "k", _vector("k", self.k, n - 1, v.positive))
         object.__setattr__(self, "d", _vector("d", self.d, n - 1, v.nonnegative))
         object.__setattr__(self, "theta", _vector("theta", self.theta, n - 1, v.nonnegative))
+        fc = _vector("fc", self.fc, n, v.nonnegative) if len(self.fc) else (0.0,) * n
+        object.__setattr__(self, "fc", fc)
+        fs = (None,) * n if self.fs is None else _vector("fs", self.fs, n, lambda _n, x: x)
+        fs = tuple(_breakaway(f"fs[{i}]", x, f"fc[{i}]", fc[i]) for i, x in enumerate(fs))
+        object.__setattr__(self, "fs", fs)
+
+    @property
+    def has_friction(self) -> bool:
+        """Whether some inertia has Coulomb or static friction."""
+        return any(x > 0 for x in self.fs)
 
     @property
     def n_inertias(self) -> int:
@@ -168,6 +213,21 @@ class DriveChain(_Simulates):
         u = v.finite_scalar("torque", torque)
         f = np.asarray(self.f)
         total = f.sum()
+        fc = np.asarray(self.fc)
+        if self.has_friction:
+            if abs(u) <= fc.sum():
+                if u == 0:
+                    return np.zeros(self.n_states)
+                raise InputError(
+                    f"steady_state: the torque {u!r} N m does not overcome the Coulomb "
+                    f"friction (sum of fc = {fc.sum()!r} N m): the drive comes to rest with "
+                    "a twist its dynamics do not determine"
+                )
+            # Slipping in the direction of the torque: the Coulomb torques act as a
+            # constant load opposing the motion.
+            u_net = u - np.sign(u) * fc.sum()
+        else:
+            u_net = u
         if total <= 0:
             if u == 0:
                 return np.zeros(self.n_states)
@@ -175,8 +235,10 @@ class DriveChain(_Simulates):
                 "steady_state needs some viscous friction (sum of f > 0): without it a "
                 f"constant torque {u!r} N m accelerates the drive forever"
             )
-        w = u / total
+        w = u_net / total
         torques = w * np.cumsum(f[::-1])[::-1][1:]
+        if self.has_friction:
+            torques = torques + np.sign(w) * np.cumsum(fc[::-1])[::-1][1:]
         theta = np.asarray(self.theta)
         phi = np.where(torques > 0, theta, np.where(torques < 0, -theta, 0.0))
         phi = phi + torques / np.asarray(self.k)
@@ -207,6 +269,11 @@ class TwoMassDrive(_Simulates):
         Backlash **half-width** in rad, >= 0 (total gap ``2 theta``). ``None`` for a
         drive whose backlash is unknown (e.g. a prior for identification); such a drive
         cannot be simulated until a value is given with :meth:`with_theta`.
+    fc_M, fc_L : float, optional
+        Coulomb friction torques of motor and load in N m, >= 0; default 0.
+    fs_M, fs_L : float or None, optional
+        Breakaway (static friction) torques in N m, ``fs >= fc``; ``None`` (default)
+        means equal to the Coulomb torque. See :class:`DriveChain` for stick-slip.
 
     Examples
     --------
@@ -227,12 +294,21 @@ class TwoMassDrive(_Simulates):
     f_L: float
     f_sh: float
     theta: float | None = None
+    fc_M: float = 0.0
+    fc_L: float = 0.0
+    fs_M: float | None = None
+    fs_L: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("J_M", "J_L", "k_sh"):
             object.__setattr__(self, name, v.positive(name, getattr(self, name)))
-        for name in ("f_M", "f_L", "f_sh"):
+        for name in ("f_M", "f_L", "f_sh", "fc_M", "fc_L"):
             object.__setattr__(self, name, v.nonnegative(name, getattr(self, name)))
+        for side in ("M", "L"):
+            fs = _breakaway(f"fs_{side}", getattr(self, f"fs_{side}"), f"fc_{side}",
+                            getattr(self, f"fc_{side}"))
+            if getattr(self, f"fs_{side}") is not None:
+                object.__setattr__(self, f"fs_{side}", fs)
         if self.theta is not None:
             object.__setattr__(self, "theta", v.nonnegative("theta", self.theta))
 
@@ -271,7 +347,7 @@ class TwoMassDrive(_Simulates):
         -------
         DriveChain
             ``J = (J_M, J_L)``, ``f = (f_M, f_L)``, ``k = (k_sh,)``, ``d = (f_sh,)``,
-            ``theta = (theta,)``.
+            ``theta = (theta,)``, ``fc = (fc_M, fc_L)``, ``fs = (fs_M, fs_L)``.
         """
         return DriveChain(
             J=(self.J_M, self.J_L),
@@ -279,6 +355,11 @@ class TwoMassDrive(_Simulates):
             k=(self.k_sh,),
             d=(self.f_sh,),
             theta=(self._require_theta(),),
+            fc=(self.fc_M, self.fc_L),
+            fs=(
+                self.fc_M if self.fs_M is None else self.fs_M,
+                self.fc_L if self.fs_L is None else self.fs_L,
+            ),
         )
 
     def steady_state(self, torque: float) -> np.ndarray:

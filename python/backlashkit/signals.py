@@ -32,12 +32,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import _validate as v
+from . import validate as v
 from .errors import InputError
 
 __all__ = [
     "add_noise",
     "from_table",
+    "highpass_noise_std",
     "measure_snr_db",
     "prbs",
     "sine",
@@ -468,8 +469,25 @@ def measure_snr_db(clean: ArrayLike, noisy: ArrayLike) -> float:
     return 10.0 * math.log10(power / var)
 
 
-def _noise_hp(y: np.ndarray) -> float:
-    """Noise std from the robust spread of the second difference (``/ sqrt(6)``)."""
+def highpass_noise_std(y: np.ndarray) -> float:
+    """Noise standard deviation of a signal from its robust second difference.
+
+    Public because the estimators start their noise weights from it
+    (:mod:`backlashkit.identify`).
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        Uniformly sampled signal (1-D).
+
+    Returns
+    -------
+    float
+        ``1.4826 MAD(diff(y, 2)) / sqrt(6)``: the standard deviation of white noise on
+        a signal smooth at the sample scale (a second difference of white noise has
+        variance ``6 s^2``; 1.4826 turns a median absolute deviation into a Gaussian
+        std). 0 for fewer than 5 samples.
+    """
     d2 = np.diff(y, 2)
     if d2.size < 3:
         return 0.0

@@ -17,7 +17,7 @@ pass in :attr:`DriveResponse.near_grazing` and warns with
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -25,260 +25,28 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from . import _validate as v
+from . import validate as v
 from .errors import InputError, SensitivityWarning
 from .laws import ShaftLaw
+from .response import ContactEvent, DriveResponse, FrictionEvent, NearGrazing
 
 if TYPE_CHECKING:
-    import matplotlib.figure
-    import pandas
-
+    from .actuator import CurrentLoop
     from .plants import DriveChain, TwoMassDrive
 
 __all__ = [
     "ContactEvent",
     "DriveResponse",
+    "FrictionEvent",
     "NearGrazing",
     "Sensitivity",
     "assess_sensitivity",
     "simulate_batch",
     "simulate_drive",
+    "simulate_packed",
 ]
 
 Backend = Literal["rust", "numpy"]
-
-#: Mode codes used by the kernels for each shaft.
-GAP, POSITIVE, NEGATIVE = 0, 1, -1
-_FLANK = {POSITIVE: "positive", NEGATIVE: "negative"}
-
-
-@dataclass(frozen=True)
-class ContactEvent:
-    """A change of contact of one shaft.
-
-    Parameters
-    ----------
-    time : float
-        Instant of the change in s, located inside the sample (not on the grid).
-    shaft : int
-        Index of the shaft (0 for the two-mass drive's only shaft).
-    kind : {"contact_made", "contact_lost"}
-        Whether the flanks met or separated.
-    flank : {"positive", "negative"}
-        The flank met or left: ``"positive"`` is ``phi = +theta``.
-    """
-
-    time: float
-    shaft: int
-    kind: str
-    flank: str
-
-
-@dataclass(frozen=True)
-class NearGrazing:
-    """A pass of a shaft's twist close to a contact boundary with little speed.
-
-    Parameters
-    ----------
-    time : float
-        Instant of the closest approach in s.
-    shaft : int
-        Index of the shaft.
-    margin : float
-        Signed distance of the closest approach relative to the boundary's scale (the
-        half-width ``theta`` for the twist; ``k theta`` for the no-pull torque
-        condition; 1e-6 rad when ``theta = 0``): negative when the boundary was missed,
-        positive when it was barely crossed. Passes with ``|margin| < 1e-6`` are
-        reported.
-    """
-
-    time: float
-    shaft: int
-    margin: float
-
-
-class StateColumns:
-    """Named views of a ``states`` array ``[w_1 .. w_N, phi_1 .. phi_{N-1}]``.
-
-    Mixed into result classes that have ``states`` (shape ``(n, 2N - 1)``) and
-    ``n_inertias``.
-    """
-
-    states: np.ndarray
-    n_inertias: int
-
-    @property
-    def speeds(self) -> np.ndarray:
-        """Speeds of all inertias in rad/s, shape ``(n, N)``."""
-        return self.states[:, : self.n_inertias]
-
-    @property
-    def twists(self) -> np.ndarray:
-        """Twists ``phi_j`` of all shafts in rad, shape ``(n, N - 1)``."""
-        return self.states[:, self.n_inertias :]
-
-    @property
-    def w_motor(self) -> np.ndarray:
-        """Motor speed (inertia 1) in rad/s."""
-        return self.states[:, 0]
-
-    @property
-    def w_load(self) -> np.ndarray:
-        """Load speed (last inertia) in rad/s."""
-        return self.states[:, self.n_inertias - 1]
-
-    @property
-    def phi_d(self) -> np.ndarray:
-        """Twist of the first shaft (``phi_M - phi_L`` for a two-mass drive) in rad."""
-        return self.states[:, self.n_inertias]
-
-
-@dataclass(frozen=True, eq=False)
-class DriveResponse(StateColumns):
-    """Result of a drive simulation, sampled on the input's time grid.
-
-    Parameters
-    ----------
-    t : numpy.ndarray
-        Time in s, shape ``(n,)``.
-    torque : numpy.ndarray
-        Motor torque in N m (zero-order hold: ``torque[i]`` acts on
-        ``[t[i], t[i+1])``), shape ``(n,)``.
-    states : numpy.ndarray
-        States ``[w_1 .. w_N, phi_1 .. phi_{N-1}]`` at ``t``, shape ``(n, 2N - 1)``.
-    modes : numpy.ndarray
-        Contact mode of each shaft at ``t`` (0 gap, +1 positive flank, -1 negative
-        flank), ``int8``, shape ``(n, N - 1)``.
-    event_array : numpy.ndarray
-        Contact changes as rows ``[time, shaft, mode before, mode after]``, shape
-        ``(E, 4)``; :attr:`events` gives them as :class:`ContactEvent` objects.
-    graze_array : numpy.ndarray
-        Near-grazing passes as rows ``[time, shaft, margin]``, shape ``(G, 3)``;
-        :attr:`near_grazing` gives them as :class:`NearGrazing` objects.
-    law : ShaftLaw
-        The shaft law used.
-    drive : DriveChain
-        The simulated chain (a two-mass drive is simulated as its chain).
-    """
-
-    t: np.ndarray
-    torque: np.ndarray
-    states: np.ndarray
-    modes: np.ndarray
-    event_array: np.ndarray
-    graze_array: np.ndarray
-    law: ShaftLaw
-    drive: DriveChain
-
-    # Built on first access: most runs never look at their events one by one.
-    @functools.cached_property
-    def events(self) -> tuple[ContactEvent, ...]:
-        """Every contact change, in time order (from :attr:`event_array`)."""
-        return tuple(
-            ContactEvent(
-                time=time,
-                shaft=int(shaft),
-                kind="contact_made" if src == GAP else "contact_lost",
-                flank=_FLANK[int(dst)] if src == GAP else _FLANK[int(src)],
-            )
-            for time, shaft, src, dst in self.event_array.tolist()
-        )
-
-    @functools.cached_property
-    def near_grazing(self) -> tuple[NearGrazing, ...]:
-        """Passes close to grazing, where the trajectory is ill-conditioned."""
-        return tuple(NearGrazing(a, int(b), c) for a, b, c in self.graze_array.tolist())
-
-    @property
-    def n_inertias(self) -> int:
-        """Number of inertias ``N``."""
-        return self.drive.n_inertias
-
-    @property
-    def shaft_torques(self) -> np.ndarray:
-        """Torque carried by every shaft in N m, shape ``(n, N - 1)``."""
-        return shaft_torques(self.drive, self.states, self.modes, self.law)
-
-    @property
-    def shaft_torque(self) -> np.ndarray:
-        """Torque carried by the first shaft in N m."""
-        return self.shaft_torques[:, 0]
-
-    def plot(self, ax: Sequence[matplotlib.axes.Axes] | None = None) -> matplotlib.figure.Figure:
-        """Plot speeds, twist and shaft torque against time, with contact changes.
-
-        Parameters
-        ----------
-        ax : sequence of three matplotlib Axes, optional
-            Axes for speeds, twist and shaft torque. New ones are created when omitted.
-
-        Returns
-        -------
-        matplotlib.figure.Figure
-            The figure holding the axes. The function never calls ``plt.show()``.
-        """
-        from .report import plot_drive_response
-
-        return plot_drive_response(self, ax=ax)
-
-    def to_pandas(self) -> pandas.DataFrame:
-        """The response as a :class:`pandas.DataFrame` indexed by ``t``.
-
-        Returns
-        -------
-        pandas.DataFrame
-            The columns of :meth:`to_columns` but ``t``, indexed by ``t`` (requires
-            pandas).
-        """
-        import pandas as pd
-
-        return pd.DataFrame(self.to_columns()).set_index("t")
-
-    def to_columns(self) -> dict[str, np.ndarray]:
-        """The response as named 1-D columns.
-
-        Returns
-        -------
-        dict of str to numpy.ndarray
-            ``t``, ``torque`` and, for a two-mass drive, ``w_motor``, ``w_load``,
-            ``phi_d``, ``shaft_torque``; for a longer chain ``w_1 .. w_N``,
-            ``phi_1 .. phi_{N-1}`` and ``shaft_torque_1 .. shaft_torque_{N-1}``.
-        """
-        cols: dict[str, np.ndarray] = {"t": self.t, "torque": self.torque}
-        if self.n_inertias == 2:
-            cols.update(
-                w_motor=self.w_motor,
-                w_load=self.w_load,
-                phi_d=self.phi_d,
-                shaft_torque=self.shaft_torque,
-            )
-            return cols
-        for i in range(self.n_inertias):
-            cols[f"w_{i + 1}"] = self.speeds[:, i]
-        for j in range(self.n_inertias - 1):
-            cols[f"phi_{j + 1}"] = self.twists[:, j]
-        for j in range(self.n_inertias - 1):
-            cols[f"shaft_torque_{j + 1}"] = self.shaft_torques[:, j]
-        return cols
-
-
-def shaft_torques(
-    drive: DriveChain, states: np.ndarray, modes: np.ndarray, law: ShaftLaw
-) -> np.ndarray:
-    """Shaft torques (N m) from states and contact modes, shape ``(n, N - 1)``."""
-    n = drive.n_inertias
-    w = states[:, :n]
-    phi = states[:, n:]
-    k = np.asarray(drive.k)
-    d = np.asarray(drive.d)
-    theta = np.asarray(drive.theta)
-    spring_damper = k * (phi - modes * theta) + d * (w[:, :-1] - w[:, 1:])
-    torque = np.where(modes != GAP, spring_damper, 0.0)
-    if law is ShaftLaw.NO_PULL:
-        torque = np.where(modes == POSITIVE, np.maximum(torque, 0.0), torque)
-        torque = np.where(modes == NEGATIVE, np.minimum(torque, 0.0), torque)
-    return torque
-
 
 def _as_chain(drive: DriveChain | TwoMassDrive) -> DriveChain:
     to_chain = getattr(drive, "to_chain", None)
@@ -289,19 +57,48 @@ def _as_chain(drive: DriveChain | TwoMassDrive) -> DriveChain:
     return to_chain()
 
 
-def _initial_state(chain: DriveChain, initial_state) -> np.ndarray:
+def _initial_state(chain: DriveChain, initial_state, loop: bool = False) -> np.ndarray:
+    """The initial state: ``2N - 1`` entries, and with a current loop optionally the
+    motor torque as one more (``nan`` until filled in with the first set-point)."""
     if initial_state is None:
-        return np.zeros(chain.n_states)
-    x0 = v.finite_array("initial_state", initial_state)
+        x0 = np.zeros(chain.n_states)
+    else:
+        x0 = v.finite_array("initial_state", initial_state)
+    if x0.size == chain.n_states + 1 and loop:
+        return x0
     if x0.size != chain.n_states:
         n = chain.n_inertias
         names = ([f"w_{i}" for i in range(1, n + 1)] + [f"phi_{i}" for i in range(1, n)]
                  if n <= 3 else [f"w_1..w_{n}", f"phi_1..phi_{n - 1}"])
+        extra = " (and optionally the motor torque, with a current loop)" if loop else ""
         raise InputError(
-            f"initial_state must have {chain.n_states} entries [{', '.join(names)}], "
+            f"initial_state must have {chain.n_states} entries [{', '.join(names)}]{extra}, "
             f"got {x0.size}"
         )
-    return x0
+    return np.append(x0, np.nan) if loop else x0
+
+
+def _actuator(actuator) -> CurrentLoop | None:
+    if actuator is None:
+        return None
+    if not hasattr(actuator, "tau_i"):
+        raise InputError(
+            f"actuator must be a CurrentLoop or None, got {type(actuator).__name__}"
+        )
+    return None if actuator.tau_i == 0 else actuator
+
+
+def _kernel_args(chain: DriveChain, actuator: CurrentLoop | None, positions: bool) -> dict:
+    """Keyword arguments of the kernels beyond paper A's model (none for it, so its
+    runs take exactly the historical path)."""
+    kw: dict = {}
+    if chain.has_friction:
+        kw.update(fc=np.asarray(chain.fc, float), fs=np.asarray(chain.fs, float))
+    if actuator is not None:
+        kw["tau_i"] = actuator.tau_i
+    if positions:
+        kw["track_angle"] = True
+    return kw
 
 
 def _kernel(backend: Backend):
@@ -316,37 +113,50 @@ def _kernel(backend: Backend):
     raise InputError(f"backend must be 'rust' or 'numpy', got {backend!r}")
 
 
-def _response(chain, t, torque, law, raw) -> DriveResponse:
+def _response(chain, t, torque, law, raw, actuator=None, positions=False) -> DriveResponse:
     states, modes, ev, gr = raw
     if len(gr):
         time, shaft, margin = gr[0]
         warnings.warn(
             f"the simulation passed within {abs(margin):.3g} (relative) of a grazing "
-            f"contact (shaft {int(shaft)}, t = {time:.6g} s; {len(gr)} such pass(es)): "
-            "what happens after it is sensitive to tiny changes of the inputs and "
-            "parameters; see response.near_grazing",
+            f"contact or stop (switch {int(shaft)}, t = {time:.6g} s; {len(gr)} such "
+            "pass(es)): what happens after it is sensitive to tiny changes of the inputs "
+            "and parameters; see response.near_grazing",
             SensitivityWarning,
             stacklevel=3,
         )
+    n_base, n_shafts = chain.n_states, chain.n_inertias - 1
+    extra = states[:, n_base:]
+    loop_torque = extra[:, 0].copy() if actuator is not None else None
+    angle = extra[:, -1].copy() if positions else None
+    friction = modes[:, n_shafts:] if chain.has_friction else None
     return DriveResponse(
         t=t,
         torque=torque,
-        states=states,
-        modes=modes,
+        states=states[:, :n_base] if states.shape[1] > n_base else states,
+        modes=modes[:, :n_shafts] if modes.shape[1] > n_shafts else modes,
         event_array=ev,
         graze_array=gr,
         law=law,
         drive=chain,
+        friction_modes=friction,
+        loop_torque=loop_torque,
+        angle=angle,
+        actuator=actuator,
     )
 
 
-def _check_inputs(drive, t, torque, law, initial_state):
+def _check_inputs(drive, t, torque, law, initial_state, actuator=None):
     chain = _as_chain(drive)
     t_arr, ts = v.time_grid(t)
     u = v.finite_array("torque", torque)
     if u.shape != t_arr.shape:
         raise InputError(f"torque must have one sample per time step ({t_arr.size}), got {u.size}")
-    return chain, t_arr, ts, u, ShaftLaw.parse(law), _initial_state(chain, initial_state)
+    act = _actuator(actuator)
+    x0 = _initial_state(chain, initial_state, loop=act is not None)
+    if act is not None and np.isnan(x0[-1]):
+        x0[-1] = u[0]  # the loop settled at the first set-point
+    return chain, t_arr, ts, u, ShaftLaw.parse(law), x0, act
 
 
 def simulate_drive(
@@ -357,8 +167,14 @@ def simulate_drive(
     law: ShaftLaw | str = "paper",
     initial_state: Sequence[float] | np.ndarray | None = None,
     backend: Backend = "rust",
+    actuator: CurrentLoop | None = None,
+    positions: bool = False,
 ) -> DriveResponse:
     """Simulate a drive with backlash under a zero-order-hold motor torque.
+
+    Coulomb and static friction of the drive (``fc``, ``fs``) are simulated as modes:
+    a sticking inertia has a zero speed row, and sticking, breakaway and reversal are
+    located inside the sample like contact changes.
 
     Parameters
     ----------
@@ -367,22 +183,30 @@ def simulate_drive(
     t : array_like
         Uniform, strictly increasing time grid in s, at least 2 samples.
     torque : array_like
-        Motor torque in N m, one sample per entry of ``t``, held constant over
-        ``[t[i], t[i+1])`` (the last sample is not used).
-    law : {"paper", "no-pull"} or ShaftLaw, optional
+        Motor torque (set-point, with an actuator) in N m, one sample per entry of
+        ``t``, held constant over ``[t[i], t[i+1])`` (the last sample is not used).
+    law : {"paper", "no-pull", "modelica"} or ShaftLaw, optional
         Contact law of the shafts; default ``"paper"`` (paper A, eq. 2).
     initial_state : array_like, optional
         State at ``t[0]``: ``[w_M, w_L, phi_d]`` for a two-mass drive. Default: rest,
         twist 0 (the middle of the gap). Use ``drive.steady_state(torque)`` to start
-        from a steady state.
+        from a steady state. With a current loop one more entry may give the initial
+        motor torque; by default it is ``torque[0]`` (the loop settled).
     backend : {"rust", "numpy"}, optional
         ``"rust"`` (default) is the compiled kernel; ``"numpy"`` its plain-NumPy
         reference (same algorithm, about 100 times slower), for verification.
+    actuator : CurrentLoop, optional
+        First-order current loop between set-point and motor torque, simulated exactly
+        (the motor torque is one more state). Default none: the torque is exact.
+    positions : bool, optional
+        Track the absolute motor angle as one more state of this run
+        (:attr:`DriveResponse.phi_motor`); default False, in which case the angles are
+        computed by a second run when first asked for.
 
     Returns
     -------
     DriveResponse
-        States, contact modes and contact events on the grid ``t``.
+        States, contact modes and events on the grid ``t``.
 
     Warns
     -----
@@ -390,7 +214,11 @@ def simulate_drive(
         When the run passes close to a grazing contact (see
         :attr:`DriveResponse.near_grazing`).
     """
-    chain, t_arr, ts, u, law_, x0 = _check_inputs(drive, t, torque, law, initial_state)
+    chain, t_arr, ts, u, law_, x0, act = _check_inputs(
+        drive, t, torque, law, initial_state, actuator
+    )
+    if positions:
+        x0 = np.append(x0, 0.0)  # the motor angle, 0 at t[0]
     raw = _kernel(backend).simulate_chain(
         np.asarray(chain.J),
         np.asarray(chain.f),
@@ -402,8 +230,9 @@ def simulate_drive(
         ts,
         u,
         x0,
+        **_kernel_args(chain, act, positions),
     )
-    return _response(chain, t_arr, u, law_, raw)
+    return _response(chain, t_arr, u, law_, raw, act, positions)
 
 
 def simulate_batch(
@@ -426,7 +255,7 @@ def simulate_batch(
         Uniform time grid in s shared by all runs.
     torque : array_like
         Motor torque in N m: shape ``(n,)`` shared by all runs, or ``(len(drives), n)``.
-    law : {"paper", "no-pull"} or ShaftLaw, optional
+    law : {"paper", "no-pull", "modelica"} or ShaftLaw, optional
         Contact law, default ``"paper"``.
     initial_state : array_like, optional
         Shape ``(2N - 1,)`` shared, or ``(len(drives), 2N - 1)``; default rest.
@@ -469,6 +298,9 @@ def simulate_batch(
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise InputError(f"workers must be a positive integer, got {workers!r}")
     params = np.array([np.concatenate([c.J, c.f, c.k, c.d, c.theta]) for c in chains])
+    if any(c.has_friction for c in chains):  # the packed layout's friction tail
+        tail = np.array([np.concatenate([c.fc, c.fs, [0.0]]) for c in chains])
+        params = np.hstack([params, tail])
     states, modes, events = _core.simulate_chain_batch(
         n_in, params, law_.code, float(t_arr[0]), ts, u, x0, workers or 0
     )
@@ -478,7 +310,7 @@ def simulate_batch(
     ]
 
 
-def _simulate_packed(
+def simulate_packed(
     n_inertias: int,
     params: np.ndarray,
     t0: float,
@@ -491,10 +323,33 @@ def _simulate_packed(
 ) -> np.ndarray:
     """States of a batch, shape ``(len(params), n, 2N - 1)``: the kernel without wrappers.
 
-    For the estimators' inner loops, which simulate thousands of parameter vectors:
-    ``params`` rows are packed ``[J, f, k, d, theta]`` (the fields of a
-    :class:`DriveChain`); ``torque`` has shape ``(1, n)`` or ``(b, n)``; ``x0`` has
-    shape ``(b, 2N - 1)``. Nothing is validated here but by the kernel (``ValueError``).
+    For the estimators' inner loops, which simulate thousands of parameter vectors.
+    Nothing is validated here but by the kernel (``ValueError``).
+
+    Parameters
+    ----------
+    n_inertias : int
+        Number of inertias ``N`` of every chain.
+    params : numpy.ndarray
+        One row per chain, packed ``[J, f, k, d, theta]`` (the fields of a
+        :class:`DriveChain`), optionally followed by ``[fc, fs, tau_i]``.
+    t0 : float
+        Time of the first sample in s.
+    ts : float
+        Sample time in s.
+    torque : numpy.ndarray
+        Motor torque in N m, shape ``(1, n)`` (shared) or ``(b, n)``.
+    x0 : numpy.ndarray
+        Initial states, shape ``(b, 2N - 1)``.
+    law : ShaftLaw or str
+        Contact law.
+    workers : int or None
+        Number of threads; None uses all cores.
+
+    Returns
+    -------
+    numpy.ndarray
+        States of every run, shape ``(b, n, 2N - 1)``.
     """
     from . import _core
 
@@ -504,6 +359,10 @@ def _simulate_packed(
         np.ascontiguousarray(x0, float), workers or 0,
     )
     return states
+
+
+#: The historical private name of :func:`simulate_packed`.
+_simulate_packed = simulate_packed
 
 
 @dataclass(frozen=True)
@@ -559,7 +418,7 @@ def assess_sensitivity(
         Uniform time grid in s.
     torque : array_like
         Motor torque in N m on ``t`` (zero-order hold).
-    law : {"paper", "no-pull"} or ShaftLaw, optional
+    law : {"paper", "no-pull", "modelica"} or ShaftLaw, optional
         Contact law, default ``"paper"``.
     initial_state : array_like, optional
         State at ``t[0]``; default rest.
@@ -577,7 +436,7 @@ def assess_sensitivity(
     """
     if not isinstance(refine, int) or refine < 2:
         raise InputError(f"refine must be an integer >= 2, got {refine!r}")
-    chain, t_arr, ts, u, law_, x0 = _check_inputs(drive, t, torque, law, initial_state)
+    chain, t_arr, ts, u, law_, x0, _ = _check_inputs(drive, t, torque, law, initial_state)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)
         coarse = simulate_drive(chain, t_arr, u, law=law_, initial_state=x0)
@@ -588,8 +447,9 @@ def assess_sensitivity(
     speeds = coarse.states[:, :n]
     scale = max(float(np.abs(speeds).max()), np.finfo(float).tiny)
     speed_diff = float(np.abs(fine.states[::refine, :n] - speeds).max()) / scale
-    key = [(e.shaft, e.kind, e.flank) for e in coarse.events]
-    same = key == [(e.shaft, e.kind, e.flank) for e in fine.events]
+    # An event's identity is everything but its time (shaft or inertia, kind, side).
+    key = [dataclasses.astuple(e)[1:] for e in coarse.events]
+    same = key == [dataclasses.astuple(e)[1:] for e in fine.events]
     if not same:
         event_diff = float("inf")
     elif key:

@@ -38,17 +38,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import integrate, optimize
 
+from ._reference_model import ReferenceModel as _Model
 from .errors import InputError
 from .laws import ShaftLaw
-from .simulate import StateColumns
+from .response import FrictionEvent, StateColumns
 
 if TYPE_CHECKING:
+    from .actuator import CurrentLoop
     from .plants import DriveChain, TwoMassDrive
 
 __all__ = [
@@ -86,9 +88,6 @@ _MAX_LIE_ORDER = 4
 #: Zero-length restarts in a row after which the run is declared chattering.
 _MAX_ZERO_LENGTH_RESTARTS = 64
 
-_FLANK = {1: "positive", -1: "negative"}
-
-
 # --------------------------------------------------------------------------- results
 
 
@@ -96,7 +95,7 @@ _FLANK = {1: "positive", -1: "negative"}
 class ReferenceEvent:
     """A contact change located by the reference.
 
-    Attributes
+    Parameters
     ----------
     time : float
         Instant of the change in s.
@@ -118,7 +117,7 @@ class ReferenceEvent:
 class ReferenceGraze:
     """A local extremum of a switching function that came close to zero.
 
-    Attributes
+    Parameters
     ----------
     time : float
         Instant of the extremum in s.
@@ -138,7 +137,7 @@ class ReferenceGraze:
 class ReferenceResult(StateColumns):
     """Result of :func:`reference_simulate`, sampled on the input grid.
 
-    Attributes
+    Parameters
     ----------
     t : numpy.ndarray
         Time grid in s, shape ``(n,)``.
@@ -150,8 +149,9 @@ class ReferenceResult(StateColumns):
         Contact mode of each shaft at ``t`` (0 gap, +1 positive flank, -1 negative
         flank), ``int8``, shape ``(n, N - 1)``. At ``t[0]`` the mode is the
         classification of the initial state, before any contact change at ``t[0]``.
-    events : tuple of ReferenceEvent
-        Every contact change, in time order.
+    events : tuple of ReferenceEvent or FrictionEvent
+        Every contact change and friction change (stick, breakaway, reversal), in
+        time order.
     event_states : numpy.ndarray
         State at each event, shape ``(len(events), 2N - 1)``.
     grazes : tuple of ReferenceGraze
@@ -172,6 +172,11 @@ class ReferenceResult(StateColumns):
         Right-hand-side evaluations.
     n_inertias : int
         Number of inertias ``N``.
+    stuck_array : numpy.ndarray or None
+        Whether each inertia is stuck at ``t``, ``bool``, shape ``(n, N)``; ``None``
+        without Coulomb or static friction.
+    loop_torque : numpy.ndarray or None
+        Motor torque of the current loop at ``t`` in N m; ``None`` without one.
     """
 
     t: np.ndarray
@@ -189,6 +194,8 @@ class ReferenceResult(StateColumns):
     n_restarts: int
     nfev: int
     n_inertias: int
+    stuck_array: np.ndarray | None = None
+    loop_torque: np.ndarray | None = None
 
     @property
     def event_times(self) -> np.ndarray:
@@ -200,7 +207,7 @@ class ReferenceResult(StateColumns):
 class ConditioningReport:
     """Outcome of :func:`check_conditioning`.
 
-    Attributes
+    Parameters
     ----------
     well_conditioned : bool
         True when the two references agree within the tolerances.
@@ -232,7 +239,7 @@ class ConditioningReport:
 class AccuracyReport:
     """Outcome of :func:`compare_to_reference`.
 
-    Attributes
+    Parameters
     ----------
     max_speed_error : float
         ``max |w - w_ref|`` over the grid and all inertias, rad/s.
@@ -257,7 +264,20 @@ class AccuracyReport:
     n_events: int
 
     def passes(self, speed_rtol: float = 1e-7, event_tol: float = 1e-6) -> bool:
-        """Whether the speed error ratio and the event times are within the bars."""
+        """Whether the speed error ratio and the event times are within the bars.
+
+        Parameters
+        ----------
+        speed_rtol : float, optional
+            Largest allowed :attr:`speed_error_ratio`; default 1e-7.
+        event_tol : float, optional
+            Largest allowed event-time difference in s; default 1e-6.
+
+        Returns
+        -------
+        bool
+            True when the event sequences agree and both bars hold.
+        """
         return (
             self.same_event_sequence
             and self.speed_error_ratio <= speed_rtol
@@ -266,123 +286,6 @@ class AccuracyReport:
 
 
 # --------------------------------------------------------------------------- model
-
-
-@dataclass
-class _Model:
-    """The chain's parameters, its right-hand side per contact configuration and the
-    switching functions of each configuration."""
-
-    J: np.ndarray
-    f: np.ndarray
-    k: np.ndarray
-    d: np.ndarray
-    theta: np.ndarray
-    law: ShaftLaw
-    twist_scale: np.ndarray
-    _fields: dict = field(default_factory=dict)
-    _guards: dict = field(default_factory=dict)
-
-    @property
-    def n(self) -> int:
-        return self.J.size
-
-    @property
-    def s(self) -> int:
-        return 2 * self.J.size - 1
-
-    def rhs_direct(self, modes: np.ndarray, u: float, x: np.ndarray) -> np.ndarray:
-        """Time derivative of the state, written from the physics (eq. 2 per shaft).
-
-        ``modes`` fixes the contact configuration: the shaft torque is the
-        spring-damper torque on a closed flank and zero in the gap. (Under the no-pull
-        law the configuration is only ever closed while that torque pushes, so the
-        clamp is enforced by the switching, not here.)
-        """
-        n = self.n
-        w, phi = x[:n], x[n:]
-        dphi = w[:-1] - w[1:]
-        torque = np.where(modes == 0, 0.0, self.k * (phi - modes * self.theta) + self.d * dphi)
-        load = -self.f * w
-        load[0] += u
-        load[:-1] -= torque
-        load[1:] += torque
-        return np.concatenate([load / self.J, dphi])
-
-    def field(self, modes: tuple[int, ...], u: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, c)`` with ``dx/dt = A x + c`` in the configuration ``modes``.
-
-        Obtained by probing :meth:`rhs_direct` (affine in ``x`` for fixed modes) at the
-        origin and the unit vectors, so the fast path is the physics formula itself.
-        """
-        key = (modes, u)
-        hit = self._fields.get(key)
-        if hit is None:
-            m = np.asarray(modes, dtype=float)
-            c = self.rhs_direct(m, u, np.zeros(self.s))
-            a = np.empty((self.s, self.s))
-            for i in range(self.s):
-                e = np.zeros(self.s)
-                e[i] = 1.0
-                a[:, i] = self.rhs_direct(m, u, e) - c
-            hit = (a, c)
-            self._fields[key] = hit
-        return hit
-
-    def guards(self, modes: tuple[int, ...]) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
-        """Switching functions of the configuration ``modes``.
-
-        Each guard is ``(shaft, target, H, h0)``: the shaft switches to mode ``target``
-        when ``q(x) = min_r (H[r] @ x + h0[r])`` crosses from ``<= 0`` to ``> 0``. All
-        ``q`` are in rad (torques are divided by the stiffness).
-        """
-        hit = self._guards.get(modes)
-        if hit is not None:
-            return hit
-        n, s = self.n, self.s
-        out = []
-        for j, m in enumerate(modes):
-            ph = np.zeros(s)
-            ph[n + j] = 1.0
-            rate = np.zeros(s)  # d/k * dphi_j/dt
-            rate[j], rate[j + 1] = self.d[j] / self.k[j], -self.d[j] / self.k[j]
-            th = self.theta[j]
-            if self.law is ShaftLaw.PAPER:
-                if m == 0:
-                    out.append((j, 1, ph[None, :], np.array([-th])))  # phi - theta
-                    out.append((j, -1, -ph[None, :], np.array([-th])))  # -(phi + theta)
-                elif m == 1:
-                    out.append((j, 0, -ph[None, :], np.array([th])))
-                else:
-                    out.append((j, 0, ph[None, :], np.array([th])))
-            else:
-                if m == 0:
-                    # enter the positive flank when phi >= theta AND k(phi-theta)+d dphi >= 0
-                    out.append((j, 1, np.stack([ph, ph + rate]), np.array([-th, -th])))
-                    out.append((j, -1, np.stack([-ph, -ph - rate]), np.array([-th, -th])))
-                elif m == 1:
-                    # leave when the spring-damper torque would pull
-                    out.append((j, 0, -(ph + rate)[None, :], np.array([th])))
-                else:
-                    out.append((j, 0, (ph + rate)[None, :], np.array([th])))
-        self._guards[modes] = out
-        return out
-
-    def classify(self, x: np.ndarray) -> tuple[int, ...]:
-        """Contact configuration of a state, strictly (a state exactly on a flank is in
-        the gap; :func:`_settle` then decides from the direction of motion)."""
-        n = self.n
-        out = []
-        for j in range(n - 1):
-            phi, th = x[n + j], self.theta[j]
-            sd = self.k[j] * phi + self.d[j] * (x[j] - x[j + 1])
-            if phi > th and (self.law is ShaftLaw.PAPER or sd - self.k[j] * th > 0):
-                out.append(1)
-            elif phi < -th and (self.law is ShaftLaw.PAPER or sd + self.k[j] * th < 0):
-                out.append(-1)
-            else:
-                out.append(0)
-        return tuple(out)
 
 
 def _chain_of(drive: DriveChain | TwoMassDrive) -> DriveChain:
@@ -394,7 +297,7 @@ def _chain_of(drive: DriveChain | TwoMassDrive) -> DriveChain:
     return to_chain()
 
 
-def _prepare(drive, t, torque, law, initial_state):
+def _prepare(drive, t, torque, law, initial_state, actuator=None):
     chain = _chain_of(drive)
     t_arr = np.asarray(t, dtype=float)
     u = np.asarray(torque, dtype=float)
@@ -407,8 +310,12 @@ def _prepare(drive, t, torque, law, initial_state):
     if not (np.all(np.isfinite(t_arr)) and np.all(np.isfinite(u))):
         raise InputError("t and torque must be finite")
     n = len(chain.J)
+    tau_i = 0.0 if actuator is None else float(actuator.tau_i)
     s = 2 * n - 1
     x0 = np.zeros(s) if initial_state is None else np.asarray(initial_state, dtype=float).ravel()
+    if tau_i > 0 and x0.size == s:
+        x0 = np.append(x0, u[0])  # the loop settled at the first set-point
+    s += int(tau_i > 0)
     if x0.size != s or not np.all(np.isfinite(x0)):
         raise InputError(f"initial_state must have {s} finite entries")
     law_ = ShaftLaw.parse(law)
@@ -420,7 +327,8 @@ def _prepare(drive, t, torque, law, initial_state):
     twist_scale = np.maximum.reduce(
         [theta, np.abs(x0[n:]), np.full(n - 1, u_max) / k, np.full(n - 1, 1e-12)]
     )
-    model = _Model(J, f, k, d, theta, law_, twist_scale)
+    fc = np.asarray(getattr(chain, "fc", np.zeros(n)), float)
+    fs = np.asarray(getattr(chain, "fs", fc), float)
 
     # Speed scale: initial speeds, the terminal speed u/sum(f) or, if friction is
     # too weak to reach it within the record, the speed gained in the record.
@@ -428,7 +336,8 @@ def _prepare(drive, t, torque, law, initial_state):
     if f.sum() > 0:
         gain = min(gain, 1.0 / f.sum())
     w_scale = max(float(np.max(np.abs(x0[:n]))), u_max * gain, 1e-12)
-    scale = np.concatenate([np.full(n, w_scale), twist_scale])
+    scale = np.concatenate([np.full(n, w_scale), twist_scale] + ([[u_max or 1.0]] if tau_i else []))
+    model = _Model(J, f, k, d, theta, law_, twist_scale, fc, fs, tau_i, w_scale)
     return model, t_arr, u, x0, law_, scale
 
 
@@ -464,8 +373,8 @@ def _settle(model: _Model, t: float, x: np.ndarray, modes: tuple[int, ...], u: f
         a, c = model.field(modes, u)
         rate = max(float(np.max(np.abs(np.linalg.eigvals(a)))), 1.0)
         fired = None
-        for shaft, target, hmat, h0 in model.guards(modes):
-            eps = eps_rel * model.twist_scale[shaft]
+        for shaft, target, hmat, h0 in model.guards(modes, u):
+            eps = eps_rel * model.scale(shaft)
             vals = hmat @ x + h0
             if vals.min() > eps:
                 fired = (shaft, target)
@@ -482,23 +391,20 @@ def _settle(model: _Model, t: float, x: np.ndarray, modes: tuple[int, ...], u: f
         if fired is None:
             return modes
         shaft, target = fired
-        modes = _switch(modes, shaft, target, t, events, x, event_states)
+        modes = _switch(model, modes, shaft, target, t, x, u, events, event_states)
     raise RuntimeError(f"contact configuration does not settle at t = {t!r} s (chatter)")
 
 
-def _switch(modes, shaft, target, t, events, x, event_states) -> tuple[int, ...]:
-    src = modes[shaft]
-    event_states.append(np.array(x, dtype=float))
-    if src == 0:
-        events.append(ReferenceEvent(float(t), int(shaft), "contact_made", _FLANK[target]))
-    else:
-        events.append(ReferenceEvent(float(t), int(shaft), "contact_lost", _FLANK[src]))
-        if target != 0:  # not produced by the guards, kept for completeness
-            events.append(ReferenceEvent(float(t), int(shaft), "contact_made", _FLANK[target]))
-            event_states.append(np.array(x, dtype=float))
-    out = list(modes)
-    out[shaft] = target
-    return tuple(out)
+def _switch(model, modes, index, target, t, x, u, events, event_states) -> tuple[int, ...]:
+    """Apply a switch (the model may set a stuck speed to 0 in ``x``); record its
+    events and the state at each."""
+    modes, new = model.switch(modes, index, target, t, x, u)
+    for e in new:
+        if not isinstance(e, FrictionEvent):
+            e = ReferenceEvent(float(e[0]), int(e[1]), e[2], e[3])
+        events.append(e)
+        event_states.append(np.array(x, dtype=float))
+    return modes
 
 
 def _guard_fn(dense, hmat, h0):
@@ -540,7 +446,7 @@ def _scan_step(model, modes, guards, a, c, dense, t_old, t_new, first_step, graz
     dxs = a @ xs + c[:, None]
     best = None
     for shaft, target, hmat, h0 in guards:
-        scale = model.twist_scale[shaft]
+        scale = model.scale(shaft)
         vals = hmat @ xs + h0[:, None]
         arg = np.argmin(vals, axis=0)
         q = vals[arg, np.arange(taus.size)]
@@ -606,6 +512,7 @@ def reference_simulate(
     rtol: float = 1e-10,
     atol: float | Sequence[float] | np.ndarray | None = None,
     max_step: float = np.inf,
+    actuator: CurrentLoop | None = None,
 ) -> ReferenceResult:
     """Reference simulation by adaptive ODE integration with located contact changes.
 
@@ -625,6 +532,17 @@ def reference_simulate(
       ``phi_j - theta >= 0`` and ``k_j (phi_j - theta) + d_j dphi_j/dt >= 0``; it opens
       when the spring-damper torque ``k_j (phi_j - theta) + d_j dphi_j/dt`` falls below
       zero (mirrored for the negative flank).
+    * ``"modelica"``: the flanks close and open as under ``"no-pull"``; on a flank the
+      branch of ``tau_c + min(tau_c, tau_d)`` changes where ``tau_d = tau_c`` (the
+      spring's torque doubled beyond it), located like a contact change.
+
+    An inertia with a breakaway torque ``fs > 0`` (the drive's ``fs``) slips with its
+    Coulomb torque ``fc`` against its motion; where its speed crosses zero it sticks
+    (speed exactly 0) if the torque on it from motor and shafts is within ``fs``, else
+    it slips on the other way; a stuck inertia breaks away where that torque exceeds
+    ``fs``. These are located like contact changes and reported as
+    :class:`~backlashkit.simulate.FrictionEvent`. With ``actuator`` the motor torque
+    is one more state, ``tau_i dT/dt = torque - T``.
 
     A state exactly on a boundary is resolved from the direction of motion (successive
     Lie derivatives of the switching function), so a restart never re-detects the
@@ -638,7 +556,7 @@ def reference_simulate(
         Strictly increasing time grid in s, at least 2 samples (need not be uniform).
     torque : array_like
         Motor torque in N m, one sample per entry of ``t``, held on ``[t[i], t[i+1])``.
-    law : {"paper", "no-pull"} or ShaftLaw, optional
+    law : {"paper", "no-pull", "modelica"} or ShaftLaw, optional
         Contact law; default ``"paper"``.
     initial_state : array_like, optional
         State ``[w_1 .. w_N, phi_1 .. phi_{N-1}]`` at ``t[0]``; default rest, twists 0.
@@ -654,6 +572,10 @@ def reference_simulate(
     max_step : float, optional
         Largest solver step in s; default unbounded (the interior scan of each step
         keeps long steps safe).
+    actuator : CurrentLoop, optional
+        First-order current loop between the torque set-point and the motor torque
+        (its initial torque is ``torque[0]`` unless ``initial_state`` gives one more
+        entry); default none.
 
     Returns
     -------
@@ -667,7 +589,7 @@ def reference_simulate(
     RuntimeError
         The solver failed or the contact configuration chatters.
     """
-    model, t_arr, u, x0, law_, scale = _prepare(drive, t, torque, law, initial_state)
+    model, t_arr, u, x0, law_, scale = _prepare(drive, t, torque, law, initial_state, actuator)
     if method not in _SOLVERS:
         raise InputError(f"method must be one of {sorted(_SOLVERS)}, got {method!r}")
     solver_cls = _SOLVERS[method]
@@ -677,13 +599,13 @@ def reference_simulate(
 
     n_grid = t_arr.size
     states = np.empty((n_grid, model.s))
-    modes_out = np.empty((n_grid, model.n - 1), dtype=np.int8)
+    modes_out = np.empty((n_grid, model.n - 1 + len(model.sticky)), dtype=np.int8)
     events: list[ReferenceEvent] = []
     event_states: list[np.ndarray] = []
     grazes: list[ReferenceGraze] = []
 
     x = x0.copy()
-    modes = model.classify(x)
+    modes = model.classify(x, float(u[0]))
     states[0] = x
     modes_out[0] = modes
     filled = 1  # grid points [0, filled) are done
@@ -702,7 +624,7 @@ def reference_simulate(
         zero_len = 0
         while t_cur < t_end:
             a, c = model.field(modes, ui)
-            guards = model.guards(modes)
+            guards = model.guards(modes, ui)
 
             def fun(_t, y, a=a, c=c):
                 return a @ y + c
@@ -746,19 +668,24 @@ def reference_simulate(
             if zero_len > _MAX_ZERO_LENGTH_RESTARTS:
                 raise RuntimeError(f"contact chatter at t = {te!r} s")
             t_cur = te
-            modes = _switch(modes, shaft, target, te, events, x, event_states)
+            modes = _switch(model, modes, shaft, target, te, x, ui, events, event_states)
             modes = _settle(model, t_cur, x, modes, ui, events, event_states, eps_rel)
         # grid points at the end of the segment up to (not including) t_end are filled;
         # t_end is filled by the next segment's first step or below.
     states[-1] = x
     modes_out[-1] = modes
+    n_base = 2 * model.n - 1
+    stuck = None
+    if model.sticky:
+        stuck = np.zeros((n_grid, model.n), dtype=bool)
+        stuck[:, model.sticky] = modes_out[:, model.n - 1 :] == 0
     if filled < n_grid - 1:  # pragma: no cover - defensive
         raise RuntimeError("internal error: grid not filled")
     return ReferenceResult(
         t=t_arr,
         torque=u,
-        states=states,
-        modes=modes_out,
+        states=states[:, :n_base],
+        modes=np.sign(modes_out[:, : model.n - 1]).astype(np.int8),
         events=tuple(events),
         event_states=np.array(event_states, dtype=float).reshape(-1, model.s),
         grazes=tuple(grazes),
@@ -770,13 +697,17 @@ def reference_simulate(
         n_restarts=n_restarts,
         nfev=nfev,
         n_inertias=model.n,
+        stuck_array=stuck,
+        loop_torque=states[:, n_base].copy() if model.tau_i > 0 else None,
     )
 
 
 # --------------------------------------------------------------------------- checks
 
 
-def _event_key(e) -> tuple[int, str, str]:
+def _event_key(e) -> tuple:
+    if isinstance(e, FrictionEvent):
+        return ("friction", int(e.inertia), str(e.kind), str(e.direction))
     return (int(e.shaft), str(e.kind), str(e.flank))
 
 

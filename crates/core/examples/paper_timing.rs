@@ -1,5 +1,6 @@
 //! Times the paper experiment (80 s at 1 ms) in pure Rust: the simulator vs the bare
-//! recurrence. `cargo run --release --example paper_timing [sim|bare] [reps]`.
+//! recurrence. `cargo run --release --example paper_timing [sim|bare|friction] [reps]`
+//! (`friction`: the simulator with Coulomb friction and stiction on both inertias).
 use backlashkit_core::bare::bare_recurrence3;
 use backlashkit_core::chain::{simulate_chain, ChainParams, Law};
 use backlashkit_core::linalg::expm_and_integral;
@@ -9,13 +10,17 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let which = args.get(1).map(String::as_str).unwrap_or("both");
     let reps: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(300);
-    let p = ChainParams {
+    let mut p = ChainParams {
         j: vec![4.88e-3, 6.8e-2],
         f: vec![0.5e-2, 0.5e-2],
         k: vec![78.0],
         d: vec![1.575e-2],
         theta: vec![3.49e-2],
+        ..Default::default()
     };
+    if which == "friction" {
+        (p.fc, p.fs) = (vec![0.01, 0.02], vec![0.015, 0.03]);
+    }
     let ts = 1e-3;
     let u: Vec<f64> = (0..80_001)
         .map(|i| if (i as f64) * ts < 40.0 { 0.157 } else { 0.0 })

@@ -41,8 +41,13 @@ fn to_numpy<'py>(
     ))
 }
 
-/// Simulate one chain; see `backlashkit.simulate.simulate_drive`.
+/// Simulate one chain; see `backlashkit.simulate.simulate_drive`. `fc` and `fs` are
+/// the Coulomb and breakaway torques per inertia (empty: none), `tau_i` the current
+/// loop's time constant (0: none). States have `2N - 1` columns, plus the motor torque
+/// with a current loop, plus the motor angle with `track_angle`; modes one column per
+/// shaft and per inertia with `fs > 0`.
 #[pyfunction]
+#[pyo3(signature = (j, f, k, d, theta, law, t0, ts, u, x0, fc=None, fs=None, tau_i=0.0, track_angle=false))]
 #[allow(clippy::too_many_arguments)]
 fn simulate_chain<'py>(
     py: Python<'py>,
@@ -56,21 +61,35 @@ fn simulate_chain<'py>(
     ts: f64,
     u: PyReadonlyArray1<'py, f64>,
     x0: PyReadonlyArray1<'py, f64>,
+    fc: Option<PyReadonlyArray1<'py, f64>>,
+    fs: Option<PyReadonlyArray1<'py, f64>>,
+    tau_i: f64,
+    track_angle: bool,
 ) -> PyResult<RawOutput<'py>> {
+    let vec_of = |a: Option<PyReadonlyArray1<'py, f64>>| -> PyResult<Vec<f64>> {
+        Ok(match a {
+            Some(a) => a.as_slice()?.to_vec(),
+            None => Vec::new(),
+        })
+    };
     let p = ChainParams {
         j: j.as_slice()?.to_vec(),
         f: f.as_slice()?.to_vec(),
         k: k.as_slice()?.to_vec(),
         d: d.as_slice()?.to_vec(),
         theta: theta.as_slice()?.to_vec(),
+        fc: vec_of(fc)?,
+        fs: vec_of(fs)?,
+        tau_i,
+        track_angle,
     };
+    p.validate().map_err(value_error)?;
     let law = Law::from_code(law).map_err(value_error)?;
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);
     let out = py
         .detach(|| chain::simulate_chain(&p, law, t0, ts, u, x0))
         .map_err(value_error)?;
-    let n_in = p.n_inertias();
-    to_numpy(py, out, 2 * n_in - 1, n_in - 1)
+    to_numpy(py, out, p.n_states(), p.n_switches())
 }
 
 /// A pair of 2-D float arrays (events and grazes; or E and F of the exponential).
@@ -107,8 +126,9 @@ type BatchOutput<'py> = (
 );
 
 /// Simulate many chains in parallel with the GIL released, into one states array
-/// `(B, n, 2N-1)` and one modes array `(B, n, N-1)`. `params` has one packed row
-/// `[J.., f.., k.., d.., theta..]` per chain; `u` one row shared by all chains or one
+/// `(B, n, S)` and one modes array `(B, n, M)` (as for `simulate_chain`). `params` has
+/// one packed row `[J.., f.., k.., d.., theta..]` per chain, optionally followed by
+/// `[fc.., fs.., tau_i]`; `u` one row shared by all chains or one
 /// row per chain; `x0` one row per chain. Returns the two arrays and, per chain, its
 /// events `(E, 4)` and grazes `(G, 3)`.
 #[pyfunction]
@@ -133,7 +153,11 @@ fn simulate_chain_batch<'py>(
         .collect::<Result<_, _>>()
         .map_err(value_error)?;
     let (b, n) = (rows.len(), u.as_array().ncols());
-    let (s, m) = (2 * n_inertias - 1, n_inertias - 1);
+    let (s, m) = rows
+        .first()
+        .map_or((2 * n_inertias - 1, n_inertias - 1), |p| {
+            (p.n_states(), p.n_switches())
+        });
     let states = PyArray3::<f64>::zeros(py, [b, n, s], false);
     let modes = PyArray3::<i8>::zeros(py, [b, n, m], false);
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);

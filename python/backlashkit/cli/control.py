@@ -7,8 +7,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 from ..io import check_plot_suffix, check_writable
 from .main import missing_directory
@@ -67,32 +65,6 @@ def _check_out(path: str | None, force: bool, flag: str) -> Path | None:
     return out
 
 
-def write_trace(path: Path, response) -> None:
-    """Write a closed-loop trace as CSV (columns of ``TRACE_COLUMNS``).
-
-    Parameters
-    ----------
-    path : pathlib.Path
-        Output file.
-    response : ClosedLoopResponse
-        The run.
-
-    Returns
-    -------
-    None
-    """
-    from ..control.closed_loop import TRACE_COLUMNS
-
-    np.savetxt(
-        path,
-        response.table(),
-        delimiter=",",
-        header=",".join(TRACE_COLUMNS),
-        comments="",
-        fmt="%.10g",
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``backlashkit control``.
 
@@ -106,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     int
         Exit status (0).
     """
+    from ..control.closed_loop import write_trace
     from ..control.scenario import load_scenario
 
     trace = _check_out(args.trace, args.force, "--trace")

@@ -1,18 +1,18 @@
 """File-reading options shared by ``identify`` (experiments) and ``simulate --torque``.
 
 Both commands read their files with :mod:`backlashkit.identify.readers`; the options below map
-onto its keywords, and :func:`reader_errors` rewrites its advice (``pass
-sample_time=``) into the flags of the command line (``pass --sample-time TS``).
+onto its keywords, and :func:`reader_errors` words the reader's advice (the options of its
+messages, ``pass sample_time=``) as the flags of the command line (``pass --sample-time TS``).
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager
 from typing import Any
 
-from ..errors import InputError
+from ..errors import InputError, Option
+from .main import Flag, flag_names
 
 __all__ = ["READER_FLAGS", "add_file_options", "file_options", "parse_columns",
            "reader_errors"]
@@ -94,41 +94,37 @@ def parse_columns(text: str | None) -> dict[str, str] | None:
     return out
 
 
-@contextmanager
-def reader_errors() -> Iterator[None]:
-    """Raise the reader's errors again with its advice in the command line's flags.
+def _columns_flag(option: Option) -> str:
+    """``--columns`` with the names the reader asks to map (``t=...,torque=...``)."""
+    if option.value is None:
+        return "--columns"
+    if isinstance(option.value, str):
+        return f"--columns {option.value}"
+    return "--columns " + ",".join(f"{name}=..." for name in option.value)
 
-    Yields
-    ------
-    None
+
+def _delimiter_flag(option: Option) -> str:
+    if option.value is None:
+        return "--delimiter"
+    return "--delimiter " + ("tab" if option.value == "\t" else repr(option.value))
+
+
+#: The reader's options -> the flags of the command line.
+READER_FLAGS: dict[str, Flag] = {
+    "columns": _columns_flag,
+    "sample_time": "--sample-time",
+    "delimiter": _delimiter_flag,
+    "decimal": "--decimal",
+    "resample": "--resample",
+}
+
+
+def reader_errors() -> AbstractContextManager[None]:
+    """Word the reader's errors and warnings in the command line's flags.
+
+    Returns
+    -------
+    contextlib.AbstractContextManager
+        :func:`~backlashkit.cli.main.flag_names` of :data:`READER_FLAGS`.
     """
-    try:
-        yield
-    except InputError as exc:
-        message = str(exc)
-        for python, flag in READER_FLAGS:
-            message = message.replace(python, flag)
-        raise InputError(message) from exc
-
-
-#: The reader's advice (library keywords) -> the same advice as flags.
-READER_FLAGS = (
-    ("resample='linear'", "--resample linear"),
-    ("columns={'t': ..., 'torque': ..., 'w_motor': ..., 'w_load': ...}",
-     "--columns t=...,torque=...,w_motor=...,w_load=..."),
-    ("columns={'t': ..., 'torque': ...}", "--columns t=...,torque=..."),
-    ("columns={...}", "--columns t=...,w_motor=..."),
-    ("pass sample_time=", "pass --sample-time TS"),
-    ("drop sample_time", "drop --sample-time"),
-    ("sample_time (got", "--sample-time (got"),
-    ("columns['t'] = ", "--columns t="),
-    ("columns: ", "--columns: "),
-    ("pass decimal=','", "pass --decimal ,"),
-    ("pass decimal='.'", "pass --decimal ."),
-    ("delimiter ';'", "--delimiter ';'"),
-    ("(delimiter=", "(--delimiter "),
-    ("sample_time = ", "--sample-time "),
-    ("pass delimiter='\\t'", "pass --delimiter tab"),
-    ("pass delimiter=", "pass --delimiter "),
-)
-
+    return flag_names(READER_FLAGS)

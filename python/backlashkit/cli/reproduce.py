@@ -1,25 +1,28 @@
 """``backlashkit reproduce PAPER``: rerun a source paper's protocol and compare.
 
-Each target is a module exposing ``add_arguments(parser)`` and ``run_cli(args)``;
-targets are listed in :data:`TARGETS` and imported only when chosen.
+The reproductions are library code (:mod:`backlashkit.papers`); this module parses each
+target's options, checks its output paths before the run, calls it and prints its
+tables and bars.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
+import json
+import math
+import sys
+from pathlib import Path
 
-#: target name -> (module, one-line description)
+from ..errors import InputError
+from .main import flag_names, missing_directory
+
+__all__ = ["add_parser", "check_reproduce_outputs"]
+
+#: target name -> one-line description
 TARGETS = {
-    "ravanbod2002": (
-        "backlashkit.papers.ravanbod2002",
-        "Ravanbod-Shirazi & Besancon-Voda 2002, Section 5: Tables 1 and 2 and the joint "
-        "estimator",
-    ),
-    "tao1995": (
-        "backlashkit.papers.tao1995",
-        "Tao & Kokotovic 1995, Section IV: adaptive backlash inverse, Figs. 5 and 6",
-    ),
+    "ravanbod2002": "Ravanbod-Shirazi & Besancon-Voda 2002, Section 5: Tables 1 and 2 and "
+                    "the joint estimator",
+    "tao1995": "Tao & Kokotovic 1995, Section IV: adaptive backlash inverse, Figs. 5 and 6",
 }
 
 
@@ -29,7 +32,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     Parameters
     ----------
     subparsers : argparse._SubParsersAction
-        The top-level subparsers of :func:`backlashkit.cli.build_parser`.
+        The top-level subparsers of :func:`backlashkit.cli.main.build_parser`.
 
     Returns
     -------
@@ -43,15 +46,189 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     targets = p.add_subparsers(dest="paper", metavar="PAPER", parser_class=type(p))
     targets.required = True
-    for name, (module, summary) in TARGETS.items():
+    adders = {"ravanbod2002": _ravanbod2002_arguments, "tao1995": _tao1995_arguments}
+    runners = {"ravanbod2002": run_ravanbod2002, "tao1995": run_tao1995}
+    for name, summary in TARGETS.items():
         tp = targets.add_parser(name, help=summary, description=summary)
-        importlib.import_module(module).add_arguments(tp)
-        tp.set_defaults(func=_runner(module))
+        adders[name](tp)
+        tp.set_defaults(func=runners[name])
     return p
 
 
-def _runner(module: str):
-    def run(args: argparse.Namespace) -> int:
-        return int(importlib.import_module(module).run_cli(args))
+def _output_arguments(parser: argparse.ArgumentParser, *, json_help: str,
+                      report_help: str) -> None:
+    parser.add_argument("--json", metavar="FILE", help=json_help)
+    parser.add_argument("--report", metavar="DIR", help=report_help)
+    parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
-    return run
+
+def check_reproduce_outputs(json_path: str | None, report: str | None,
+                            force: bool) -> Path | None:
+    """Refuse, before any run, the ``--json FILE`` and ``--report DIR`` of a ``reproduce``
+    target that exist (without ``--force``), sit in a missing directory or cannot be
+    written; return the report directory.
+
+    Parameters
+    ----------
+    json_path : str or None
+        ``--json`` (``"-"``: standard output).
+    report : str or None
+        ``--report``.
+    force : bool
+        ``--force``.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The report directory.
+    """
+    from ..io import check_writable
+
+    if json_path not in (None, "-"):
+        if Path(json_path).exists() and not force:
+            raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
+        if not Path(json_path).parent.is_dir():
+            raise InputError(missing_directory("--json", Path(json_path)))
+        check_writable(json_path, "--json")
+    if report is None:
+        return None
+    rep = Path(report)
+    if rep.exists() and not rep.is_dir():
+        raise InputError(f"--report {rep} exists and is not a directory")
+    if rep.exists() and any(rep.iterdir()) and not force:
+        raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
+    check_writable(rep, "--report", directory=True)
+    return rep
+
+
+def _bar_lines(bars) -> str:
+    return "\n".join(f"{'MET ' if m else 'MISS'}  {b}: {v}" for b, v, m in bars)
+
+
+# --- ravanbod2002 ------------------------------------------------------------------
+
+
+def _ravanbod2002_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``backlashkit reproduce ravanbod2002``; without one, the library's
+    default applies (said in the help)."""
+    import inspect
+
+    from ..papers.ravanbod2002 import run_ravanbod2002 as run
+
+    default = {k: p.default for k, p in inspect.signature(run).parameters.items()}
+    parser.add_argument("--runs", type=int, default=None,
+                        help=f"runs per Err_p, >= 2 (a spread needs two; default "
+                        f"{default['runs']})")
+    parser.add_argument("--seed", type=int, default=None,
+                        help=f"root seed (default {default['seed']})")
+    parser.add_argument("--jobs", type=int, default=None,
+                        help=f"worker processes (default {default['jobs']}); results do not "
+                        "depend on it")
+    parser.add_argument("--err-p", default=None, metavar="E1,E2,...",
+                        help="prior errors to run (default "
+                        f"{','.join(f'{e:g}' for e in default['err_p'])})")
+    parser.add_argument("--snr-step1", default=None, metavar="SNR_M,SNR_L",
+                        help="step-1 SNR of w_M,w_L in dB (default the paper's "
+                        f"{','.join(f'{x:g}' for x in default['snr1'])})")
+    _output_arguments(parser, json_help="write the JSON document to FILE ('-': stdout, the "
+                      "tables then go to stderr)", report_help="write an HTML report "
+                      "(index.html), the JSON and a figure of the estimates (PNG, SVG) "
+                      "into DIR")
+
+
+def _numbers(option: str, text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"{option} must be numbers separated by commas, got {text!r}") from None
+
+
+def run_ravanbod2002(args: argparse.Namespace) -> int:
+    """Run ``backlashkit reproduce ravanbod2002``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``runs``, ``seed``, ``jobs``, ``err_p``, ``snr_step1``, ``json``,
+        ``report``, ``force``.
+
+    Returns
+    -------
+    int
+        0 when the joint estimator meets every bar, 1 otherwise.
+    """
+    from ..papers import ravanbod2002 as paper
+
+    json_path = args.json
+    rep = check_reproduce_outputs(json_path, args.report, bool(args.force))
+    options = {k: getattr(args, k) for k in ("runs", "seed", "jobs")
+               if getattr(args, k) is not None}
+    if args.snr_step1 is not None:
+        snr1 = _numbers("--snr-step1", args.snr_step1)
+        if len(snr1) != 2 or not all(math.isfinite(x) for x in snr1):
+            raise InputError(f"--snr-step1 must be two finite numbers SNR_M,SNR_L in dB, got "
+                             f"{args.snr_step1!r}")
+        options["snr1"] = (snr1[0], snr1[1])
+    if args.err_p is not None:
+        err_p = _numbers("--err-p", args.err_p)
+        if len(set(err_p)) != len(err_p):
+            raise InputError(f"--err-p lists a value twice ({args.err_p!r}): each row is run "
+                             "once")
+        options["err_p"] = err_p
+    flags = {"runs": "--runs", "seed": "--seed", "jobs": "--jobs", "err_p": "--err-p"}
+    with flag_names(flags):
+        doc = paper.run_ravanbod2002(**options, progress=lambda m: print(m, file=sys.stderr))
+    bars = paper.checks(doc)
+    doc["checks"] = [{"bar": b, "value": v, "met": bool(m)} for b, v, m in bars]
+    text = paper.format_tables(doc) + "\n\n" + _bar_lines(bars)
+    print(text, file=sys.stderr if json_path == "-" else sys.stdout)
+    body = paper.to_json(doc)
+    if json_path == "-":
+        sys.stdout.write(body)
+    elif json_path is not None:
+        Path(json_path).write_text(body)
+    if rep is not None:
+        paper.write_report(rep, doc, text=text)
+    return 0 if all(m for _, _, m in bars) else 1
+
+
+# --- tao1995 -----------------------------------------------------------------------
+
+
+def _tao1995_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``backlashkit reproduce tao1995``."""
+    _output_arguments(parser, json_help="write the JSON summary to FILE ('-': stdout)",
+                      report_help="write an HTML report (index.html), its figures (PNG, "
+                      "SVG) and the traces (CSV) into DIR")
+
+
+def run_tao1995(args: argparse.Namespace) -> int:
+    """Run ``backlashkit reproduce tao1995``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``json``, ``report``, ``force``.
+
+    Returns
+    -------
+    int
+        0 when every bar of the reproduction is met, 1 otherwise.
+    """
+    from ..papers import tao1995 as paper
+
+    json_path = args.json
+    rep = check_reproduce_outputs(json_path, args.report, bool(args.force))
+    runs = paper.run_tao1995()
+    doc = paper.summary(runs)
+    bars = [(c["bar"], c["value"], c["met"]) for c in doc["checks"]]
+    if json_path == "-":
+        json.dump(doc, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        if json_path is not None:
+            Path(json_path).write_text(json.dumps(doc, indent=2) + "\n")
+        print(_bar_lines(bars))
+    if rep is not None:
+        paper.write_report(rep, runs)
+    return 0 if all(m for _, _, m in bars) else 1

@@ -27,8 +27,8 @@ import numpy as np
 
 from .. import signals
 from .. import validate as v
-from ..errors import InputError, SensitivityWarning
 from ..encoder import Encoder, measure_encoders
+from ..errors import InputError, SensitivityWarning
 from ..io import (
     check_plot_suffix,
     check_writable,

@@ -11,6 +11,7 @@ details; the compiled kernel (``crates/core/src/control.rs``) is the same algori
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -38,6 +39,7 @@ __all__ = [
     "SumOfSines",
     "TableReference",
     "simulate_closed_loop",
+    "write_trace",
 ]
 
 TRACE_COLUMNS = ("t", "r", "y", "y_m", "e", "u_d", "v", "u", "mc_r_hat", "m_hat", "mc_l_hat")
@@ -608,3 +610,17 @@ def simulate_closed_loop(
         step=float(prob["h"]),
         plant_state=raw["xp"],
     )
+
+
+def write_trace(path: str | os.PathLike[str], response: ClosedLoopResponse) -> None:
+    """Write a closed-loop trace as CSV, one row per sample, columns :data:`TRACE_COLUMNS`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file (overwritten).
+    response : ClosedLoopResponse
+        The run.
+    """
+    np.savetxt(path, response.table(), delimiter=",", header=",".join(TRACE_COLUMNS),
+               comments="", fmt="%.10g")

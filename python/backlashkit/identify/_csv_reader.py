@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, Option
 
 PathLike = str | os.PathLike[str]
 
@@ -21,6 +21,25 @@ PathLike = str | os.PathLike[str]
 FIELDS = ("t", "torque", "w_motor", "w_load")
 
 DELIMITERS = (",", ";", "\t")
+
+#: The readers' options that their messages name or advise (a front end words them as
+#: its own options: :class:`~backlashkit.errors.Option`).
+COLUMNS = Option("columns", None)
+RESAMPLE = Option("resample", "linear")
+SAMPLE_TIME = Option("sample_time", None)
+#: The advice to give a sample time instead of a time column.
+PASS_SAMPLE_TIME = Option("sample_time", "TS", python="sample_time=")
+DELIMITER = Option("delimiter", None)
+
+
+def map_columns(names) -> Option:
+    """The advice to map the file's names of ``names`` (our names) with ``columns``."""
+    return Option("columns", tuple(names),
+                  python="columns={" + ", ".join(f"{f!r}: ..." for f in names) + "}")
+
+
+#: The advice to map names, without listing them.
+MAP_COLUMNS = Option("columns", ("t", "w_motor"), python="columns={...}")
 
 # (name of the record, raw channels (t may be absent), label of sample i, time precision)
 _Raw = tuple[str, dict[str, np.ndarray], Callable[[int], str], float]
@@ -84,16 +103,16 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
         raise InputError(
             f"{name}: the header (line {header_no}) is one column {header[0]!r} with "
             f"{sep[others[0]]} in it: the columns are separated by {sep[others[0]]}, not "
-            f"{sep[delimiter]}; pass delimiter={others[0]!r}"
+            f"{sep[delimiter]}; pass ", Option("delimiter", others[0])
         )
     if missing:
         sep = {"\t": "tab", ",": "','", ";": "';'"}[delimiter]
         raise InputError(
             f"{name}: no column {', '.join(map(repr, missing))} in the header (line "
-            f"{header_no}, separator {sep}: {header!r}); map the file's names with "
-            "columns={" + ", ".join(f"{f!r}: ..." for f in FIELDS if f in need or f == "t")
-            + "}"
-            + (" or pass sample_time= if there is no time column" if "t" in need else "")
+            f"{header_no}, separator {sep}: {header!r}); map the file's names with ",
+            map_columns([f for f in FIELDS if f in need or f == "t"]),
+            *((" or pass ", PASS_SAMPLE_TIME, " if there is no time column") if "t" in need
+              else ())
         )
     if "t" not in need and mapping["t"] in header:
         need = ["t", *need]  # read it so that the conflict with sample_time is reported
@@ -102,7 +121,8 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
         if len(row) != width:
             raise InputError(
                 f"{name}: line {numbers[r]} has {len(row)} field(s) but the header has {width}; "
-                f"check the separator (delimiter={delimiter!r}) and the decimal mark"
+                "check the separator (", Option("delimiter", delimiter), ") and the decimal "
+                "mark"
             )
     cols = {}
     for f in need:
@@ -187,29 +207,31 @@ def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
         if cell.lower() in _MISSING:
             out[r] = np.nan
             continue
-        bad = None
+        bad: tuple = ()
         if "_" in cell:
-            bad = "has an underscore, which is no number format of a measurement file"
+            bad = ("has an underscore, which is no number format of a measurement file",)
         elif decimal == "," and "." in cell:
             bad = ("has a '.' but the decimal mark is ','; thousands separators are not "
-                   "read: remove them (or pass decimal='.' if '.' is the decimal mark)")
-        if bad is not None:
-            raise InputError(f"{name}: line {numbers[r]}, column {column!r}: {raw!r} {bad}")
+                   "read: remove them (or pass ", Option("decimal", "."),
+                   " if '.' is the decimal mark)")
+        if bad:
+            raise InputError(f"{name}: line {numbers[r]}, column {column!r}: {raw!r} ", *bad)
         if decimal == ",":
             cell = cell.replace(",", ".")
         try:
             out[r] = float(cell)
         except ValueError:
-            hint = (
-                "; for decimal commas pass decimal=',' with delimiter ';' or a tab"
+            hint: tuple = (
+                ("; for decimal commas pass ", Option("decimal", ","), " with ", DELIMITER,
+                 " ';' or a tab")
                 if "," in raw and decimal == "."
-                else ""
+                else ()
             )
             if _DATE_TIME.search(cell):
                 hint = ("; a date or clock time is no time in s: convert the column to "
-                        "seconds, or remove it and pass sample_time=")
+                        "seconds, or remove it and pass ", PASS_SAMPLE_TIME)
             raise InputError(
-                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number{hint}"
+                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number", *hint
             ) from None
         if math.isinf(out[r]):
             raise InputError(

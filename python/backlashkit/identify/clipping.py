@@ -60,7 +60,7 @@ def _longest_run(mask: np.ndarray) -> int:
 
 
 def _noise_hp_d2(d2: np.ndarray) -> float:
-    """:func:`backlashkit.signals._noise_hp` from given second differences."""
+    """:func:`backlashkit.signals.highpass_noise_std` from given second differences."""
     return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
 
 

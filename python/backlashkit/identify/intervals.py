@@ -11,25 +11,71 @@ Configuration objects for ``JointIdentifier(interval=...)``:
   information at the optimum (the quadratic approximation of the same likelihood).
 * :class:`ParametricBootstrap` -- refits of records simulated from the estimate.
 
-The search for the profile's crossings (:func:`profile_crossing`) is here too; the
-fit itself lives in :mod:`backlashkit.identify.joint`.
+Each object computes its own interval from what the fit hands it
+(:class:`IntervalInputs`); the search for the profile's crossings
+(:func:`profile_crossing`) is here too. The fit itself lives in
+:mod:`backlashkit.identify.joint`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
+from ._lm import lm
 
 __all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
 
 #: chi-square quantile with one degree of freedom at 95 % (1.959964 ** 2).
 CHI2_95 = 3.841458820694124
+#: Normal 97.5 % quantile rounded as the Fisher interval has always used it.
+Z_95 = 1.96
+#: First distance (log theta) of the profile search when the Fisher error is 0.
+PROFILE_FIRST_STEP = 0.05
+
+
+@dataclass
+class IntervalInputs:
+    """What a fit hands its interval object.
+
+    ``z`` are the log-parameters at the estimate (``theta`` first), ``cov_z`` their
+    Fisher covariance, ``cost`` the cost there (chi-square units), ``residual`` the
+    weighted residual rows of log-parameter rows, ``refit`` the ``theta`` refitted to
+    one record set simulated from the estimate with noise drawn from ``rng``.
+    """
+
+    theta: float
+    std: float
+    z: np.ndarray
+    cov_z: np.ndarray
+    cost: float
+    residual: Callable[[np.ndarray], np.ndarray]
+    fd_step: float
+    refit: Callable[[np.random.Generator], float]
+
+
+@dataclass
+class ThetaInterval:
+    """An interval of ``theta`` and what its computation found on the way.
+
+    ``lowest_rise`` below 0: a held-theta refit (at log-parameters ``lowest_z``) ended
+    below the estimate's cost, so the estimate was not the nearby minimum.
+    """
+
+    kind: str
+    ci95: tuple[float, float]
+    bounded: tuple[bool, bool] = (True, True)
+    std: float | None = None  # replaces the Fisher standard error (bootstrap)
+    profile: np.ndarray | None = None
+    bootstrap_thetas: np.ndarray | None = None
+    lowest_rise: float = 0.0
+    lowest_z: np.ndarray | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -40,6 +86,11 @@ class FisherInterval:
     log-parameters). Cheapest (no extra fit), symmetric, and exact only where the
     likelihood is quadratic over the interval.
     """
+
+    def _interval(self, fit: IntervalInputs) -> ThetaInterval:
+        # a half-width is >= 0: the symmetric interval is cut there
+        return ThetaInterval("fisher", (max(0.0, fit.theta - Z_95 * fit.std),
+                                        fit.theta + Z_95 * fit.std))
 
 
 @dataclass(frozen=True)
@@ -61,7 +112,7 @@ class ProfileLikelihood:
     below, the estimate itself was not the nearby minimum: the joint fit refines all
     parameters again from that refit and searches the profile around the new estimate
     (at most twice; ``RECENTRE_MARGIN``, ``RECENTRE_MAX`` in
-    :mod:`backlashkit.identify.joint`). An end that does not reach 3.84 within a
+    :mod:`backlashkit.identify._search`). An end that does not reach 3.84 within a
     factor ``max_factor`` of ``theta_`` is reported at that factor: the records do not
     bound ``theta`` there.
 
@@ -93,6 +144,69 @@ class ProfileLikelihood:
         if not (isinstance(self.max_factor, (int, float)) and self.max_factor > 1.0
                 and math.isfinite(self.max_factor)):
             raise InputError(f"max_factor must be a finite number > 1, got {self.max_factor!r}")
+
+    def _interval(self, fit: IntervalInputs) -> ThetaInterval:
+        z, cov_z = fit.z, fit.cov_z
+        s_z = math.sqrt(cov_z[0, 0]) if cov_z[0, 0] > 0 else 0.0
+        search = _HeldTheta(fit, self.max_iter)
+        ends, bounded = [], []
+        for sign in (-1.0, 1.0):
+            d, ok = profile_crossing(partial(search.rise, sign, {}),
+                                     Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP,
+                                     tol=self.tol, max_evaluations=self.max_evaluations,
+                                     largest=math.log(self.max_factor))
+            ends.append(math.exp(z[0] + sign * d))
+            bounded.append(ok)
+        lowest = min(search.evaluated, key=lambda e: e[0])
+        points = np.array(sorted((math.exp(zz[0]), r) for r, zz in search.evaluated))
+        return ThetaInterval("profile", (ends[0], ends[1]), (bounded[0], bounded[1]),
+                             profile=points, lowest_rise=float(lowest[0]),
+                             lowest_z=lowest[1])
+
+
+class _HeldTheta:
+    """Refits of a fit's other log-parameters with ``theta`` held: its profile."""
+
+    def __init__(self, fit: IntervalInputs, max_iter: int) -> None:
+        self.fit, self.max_iter = fit, max_iter
+        z, cov_z = fit.z, fit.cov_z
+        # the other log-parameters move with theta along the Fisher covariance: the
+        # start of every held-theta refit (its exact optimum where the cost is quadratic)
+        self.slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(z.size - 1)
+        #: every refit: cost rise and log-parameters (the estimate first)
+        self.evaluated: list[tuple[float, np.ndarray]] = [(0.0, z)]
+
+    def _residual(self, zt: float, w: np.ndarray) -> np.ndarray:
+        try:
+            return self.fit.residual(np.r_[zt, w][np.newaxis, :])[0]
+        except ValueError:  # a step to a mode too fast for the sample time
+            return np.full(1, np.inf)
+
+    def _jacobian(self, zt: float, w: np.ndarray, r: np.ndarray) -> np.ndarray:
+        m, h = w.size, self.fit.fd_step
+        ww = np.repeat(np.r_[zt, w][np.newaxis, :], m, axis=0)
+        ww[:, 1:] += h * np.eye(m)
+        return ((self.fit.residual(ww) - r) / h).T
+
+    def rise(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
+        """Cost rise of the profile at distance ``d`` (log theta) on the side ``sign``;
+        ``memo`` holds that side's refits (distance -> other log-parameters)."""
+        z, cost = self.fit.z, self.fit.cost
+        zt = z[0] + sign * d
+        if z.size == 1:  # theta alone is estimated: the profile is the cost itself
+            r = self._residual(zt, np.empty(0))
+            self.evaluated.append((float(r @ r) - cost, np.array([zt])))
+            return self.evaluated[-1][0]
+        if memo:  # continue from the nearest refit on this side
+            d0 = min(memo, key=lambda x: abs(x - d))
+            w0 = memo[d0] + self.slope * sign * (d - d0)
+        else:
+            w0 = z[1:] + self.slope * sign * d
+        st = lm(partial(self._residual, zt), partial(self._jacobian, zt), w0,
+                max_iter=self.max_iter)
+        memo[d] = st.z
+        self.evaluated.append((st.cost - cost, np.r_[zt, st.z]))
+        return self.evaluated[-1][0]
 
 
 @dataclass(frozen=True)
@@ -130,6 +244,20 @@ class ParametricBootstrap:
             raise InputError(
                 f"seed must be an integer >= 0 or a numpy.random.SeedSequence, got {seed!r}"
             )
+
+    def _interval(self, fit: IntervalInputs) -> ThetaInterval:
+        root = self.seed if isinstance(self.seed, np.random.SeedSequence) else (
+            np.random.SeedSequence(self.seed))
+        thetas = np.array([fit.refit(np.random.default_rng(child))
+                           for child in root.spawn(self.n_resamples)])
+        std = float(np.std(thetas, ddof=1))
+        # the std is itself estimated from n_resamples refits: Student's quantile with
+        # n_resamples - 1 degrees of freedom, not 1.96 (2.05 for 30 refits, 2.57 for 6)
+        from scipy.stats import t as student_t
+
+        half = float(student_t.ppf(0.975, self.n_resamples - 1)) * std
+        return ThetaInterval("bootstrap", (max(0.0, fit.theta - half), fit.theta + half),
+                             std=std, bootstrap_thetas=thetas)
 
 
 def profile_crossing(rise: Callable[[float], float], first: float, *, level: float = CHI2_95,
@@ -194,3 +322,12 @@ def profile_crossing(rise: Callable[[float], float], first: float, *, level: flo
     if math.isinf(r_hi):
         return 0.5 * (lo + hi), True
     return lo + (target - r_lo) * (hi - lo) / (r_hi - r_lo), True
+
+
+def check_interval(interval) -> None:
+    """Refuse what is not one of this module's interval configurations."""
+    if not isinstance(interval, (ProfileLikelihood, FisherInterval, ParametricBootstrap)):
+        raise InputError(
+            "interval must be a ProfileLikelihood, FisherInterval or ParametricBootstrap "
+            f"(backlashkit.identify.intervals), got {type(interval).__name__}"
+        )

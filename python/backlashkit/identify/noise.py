@@ -34,11 +34,44 @@ import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
+from ..plants import TwoMassDrive
+from .record import Record
+from .step import find_step_down
 
-__all__ = ["ARNoise", "AutoNoise", "WhiteNoise", "fit_ar", "innovation_ratio", "whiten"]
+__all__ = [
+    "ARNoise",
+    "AutoNoise",
+    "WhiteNoise",
+    "fit_ar",
+    "held_noise_lag1",
+    "innovation_ratio",
+    "whiten",
+]
 
 #: Highest order accepted (the whitening filter drops this many samples per record).
 MAX_ORDER = 50
+
+#: A lag-1 autocorrelation is beyond white noise when it exceeds both this (white
+#: noise fitted by the right model gives about ``1 / sqrt(n)``, 0.004 for 80 s at
+#: 1 kHz, a model in a wrong basin 0.2 and more)...
+MISFIT_LAG1 = 0.02
+#: ... and this many of its standard deviations under white noise (short records:
+#: ``1 / sqrt(n)`` is 0.03 for 1000 samples).
+MISFIT_SIGMAS = 5.0
+#: Seconds (at most) of the level held before each step-down whose speeds show the
+#: noise's own colour, model-free, and the fewest samples that tell it.
+HELD_NOISE_SECONDS = 5.0
+HELD_NOISE_MIN = 200
+#: Degree of the polynomial trend removed there first (a speed still settling).
+HELD_TREND_DEGREE = 3
+#: The window starts this many time constants of the prior's shaft ringing
+#: (``2 J_M J_L / ((J_M + J_L) f_sh)``) after the last torque change before the
+#: step-down: ringing left there reads as coloured noise (e^-12: below 1e-5 of it).
+HELD_RINGING_DECAYS = 12.0
+#: Standard deviation of the held-noise estimate ``1 + 2 r_1`` under white noise, in
+#: units of ``1 / sqrt(n)``: twice Bartlett's ``sqrt(1/2)`` for the ``r_1 = -1/2`` of
+#: white noise's first differences.
+HELD_WHITE_STD = 1.4
 
 
 @dataclass(frozen=True)
@@ -49,6 +82,15 @@ class WhiteNoise:
     residuals of the fit), unless ``JointIdentifier(noise=(s_M, s_L))`` fixes them.
     """
 
+    def _check_with(self, noise, final_horizon) -> None:
+        """Nothing to refuse: white noise works with fixed levels and short windows."""
+
+    def _resolve(self, held_lag1, held_samples, *, fixed_noise: bool, final_horizon):
+        return self
+
+    def _whitening_passes(self, noise_iter: int) -> int:
+        return 0  # the residuals are white as they are
+
 
 @dataclass(frozen=True)
 class ARNoise:
@@ -58,7 +100,7 @@ class ARNoise:
     variance of every record and speed are estimated from its residuals
     (:func:`fit_ar`), the residuals of the model are whitened by ``A(q)``
     (:func:`whiten`) and weighted by the innovation standard deviation, and the fit is
-    refined again; this is repeated ``JointIdentifier(noise_iter=...)`` times (at
+    refined again; this is repeated ``JointSearch(noise_iter=...)`` times (at
     least once). The Fisher information, the profile likelihood and the parametric
     bootstrap all use the whitened residuals (the bootstrap simulates the fitted
     autoregressive noise). On white noise the coefficients come out within a few
@@ -76,6 +118,28 @@ class ARNoise:
     def __post_init__(self) -> None:
         _check_order(self.order)
 
+    def _check_with(self, noise, final_horizon) -> None:
+        """Refuse what an autoregression cannot be combined with."""
+        if noise is not None:
+            raise InputError(
+                "noise=(s_M, s_L) fixes white noise levels; with noise_model=ARNoise(...) "
+                "the noise is estimated from the residuals: give one or the other"
+            )
+        if final_horizon is not None:
+            raise InputError(
+                "noise_model=ARNoise(...) whitens the residuals of whole records; it "
+                f"cannot be combined with final_horizon (got {final_horizon!r})"
+            )
+
+    def _resolve(self, held_lag1, held_samples, *, fixed_noise: bool, final_horizon):
+        return self
+
+    def _whitening_passes(self, noise_iter: int) -> int:
+        return max(1, noise_iter)  # whitened at least once, else it were white noise
+
+    def _fit_channel(self, residual: np.ndarray) -> tuple[np.ndarray, float]:
+        return fit_ar(residual, self.order)
+
 
 @dataclass(frozen=True)
 class AutoNoise:
@@ -90,7 +154,8 @@ class AutoNoise:
     of those standard deviations in any record and speed the fit uses
     ``ARNoise(order)``, otherwise ``WhiteNoise()``; also white where no record holds
     such a level of 200 samples, where ``noise=(s_M, s_L)`` fixes the noise
-    levels, and with ``final_horizon`` (which :class:`ARNoise` cannot whiten).
+    levels, and with ``JointSearch(final_horizon=...)`` (which :class:`ARNoise` cannot
+    whiten).
     ``JointIdentifier.noise_model_`` says which was used. On white noise the answer is
     the white model's; on speeds filtered by an observer it is the autoregressive
     model's, whose interval is calibrated where the white one is 2.6 times too narrow
@@ -107,6 +172,15 @@ class AutoNoise:
 
     def __post_init__(self) -> None:
         _check_order(self.order)
+
+    def _check_with(self, noise, final_horizon) -> None:
+        """Nothing to refuse: it stays white where ARNoise could not be used."""
+
+    def _resolve(self, held_lag1, held_samples, *, fixed_noise: bool, final_horizon):
+        """The model to fit: ARNoise where the held speeds' noise is coloured."""
+        coloured = (not fixed_noise and final_horizon is None
+                    and noise_coloured(held_lag1, held_samples))
+        return ARNoise(self.order) if coloured else WhiteNoise()
 
 
 def _check_order(order) -> None:
@@ -233,3 +307,103 @@ def innovation_ratio(a) -> float:
     impulse[0] = 1.0
     psi = lfilter([1.0], np.r_[1.0, a], impulse)
     return float(1.0 / (psi @ psi))
+
+
+def lag1(e: np.ndarray) -> float:
+    """Lag-1 autocorrelation of a residual (mean removed; 0 for a constant one)."""
+    x = e - e.mean()
+    den = float(x @ x)
+    return float(x[1:] @ x[:-1]) / den if den > 0 else 0.0
+
+
+def beyond_noise(lag1_: np.ndarray, white_std: np.ndarray) -> bool:
+    """Whether any lag-1 autocorrelation exceeds both :data:`MISFIT_LAG1` and
+    :data:`MISFIT_SIGMAS` times its std under white noise."""
+    return bool(np.any(np.abs(lag1_) > np.maximum(MISFIT_LAG1, MISFIT_SIGMAS * white_std)))
+
+
+def noise_coloured(held_lag1: np.ndarray, held_samples: np.ndarray) -> bool:
+    """Whether the speeds' own noise (:func:`held_noise_lag1`) is correlated beyond
+    white noise (:func:`beyond_noise`)."""
+    return beyond_noise(np.nan_to_num(held_lag1),
+                        HELD_WHITE_STD / np.sqrt(held_samples)[:, np.newaxis])
+
+
+def held_noise_lag1(records: list[Record], prior: TwoMassDrive
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Lag-1 autocorrelation of each record's speed noise, from the speeds alone.
+
+    On the last :data:`HELD_NOISE_SECONDS` of the level held before each step-down,
+    from :data:`HELD_RINGING_DECAYS` time constants of the prior's shaft ringing after
+    the last torque change on (ringing reads as coloured noise), the speeds less a
+    cubic trend are differenced; noise ``e_t = rho e_(t-1) + w_t`` gives their lag-1
+    autocorrelation ``(rho - 1) / 2``, so ``rho = 1 + 2 r_1`` (white noise: 0 within
+    about ``1.4 / sqrt(n)``; noise averaged over a few samples, by an observer, about
+    1).
+
+    Parameters
+    ----------
+    records : list of Record
+        The records.
+    prior : TwoMassDrive
+        Prior linear parameters (the ringing's time constant).
+
+    Returns
+    -------
+    lag1 : numpy.ndarray
+        ``(n_records, 2)`` for ``(w_M, w_L)``; NaN where the record holds no level of
+        :data:`HELD_NOISE_MIN` samples, or where the speed's own motion dominates the
+        differences (above 2); values between 1 and 2 (noise averaged over samples)
+        count as 1.
+    samples : numpy.ndarray
+        Samples used per record (1 where none).
+    """
+    out = np.full((len(records), 2), np.nan)
+    samples = np.ones(len(records))
+    j_eff = prior.J_M * prior.J_L / (prior.J_M + prior.J_L)
+    tau = 2.0 * j_eff / prior.f_sh if prior.f_sh > 0 else math.inf
+    for k, rec in enumerate(records):
+        try:
+            i_s = find_step_down(rec)[0]
+        except InputError:
+            continue
+        u = rec.torque[:i_s]
+        changes = np.flatnonzero(u != u[-1])
+        settled = (int(changes[-1]) + 1 if changes.size else 0) + HELD_RINGING_DECAYS * tau / rec.ts
+        m = min(int(round(HELD_NOISE_SECONDS / rec.ts)), int(i_s - min(settled, i_s)))
+        if m < HELD_NOISE_MIN:
+            continue
+        samples[k] = m
+        x = np.linspace(-1.0, 1.0, m)
+        for c, w in enumerate((rec.w_motor, rec.w_load)):
+            y = w[i_s - m : i_s]
+            y = y - np.polynomial.polynomial.polyval(  # a speed still settling: its trend
+                x, np.polynomial.polynomial.polyfit(x, y, HELD_TREND_DEGREE))
+            rho = 1.0 + 2.0 * lag1(np.diff(y))
+            out[k, c] = min(rho, 1.0) if rho <= 2.0 else np.nan
+    return out, samples
+
+
+def sample_noise(rng: np.random.Generator, std: float, a: np.ndarray | None, n: int
+                 ) -> np.ndarray:
+    """``n`` samples of fitted noise: white of ``std``, or ``1 / A(q)`` driven by it.
+
+    An autoregression starts in its stationary regime: it is run in until its slowest
+    pole has decayed to 1e-6.
+    """
+    if a is None:
+        return rng.normal(0.0, std, n)
+    from scipy.signal import lfilter
+
+    burn = _impulse_length(a, 1e-6)
+    eps = rng.normal(0.0, std, n + burn)
+    return lfilter([1.0], np.r_[1.0, a], eps)[burn:]
+
+
+def check_noise_model(noise_model) -> None:
+    """Refuse what is not one of this module's noise models."""
+    if not isinstance(noise_model, (WhiteNoise, ARNoise, AutoNoise)):
+        raise InputError(
+            "noise_model must be a WhiteNoise, ARNoise or AutoNoise "
+            f"(backlashkit.identify.noise), got {type(noise_model).__name__}"
+        )

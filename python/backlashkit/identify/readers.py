@@ -51,8 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError
-from ._csv_reader import DELIMITERS, FIELDS, PathLike, _from_csv
+from ..errors import InputError, Option
+from ._csv_reader import COLUMNS, DELIMITERS, FIELDS, RESAMPLE, SAMPLE_TIME, PathLike, _from_csv
 from ._mat_reader import _from_mat, _from_npz
 from .record import Record
 
@@ -163,8 +163,8 @@ def read_torque(
     if columns is not None and isinstance(columns, Mapping):
         extra = [k for k in columns if k in ("w_motor", "w_load")]
         if extra:
-            raise InputError(f"columns: {', '.join(extra)} is not read with the torque; map "
-                             "t and torque only")
+            raise InputError(COLUMNS, f": {', '.join(extra)} is not read with the torque; "
+                             "map t and torque only")
     recs = _read(path, ("t", "torque"), columns, sample_time, delimiter, decimal, resample,
                  keep_time=True)
     if len(recs) != 1:
@@ -188,8 +188,9 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
             raise InputError(f"sample_time must be a finite number > 0 (s), got {sample_time!r}")
         if columns is not None and "t" in columns:
             raise InputError(
-                f"give either sample_time (got {sample_time!r}) or a time column "
-                f"(columns['t'] = {columns['t']!r}), not both"
+                "give either ", SAMPLE_TIME, f" (got {sample_time!r}) or a time column (",
+                Option("columns", f"t={columns['t']!r}",
+                       python=f"columns['t'] = {columns['t']!r}"), "), not both"
             )
         sample_time = st
     if delimiter is not None and delimiter not in DELIMITERS:
@@ -217,8 +218,9 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
         for _, cols, _, _ in raws:
             if "t" in cols:
                 raise InputError(
-                    f"{name}: the file has a time column {file_t!r} and sample_time = "
-                    f"{sample_time!r} was given; drop sample_time (or the column)"
+                    f"{name}: the file has a time column {file_t!r} and ",
+                    Option("sample_time", sample_time, python=f"sample_time = {sample_time!r}"),
+                    " was given; drop ", SAMPLE_TIME, " (or the column)"
                 )
     return [(rec_name, *_build(rec_name, cols, label, precision, sample_time, resample, mapping,
                                keep_time))
@@ -236,16 +238,15 @@ def _check_columns(columns: Mapping[str, str] | None,
         )
     for key, value in columns.items():
         if key not in FIELDS:
-            raise InputError(
-                f"columns: unknown key {key!r}; allowed keys: {', '.join(FIELDS)}"
-            )
+            raise InputError(COLUMNS, f": unknown key {key!r}; allowed keys: "
+                             f"{', '.join(FIELDS)}")
         if not isinstance(value, str) or not value.strip():
             raise InputError(f"columns[{key!r}] must be a non-empty string, got {value!r}")
         out[key] = value.strip()
     for a, b in ((a, b) for i, a in enumerate(fields) for b in fields[i + 1 :]):
         if out[a] == out[b]:
             raise InputError(
-                f"columns: {a!r} and {b!r} both read the file's column {out[a]!r}; map "
+                COLUMNS, f": {a!r} and {b!r} both read the file's column {out[a]!r}; map "
                 "each to its own column"
             )
     return out
@@ -295,8 +296,8 @@ def _build(rec_name, cols, label, precision, sample_time, resample,
         if resample is None:
             raise InputError(
                 f"{rec_name}: {label(i)}: {mapping[f]!r} is missing (empty or NaN; "
-                f"{int(miss.sum())} missing in all); fill the samples, crop the record, or pass "
-                "resample='linear' to bridge them by linear interpolation"
+                f"{int(miss.sum())} missing in all); fill the samples, crop the record, or pass ",
+                RESAMPLE, " to bridge them by linear interpolation"
             )
         edges = np.diff(np.r_[0, miss.astype(np.int8), 0])
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
@@ -305,7 +306,7 @@ def _build(rec_name, cols, label, precision, sample_time, resample,
             raise InputError(
                 f"{rec_name}: {label(int(starts[longest]))}: {mapping[f]!r} is missing for "
                 f"{int(stops[longest] - starts[longest])} samples in a row, more than the "
-                f"{MAX_BRIDGE} that resample='linear' bridges; crop the record or split it "
+                f"{MAX_BRIDGE} that ", RESAMPLE, " bridges; crop the record or split it "
                 "at the gap"
             )
         if miss[0] or miss[-1]:
@@ -328,8 +329,8 @@ def _build(rec_name, cols, label, precision, sample_time, resample,
         kind = "a gap" if dt[i] > 1.5 * ts else "a non-uniform step"
         raise InputError(
             f"{rec_name}: {kind} in the time {mapping['t']!r} between {label(i)} and "
-            f"{label(i + 1)}: {float(dt[i]):.6g} s against the median step {ts:.6g} s; pass "
-            "resample='linear' to resample onto a uniform grid, or fix the file"
+            f"{label(i + 1)}: {float(dt[i]):.6g} s against the median step {ts:.6g} s; pass ",
+            RESAMPLE, " to resample onto a uniform grid, or fix the file"
         )
     else:
         i = int(np.argmax(dt))
@@ -337,8 +338,8 @@ def _build(rec_name, cols, label, precision, sample_time, resample,
             raise InputError(
                 f"{rec_name}: a gap of {float(dt[i]):.6g} s in the time {mapping['t']!r} "
                 f"between {label(i)} and {label(i + 1)} ({dt[i] / ts - 1:.0f} missing samples "
-                f"at the median step {ts:.6g} s), more than the {MAX_BRIDGE} that "
-                "resample='linear' bridges; crop the record or split it at the gap"
+                f"at the median step {ts:.6g} s), more than the {MAX_BRIDGE} that ",
+                RESAMPLE, " bridges; crop the record or split it at the gap"
             )
         m = int(math.floor((t[-1] - t[0]) / ts + 1e-9)) + 1
         t_new = t[0] + np.arange(m) * ts

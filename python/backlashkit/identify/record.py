@@ -26,6 +26,7 @@ from .torque import check_torque_noise
 __all__ = [
     "Record",
     "as_records",
+    "check_distinct",
     "check_prior",
     "check_sampling",
     "check_speeds_vary",
@@ -33,6 +34,7 @@ __all__ = [
 ]
 
 ArrayLike = Sequence[float] | np.ndarray
+
 
 @dataclass(frozen=True, eq=False)
 class Record:
@@ -73,6 +75,7 @@ class Record:
         return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
 
 
+
 def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
     if isinstance(rec, Record):
         return rec
@@ -83,6 +86,7 @@ def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
             f"records[{i}] must be a Record or a tuple (t, torque, w_motor, w_load)"
         ) from None
     return Record(t, torque, w_motor, w_load, name=f"records[{i}]")
+
 
 def check_speeds_vary(rec: Record) -> None:
     """Refuse a record with a constant speed: it cannot show the drive's response.
@@ -106,9 +110,11 @@ def check_speeds_vary(rec: Record) -> None:
 
 #: A speed sample farther than this many noise std (and than SPIKE_RANGE of the
 #: speed's range) from the median of itself and its two neighbours is a spike.
+
 SPIKE_SIGMAS = 30.0
 
 SPIKE_RANGE = 0.2
+
 
 def check_spikes(rec: Record) -> None:
     """Refuse a record with a single-sample spike in a speed (a glitch of the sensor).
@@ -157,6 +163,7 @@ def check_spikes(rec: Record) -> None:
                 "(empty cells, then --resample linear bridges them)"
             )
 
+
 def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
     """Refuse a record sampled too slowly to show the drive's ringing.
 
@@ -185,8 +192,58 @@ def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
             "(a time column in ms reads as s) and the prior's units"
         )
 
+def check_distinct(records: Sequence[Record]) -> None:
+    """Refuse a record given twice: a joint fit would count its data twice and report a
+    standard error too small by sqrt(2), and no method gains from it.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The records.
+
+    Raises
+    ------
+    InputError
+        If two records hold the same samples (``t``, torque and both speeds).
+    """
+    seen: dict[bytes, str] = {}
+    for rec in records:
+        key = b"".join(np.ascontiguousarray(x, float).tobytes()
+                       for x in (rec.t, rec.torque, rec.w_motor, rec.w_load))
+        if key in seen:
+            raise InputError(
+                f"{rec.name} holds the same data as {seen[key]}: give every record once "
+                "(the joint fit would count it twice and understate the uncertainty)"
+            )
+        seen[key] = rec.name
+
+
 def as_records(records, what: str = "records", *, prior=None) -> list[Record]:
-    """Records of ``records``, each checked usable (and resolving ``prior``'s ringing)."""
+    """Records of ``records``, each checked usable.
+
+    Parameters
+    ----------
+    records : Record, tuple or sequence of them
+        What the user passed: a :class:`Record`, a tuple ``(t, torque, w_motor,
+        w_load)`` or a sequence of them.
+    what : str, optional
+        Its name in messages (default ``"records"``).
+    prior : TwoMassDrive, optional
+        When given, each record must sample fast enough for its ringing
+        (:func:`check_sampling`).
+
+    Returns
+    -------
+    list of Record
+        The records, in order (a tuple becomes a Record named ``records[i]``).
+
+    Raises
+    ------
+    InputError
+        If ``records`` is none of those, is empty, holds a record twice
+        (:func:`check_distinct`), or a record is clipped, has a constant speed, a spike
+        or a noisy torque, or samples too slowly for ``prior``.
+    """
     if records is None or isinstance(records, (str, bytes, os.PathLike)):
         hint = (" (a file? read it with backlashkit.read_records)"
                 if records is not None else "")
@@ -204,6 +261,7 @@ def as_records(records, what: str = "records", *, prior=None) -> list[Record]:
     if not recs:
         raise InputError(f"{what} must hold at least one record, got none")
     out = [_as_record(r, i) for i, r in enumerate(recs)]
+    check_distinct(out)
     for rec in out:  # what no model can fit is refused rather than answered
         check_not_clipped(rec)
         check_speeds_vary(rec)
@@ -213,7 +271,25 @@ def as_records(records, what: str = "records", *, prior=None) -> list[Record]:
             check_sampling(prior, rec)
     return out
 
+
 def check_prior(prior: TwoMassDrive) -> TwoMassDrive:
+    """Refuse a prior that is not a :class:`~backlashkit.TwoMassDrive`.
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        The prior drive.
+
+    Returns
+    -------
+    TwoMassDrive
+        ``prior``.
+
+    Raises
+    ------
+    InputError
+        If it is not one.
+    """
     if not isinstance(prior, TwoMassDrive):
         raise InputError(f"prior must be a TwoMassDrive, got {type(prior).__name__}")
     return prior

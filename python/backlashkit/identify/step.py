@@ -13,22 +13,59 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, Option, PriorMismatchWarning, StepDownWarning
 from ..plants import TwoMassDrive
 from .record import Record, check_prior
 from .torque import JUMP_THRESHOLD, torque_noise_std
 
-__all__ = ["FAR_FROM_PRIOR", "find_step_down", "held_speed_gain", "is_far"]
+__all__ = [
+    "ALLOW_FAR_FROM_PRIOR",
+    "FAR_FROM_PRIOR",
+    "MAX_STEP_DOWNS",
+    "REFUSE_FROM_PRIOR",
+    "check_fit_near_prior",
+    "check_held_speeds",
+    "check_step_down",
+    "check_step_downs",
+    "find_step_down",
+    "held_speed_gain",
+    "is_far",
+    "ratios_to_prior",
+]
 
-#: A record's held speed (:func:`held_speed_gain`) or a joint fit's linear parameter
-#: this many times off the prior's (either way) raises a PriorMismatchWarning.
+#: A record's held speed (:func:`held_speed_gain`) or a fit's linear parameter this
+#: many times off the prior's (either way) raises a PriorMismatchWarning.
 FAR_FROM_PRIOR = 3.0
+#: This many times off refuses the answer unless ``allow_far_from_prior=True``: a prior
+#: that far off is rarer than a unit or column mistake (rpm read as rad/s moves J_M
+#: x0.1, swapped speeds J_M x6 and k_sh x6, held speeds x9.55), whose theta means
+#: nothing.
+REFUSE_FROM_PRIOR = 5.0
+#: The advice that overrides the refusal, in a message.
+ALLOW_FAR_FROM_PRIOR = Option("allow_far_from_prior", True)
+#: More separate step-downs (each beyond a tenth of the largest) than this in one record
+#: are no step-down experiment (a PRBS was fitted to 70 % with a standard error 1e-8).
+MAX_STEP_DOWNS = 3
+#: Ringing periods of the prior to record after the step-down: the passage through the
+#: backlash takes about one; a record that ends at the step-down shows none.
+RINGING_PERIODS_AFTER = 2.0
+#: Fewest samples recorded after the step-down.
+MIN_SAMPLES_AFTER = 10
+#: A held level varies by at most this fraction of the drop (and the torque's noise).
+HELD_WOBBLE = 0.05
+#: A drop counts as a separate step-down beyond this fraction of the largest.
+SEPARATE_DROP = 0.1
+#: What to check when the data sit far from the prior.
+CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
+               "columns (w_motor and w_load swapped?) and the prior")
 
 #: Fewest samples before the step-down that :func:`held_speed_gain` fits (else NaN).
 HELD_MIN_SAMPLES = 10
+
 
 def find_step_down(record: Record) -> tuple[int, float, float, float]:
     """Locate the torque step-down of a record.
@@ -75,6 +112,7 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
         )
     i_s = k + 1
     return i_s, float(record.t[i_s]), float(u[k]), float(u[i_s])
+
 
 def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
     """How many times the prior's speed the record holds before its step-down.
@@ -136,24 +174,244 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
     (gain, _), *_ = np.linalg.lstsq(basis / [col, 1.0], v / scale, rcond=None)
     return float(gain) * scale / col
 
+
 def is_far(ratio: float, factor: float = FAR_FROM_PRIOR) -> bool:
-    """Whether a ratio to the prior is more than ``factor`` off (either way)."""
+    """Whether a ratio to the prior is more than ``factor`` off (either way).
+
+    Parameters
+    ----------
+    ratio : float
+        An estimate over the prior's value.
+    factor : float, optional
+        The limit (default :data:`FAR_FROM_PRIOR`).
+
+    Returns
+    -------
+    bool
+        True when ``ratio`` lies outside ``[1 / factor, factor]`` (a negative ratio
+        always does).
+    """
     return not 1.0 / factor <= ratio <= factor
 
-def warn_held_speeds(recs: list[Record], prior: TwoMassDrive) -> list[float]:
-    """:func:`held_speed_gain` of every record; a PriorMismatchWarning for those far
-    off (:data:`FAR_FROM_PRIOR`)."""
+
+def check_step_down(record: Record, prior: TwoMassDrive) -> int:
+    """Refuse a record that is not a step-down experiment; count its step-downs.
+
+    The methods need a torque held at a positive level and then dropped, and at least
+    :data:`RINGING_PERIODS_AFTER` periods of the prior's ringing recorded after the
+    drop (the passage through the backlash takes about one). A sine or a random input
+    also has a largest drop, but no held level before it.
+
+    Parameters
+    ----------
+    record : Record
+        The experiment.
+    prior : TwoMassDrive
+        The prior drive (its ringing period ``2 pi / sqrt(k_sh (1/J_M + 1/J_L))``).
+
+    Returns
+    -------
+    int
+        The number of separate step-downs (each beyond a tenth of the largest and the
+        torque's noise), 1 to :data:`MAX_STEP_DOWNS`.
+
+    Raises
+    ------
+    InputError
+        If the torque has no step-down (:func:`find_step_down`), the record ends too
+        soon after it, the torque is not held before it, or it steps down more than
+        :data:`MAX_STEP_DOWNS` times.
+    """
+    i_s, t_s, _, _ = find_step_down(record)
+    period = 2.0 * math.pi / math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    need = max(RINGING_PERIODS_AFTER * period, MIN_SAMPLES_AFTER * record.ts)
+    if record.t[-1] - t_s < need:
+        raise InputError(
+            f"{record.name}: the record ends {record.t[-1] - t_s:.3g} s after the step-down "
+            f"at t = {t_s:.6g} s: record at least {need:.3g} s after it (two periods of "
+            "the prior's ringing), so that the passage through the backlash is seen"
+        )
+    n = int(round(need / record.ts))
+    u = record.torque
+    noise = torque_noise_std(u)
+    before = u[max(0, i_s - 2 * n) : i_s]
+    if before.size > n:  # some n samples within the 2n before the drop must be a level
+        drop = float(u[max(0, i_s - n)] - u[min(u.size - 1, i_s + n)])
+        windows = np.lib.stride_tricks.sliding_window_view(before, n)
+        wobble = float(np.min(np.ptp(windows, axis=1)))
+        if wobble > HELD_WOBBLE * abs(drop) + JUMP_THRESHOLD * noise:
+            raise InputError(
+                f"{record.name}: the torque is not held before its largest drop at "
+                f"t = {t_s:.6g} s (over any {need:.3g} s of the {2 * need:.3g} s before it, "
+                f"it varies by {wobble:.3g} N m or more): the identification needs a "
+                "step-down experiment, a held torque dropped to a lower level"
+            )
+    downs = np.diff(u)
+    jump = JUMP_THRESHOLD * math.sqrt(2.0) * noise  # as find_step_down counts a drop
+    big = np.flatnonzero(downs < min(SEPARATE_DROP * downs.min(), -jump))
+    count = 1 + int(np.sum(np.diff(big) > 1)) if big.size else 0  # separate jumps
+    if count > MAX_STEP_DOWNS:
+        raise InputError(
+            f"{record.name}: the torque steps down {count} times (a random or periodic "
+            "input?): the identification needs a step-down experiment, one step-down per "
+            "record; split the record"
+        )
+    return count
 
 
+def check_step_downs(records: Sequence[Record], prior: TwoMassDrive, *,
+                     stacklevel: int = 2) -> list[int]:
+    """:func:`check_step_down` of every record; a warning for a record that steps down
+    more than once.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The experiments.
+    prior : TwoMassDrive
+        The prior drive.
+    stacklevel : int, optional
+        Of the warning (2: the caller's caller).
+
+    Returns
+    -------
+    list of int
+        The step-downs per record.
+
+    Raises
+    ------
+    InputError
+        As :func:`check_step_down`.
+
+    Warns
+    -----
+    StepDownWarning
+        For a record that steps down more than once (the methods use the largest).
+    """
+    counts = [check_step_down(rec, prior) for rec in records]
+    for rec, count in zip(records, counts, strict=True):
+        if count > 1:
+            t_s = find_step_down(rec)[1]
+            warnings.warn(StepDownWarning(
+                f"{rec.name}: the torque steps down more than once; t_s, t_c, t_b and the "
+                f"pre-estimate use the largest step-down, at t = {t_s:.6g} s (the methods "
+                "expect one step-down per record: split the record to use the others)"),
+                stacklevel=stacklevel + 1)
+    return counts
 
 
-    gains = [held_speed_gain(rec, prior) for rec in recs]
-    for rec, gain in zip(recs, gains, strict=True):
-        if math.isfinite(gain) and is_far(gain):
-            warnings.warn(
-                f"{rec.name}: under the torque held before the step-down the speeds are "
-                f"{gain:.3g} times the prior's, and this method simulates the prior from "
-                "them: check the units of the speeds (rpm read as rad/s?) and of the "
-                "torque, and the prior's frictions",
-                PriorMismatchWarning, stacklevel=3)
+def check_held_speeds(records: Sequence[Record], prior: TwoMassDrive, *,
+                      allow_far_from_prior: bool = False, stacklevel: int = 2) -> list[float]:
+    """:func:`held_speed_gain` of every record, refused or warned when far off.
+
+    The two-step and regression methods simulate the prior from the speed held before
+    the step-down: a record in other units, or a prior that far off, makes that
+    meaningless.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The experiments.
+    prior : TwoMassDrive
+        The prior drive.
+    allow_far_from_prior : bool, optional
+        Answer (with the warning) even beyond :data:`REFUSE_FROM_PRIOR` (default False).
+    stacklevel : int, optional
+        Of the warning (2: the caller's caller).
+
+    Returns
+    -------
+    list of float
+        The gains (NaN where too few samples precede the step-down to tell).
+
+    Raises
+    ------
+    InputError
+        If a gain is more than :data:`REFUSE_FROM_PRIOR` times off 1 (or negative) and
+        ``allow_far_from_prior`` is False.
+
+    Warns
+    -----
+    PriorMismatchWarning
+        For a gain more than :data:`FAR_FROM_PRIOR` times off 1.
+    """
+    gains = [held_speed_gain(rec, prior) for rec in records]
+    for rec, gain in zip(records, gains, strict=True):
+        if not math.isfinite(gain):
+            continue
+        what = (f"{rec.name}: under the torque held before the step-down at t = "
+                f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
+        if is_far(gain, REFUSE_FROM_PRIOR) and not allow_far_from_prior:
+            raise InputError(
+                f"{what} (this method simulates the prior from them): {CHECK_UNITS}; if the "
+                "prior's frictions are that far off, use ",
+                Option("method", "joint", python="JointIdentifier"),
+                " (it estimates them) or pass ", ALLOW_FAR_FROM_PRIOR)
+        if is_far(gain):
+            warnings.warn(PriorMismatchWarning(f"{what}: {CHECK_UNITS}"),
+                          stacklevel=stacklevel + 1)
     return gains
+
+
+def ratios_to_prior(params: Mapping[str, float], prior: TwoMassDrive) -> str:
+    """``J_M x0.103, k_sh x6.4``: estimates over the prior's values, as text.
+
+    Parameters
+    ----------
+    params : mapping of str to float
+        Estimated linear parameters by name.
+    prior : TwoMassDrive
+        The prior drive.
+
+    Returns
+    -------
+    str
+        One ``name xratio`` per parameter, comma-separated.
+    """
+    return ", ".join(f"{n} x{x / getattr(prior, n):.3g}" for n, x in params.items())
+
+
+def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
+                         allow_far_from_prior: bool = False,
+                         stacklevel: int = 2) -> list[str]:
+    """Refuse or warn about fitted linear parameters far from the prior.
+
+    Parameters
+    ----------
+    params : mapping of str to float
+        The estimated linear parameters by name (``J_M``, ``k_sh``, ...).
+    prior : TwoMassDrive
+        The prior drive.
+    allow_far_from_prior : bool, optional
+        Answer (with the warning) even beyond :data:`REFUSE_FROM_PRIOR` (default False).
+    stacklevel : int, optional
+        Of the warning (2: the caller's caller).
+
+    Returns
+    -------
+    list of str
+        The names more than :data:`FAR_FROM_PRIOR` times off the prior (either way).
+
+    Raises
+    ------
+    InputError
+        If one is more than :data:`REFUSE_FROM_PRIOR` times off and
+        ``allow_far_from_prior`` is False.
+
+    Warns
+    -----
+    PriorMismatchWarning
+        When one is more than :data:`FAR_FROM_PRIOR` times off.
+    """
+    ratio = {n: x / getattr(prior, n) for n, x in params.items()}
+    very_far = {n: params[n] for n in params if is_far(ratio[n], REFUSE_FROM_PRIOR)}
+    if very_far and not allow_far_from_prior:
+        raise InputError(
+            f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: "
+            f"{CHECK_UNITS}; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
+    far = [n for n in params if is_far(ratio[n])]
+    if far:
+        warnings.warn(PriorMismatchWarning(
+            f"the fit moved {ratios_to_prior({n: params[n] for n in far}, prior)} from the "
+            f"prior: {CHECK_UNITS}"), stacklevel=stacklevel + 1)
+    return far

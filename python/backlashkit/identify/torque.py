@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, Option
 
 if TYPE_CHECKING:
     from .record import Record
@@ -51,6 +51,8 @@ RAMP_WINDOW = 51
 RAMP_SIGMAS = 8.0
 #: Samples per block of the estimate of that noise.
 NOISE_BLOCK = 500
+#: The advice to level the torque, in a message.
+TORQUE_LEVELS = Option("torque_levels", None, python="backlashkit.torque_levels")
 
 
 def torque_noise_std(torque: np.ndarray) -> float:
@@ -118,8 +120,7 @@ def check_torque_noise(rec: Record) -> None:
             f"{100 * noise / scale:.2g} % of its largest value): the model takes the torque "
             "as its exact input and rattles on the noise; give the torque command (the "
             "set-point) instead of a measured torque, or replace the torque by its "
-            "piecewise-constant levels (--torque-levels of identify, "
-            "backlashkit.torque_levels)"
+            "piecewise-constant levels (", TORQUE_LEVELS, ")"
         )
 
 
@@ -182,6 +183,12 @@ def torque_levels(rec: Record) -> Record:
     for seg in segments:  # noise per sample from the differences: noise_d / sqrt(2)
         _refuse_a_drift(rec, u[seg], float(levels[seg[0]]), int(seg[0]),
                         noise_d / math.sqrt(2.0), len(segments) == 1)
+    if len(segments) == 1:  # no step left: a slow ramp under the threshold, or no step
+        raise InputError(
+            f"{rec.name}: ", Option("torque_levels", None), " found one level only: the "
+            f"torque never changes by more than {JUMP_THRESHOLD:g} noise std from one "
+            "sample to the next (a slow ramp?); give the torque command (the set-point) "
+            "instead")
     return dataclasses.replace(rec, torque=levels)
 
 
@@ -214,7 +221,8 @@ def _refuse_a_drift(rec: Record, u: np.ndarray, level: float, i0: int, floor: fl
             f"{JUMP_THRESHOLD:g} noise std from one sample to the next" if only else
             "cannot level the torque")
     raise InputError(
-        f"{rec.name}: torque_levels {what}, and between t = {a:.6g} s and {b:.6g} s it "
+        f"{rec.name}: ", Option("torque_levels", None),
+        f" {what}, and between t = {a:.6g} s and {b:.6g} s it "
         f"departs from its level {level:.4g} N m by up to {worst:.3g} N m (averaged over "
         f"{RAMP_WINDOW} samples, whose noise std is about {noise:.3g} N m): a ramp, a "
         "smooth torque, or a step too small for the noise to tell from one sample to the "

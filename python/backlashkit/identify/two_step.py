@@ -71,310 +71,85 @@ Choices the paper leaves open (documented here, configurable where it matters)
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError
+from ..errors import InputError, Option, SearchEdgeWarning
 from ..plants import TwoMassDrive
+from .commutation import commutation_instants, fir_lowpass, pre_estimate
 from .record import Record, as_records, check_prior
-from .step import find_step_down, warn_held_speeds
+from .step import check_held_speeds, check_step_downs, find_step_down
 
 __all__ = [
-    "Commutation",
+    "DEFAULT_DT4",
+    "CriterionWindow",
     "RegressionIdentifier",
     "TwoStepIdentifier",
-    "commutation_instants",
-    "fir_lowpass",
-    "pre_estimate",
+    "cost_curve",
+    "criterion_costs",
+    "criterion_window",
+    "search_edges",
 ]
 
 ArrayLike = Sequence[float] | np.ndarray
 
 #: Paper A's identification time dt_4 in s.
 DEFAULT_DT4 = 1.0
+#: An estimate within this fraction of the interval's upper end from an end of the
+#: search interval sits on that end (the zoomed grids stop at 1e-6 of it).
+AT_EDGE = 1e-6
 
-def _firwin_hamming(numtaps: int, cutoff: float) -> np.ndarray:
-    """Hamming-windowed sinc low-pass taps, unit DC gain: ``scipy.signal.firwin(numtaps,
-    cutoff)`` (``cutoff`` relative to Nyquist), checked against it by the tests.
 
-    Written out because importing ``scipy.signal`` alone takes about 0.9 s, half of
-    the time budget of one identification from the command line.
-    """
-    m = np.arange(numtaps) - 0.5 * (numtaps - 1)
-    taps = cutoff * np.sinc(cutoff * m) * np.hamming(numtaps)
-    return taps / np.sum(taps)
-
-def fir_lowpass(
-    x: ArrayLike, cutoff: float, ts: float, *, numtaps: int | None = None
-) -> np.ndarray:
-    """Zero-phase FIR low-pass filter (linear-phase taps applied centred).
+def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = ()) -> list[str]:
+    """The ends of the search interval ``[lo, hi]`` that ``theta`` sits on, each warned.
 
     Parameters
     ----------
-    x : array_like
-        Signal, 1-D.
-    cutoff : float
-        Cut-off in **rad/s**, > 0 and below the Nyquist frequency ``pi / ts``.
-    ts : float
-        Sample time in s.
-    numtaps : int, optional
-        Odd filter length; default the odd integer nearest ``3.3 f_s / f_c``
-        (Hamming window, transition band about as wide as the cut-off), at least 3.
+    theta : float
+        The estimate in rad.
+    lo, hi : float
+        The search interval in rad.
+    advice : tuple of str or Option, optional
+        What to do, appended to the warning (e.g. widen ``n_theta``).
 
     Returns
     -------
-    numpy.ndarray
-        Filtered signal, same length; the ends are padded with the end values.
+    list of str
+        ``"lower"``, ``"upper"``, both or none.
+
+    Warns
+    -----
+    SearchEdgeWarning
+        For each end it sits on: the criterion's minimum may lie beyond it.
     """
-    arr = v.finite_array("x", x)
-    wc = v.positive("cutoff", cutoff)
-    ts = v.positive("ts", ts)
-    nyq = math.pi / ts
-    if not wc < nyq:
-        raise InputError(
-            f"cutoff must be below the Nyquist frequency pi/ts = {nyq:.6g} rad/s, got {cutoff!r}"
-        )
-    if numtaps is None:
-        fc_hz = wc / (2 * math.pi)
-        numtaps = 2 * int(round(3.3 / (fc_hz * ts) / 2)) + 1
-    elif isinstance(numtaps, bool) or not isinstance(numtaps, (int, np.integer)):
-        raise InputError(f"numtaps must be an odd integer >= 3, got {numtaps!r}")
-    numtaps = max(3, int(numtaps))
-    if numtaps % 2 == 0:
-        raise InputError(f"numtaps must be odd (a centred linear-phase filter), got {numtaps}")
-    taps = _firwin_hamming(numtaps, wc / nyq)
-    half = numtaps // 2
-    padded = np.pad(arr, half, mode="edge")
-    return np.convolve(padded, taps, mode="valid")
+    ends = [end for end, edge in (("lower", lo), ("upper", hi))
+            if abs(theta - edge) <= AT_EDGE * max(hi, 1e-300)]
+    for end in ends:
+        warnings.warn(SearchEdgeWarning(
+            f"theta is at the {end} end of the search interval: the cost's minimum may lie "
+            "beyond it", *advice), stacklevel=3)
+    return ends
 
-@dataclass(frozen=True)
-class Commutation:
-    """Commutation instants found by eq. 9 and the windows used.
-
-    Parameters
-    ----------
-    i_s, i_c, i_b : int
-        Sample indices of ``t_s``, ``t_c`` and ``t_b``.
-    t_s, t_c, t_b : float
-        Step-down, contact-loss and impact instants in s.
-    dt1, dt2, dt3 : float
-        Windows of eq. 9 in s (after ``t_s``).
-    """
-
-    i_s: int
-    i_c: int
-    i_b: int
-    t_s: float
-    t_c: float
-    t_b: float
-    dt1: float
-    dt2: float
-    dt3: float
-
-def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
-    if width <= 1:
-        return x.copy()
-    half = width // 2
-    padded = np.pad(x, half, mode="edge")
-    c = np.concatenate([[0.0], np.cumsum(padded)])
-    return (c[2 * half + 1 :] - c[: -2 * half - 1]) / (2 * half + 1)
-
-def _impact_time(record: Record, i_s: int, search: float) -> float:
-    """Rough impact instant (s after t_s) from the fastest rise of the motor speed."""
-    ts = record.ts
-    n = min(int(round(search / ts)), record.t.size - 1 - i_s)
-    h = max(1, int(round(0.020 / ts)))  # rise measured over 20 ms
-    if n < 4 * h:
-        raise InputError(
-            f"{record.name}: too few samples after the step-down at t = {record.t[i_s]:.6g} s "
-            f"({n}) to locate the commutations; record at least {search:g} s after it"
-        )
-    width = max(1, int(round(0.021 / ts)))
-    w = _moving_average(record.w_motor[i_s : i_s + n + h + 1], width)
-    rise = (w[h:] - w[:-h])[:n]
-    top = float(np.max(rise))
-    # noise level of the same statistic while the torque is held before t_s
-    before = _moving_average(record.w_motor[max(0, i_s - n - h) : i_s], width)
-    floor = 1e-9 * float(np.max(np.abs(record.w_motor[i_s : i_s + n])))
-    if before.size > 2 * h + 2:
-        pre = before[h:] - before[:-h]
-        floor = max(floor, 3.0 * 1.4826 * float(np.median(np.abs(pre - np.median(pre)))))
-    if not top > floor:
-        raise InputError(
-            f"{record.name}: no rise of the motor speed above its noise ({floor:.3g} rad/s) "
-            f"within {search:g} s after the step-down at t = {record.t[i_s]:.6g} s: no impact "
-            "on the negative flank found"
-        )
-    above = rise >= 0.5 * top
-    k = int(np.argmax(above))
-    while k + 1 < rise.size and rise[k + 1] >= rise[k]:  # climb to the local maximum
-        k += 1
-    j = k + h  # end of the fastest rise; walk back to the minimum that starts it
-    while j > 0 and w[j - 1] <= w[j]:
-        j -= 1
-    return j * ts
-
-#: Shapes of the load speed before the contact loss in ``F_1`` of eq. 9.
-ONSETS = ("constant", "unloading")
-
-def _w_c(y: np.ndarray, tt: np.ndarray, alpha: float, anchor: str,
-         onset: str = "constant") -> np.ndarray:
-    """W_c(t_c) for every candidate index 1 .. len - 2 (onset, then free decay).
-
-    ``tt[0]`` is the step-down instant. With ``onset="unloading"`` the load speed
-    before the candidate falls as ``w_0 - c (t - t_s)^3``: the shaft torque drops
-    quadratically after a torque step (the motor decelerates at a constant rate), so
-    the load's deceleration rises from 0 at ``t_s`` to the free decay's ``alpha w``
-    at ``t_c``; ``c`` follows from that slope, so the onset adds no parameter.
-    """
-    m = y.size
-    out = np.full(m, np.inf)
-    idx = np.arange(m)
-    tau = tt - tt[0]
-    for c in range(1, m - 1):
-        if onset == "unloading":
-            d = tau[c]
-            before = 1.0 + alpha * (d**3 - tau**3) / (3.0 * d**2)
-        else:
-            before = 1.0
-        g = np.where(idx < c, before, np.exp(-alpha * (tt - tt[c])))
-        a = y[c] if anchor == "sample" else float(y @ g) / float(g @ g)
-        r = y - a * g
-        out[c] = float(r @ r)
-    return out
-
-def _w_b(y: np.ndarray, tt: np.ndarray, alpha: float, anchor: str) -> np.ndarray:
-    """W_b(t_b) for every candidate index 0 .. len - 2 (free decay, then constant)."""
-    m = y.size
-    out = np.full(m, np.inf)
-    idx = np.arange(m)
-    for c in range(0, m - 1):
-        g = np.where(idx <= c, np.exp(-alpha * (tt - tt[c])), 1.0)
-        a = y[c] if anchor == "sample" else float(y @ g) / float(g @ g)
-        r = y - a * g
-        out[c] = float(r @ r)
-    return out
-
-def commutation_instants(
-    record: Record,
-    alpha: float,
-    *,
-    dt1: float | None = None,
-    dt2: float | None = None,
-    dt3: float | None = None,
-    anchor: str = "sample",
-    onset: str = "constant",
-    search: float = 0.5,
-) -> Commutation:
-    """Estimate ``t_c`` and ``t_b`` after the step-down by eq. 9 of paper A.
-
-    Parameters
-    ----------
-    record : Record
-        A step-down experiment.
-    alpha : float
-        Load decay rate ``f_L / J_L`` in 1/s (of the prior), >= 0.
-    dt1, dt2, dt3 : float, optional
-        Windows of eq. 9 in s after ``t_s``, ``0 < dt1``, ``0 < dt2 < dt3``; default
-        from the data (module docstring).
-    anchor : {"sample", "fit"}, optional
-        Amplitude of the decay in ``F_1``, ``F_2``: the measured sample at the
-        candidate instant (paper) or its least-squares value.
-    onset : {"constant", "unloading"}, optional
-        Load speed before ``t_c`` in ``F_1``: constant (paper; ``t_c`` comes out
-        about 2.4 samples early on paper A's noise-free data, since the unloading
-        shaft already slows the load) or falling as ``(t - t_s)^3`` into the free
-        decay (the unloading after a torque step; within 0.4 samples there, within
-        2 samples for shafts 0.3 to 3 times as stiff and motors 0.2 to 5 times as
-        heavy). Same number of fitted values either way.
-    search : float, optional
-        Span in s after ``t_s`` searched for the impact when the windows are derived
-        from the data (default 0.5 s).
-
-    Returns
-    -------
-    Commutation
-        The instants and the windows used.
-
-    Raises
-    ------
-    InputError
-        If the record has no step-down, no impact is found, or the windows do not fit
-        in the record.
-    """
-    alpha = v.nonnegative("alpha", alpha)
-    if anchor not in ("sample", "fit"):
-        raise InputError(f"anchor must be 'sample' or 'fit', got {anchor!r}")
-    if onset not in ONSETS:
-        raise InputError(f"onset must be 'constant' or 'unloading', got {onset!r}")
-    i_s, t_s, _, _ = find_step_down(record)
-    ts = record.ts
-    if dt1 is None or dt2 is None or dt3 is None:
-        tau = _impact_time(record, i_s, v.positive("search", search))
-        if tau < 4 * ts:
-            raise InputError(
-                f"{record.name}: the motor speed rises {tau:.3g} s after the step-down at "
-                f"t = {t_s:.6g} s: too early for a passage through the backlash; no contact "
-                "change found"
-            )
-        dt1 = 0.5 * tau if dt1 is None else dt1
-        dt2 = 0.5 * tau if dt2 is None else dt2
-        dt3 = 1.15 * tau if dt3 is None else dt3
-    dt1, dt2, dt3 = (v.positive(n, x) for n, x in (("dt1", dt1), ("dt2", dt2), ("dt3", dt3)))
-    if not dt2 < dt3:
-        raise InputError(f"dt2 must be < dt3, got dt2 = {dt2!r}, dt3 = {dt3!r}")
-    n1, n2, n3 = (int(round(x / ts)) for x in (dt1, dt2, dt3))
-    if n1 < 2 or n3 - n2 < 2:
-        raise InputError(
-            f"{record.name}: the windows of eq. 9 span too few samples (dt1 = {dt1:.3g} s, "
-            f"dt3 - dt2 = {dt3 - dt2:.3g} s at Ts = {ts:.3g} s)"
-        )
-    if i_s + n3 >= record.t.size:
-        raise InputError(
-            f"{record.name}: the record ends before t_s + dt3 = {t_s + dt3:.6g} s"
-        )
-    t, y = record.t, record.w_load
-    # eq. 9's argmins do not depend on the speed's scale, but 1e300 rad/s would overflow
-    # its squares: scaled by a power of 2, exact, so every other record's sums are unchanged
-    y = np.ldexp(y, -math.frexp(float(np.max(np.abs(y))))[1])
-    wc = _w_c(y[i_s : i_s + n1 + 1], t[i_s : i_s + n1 + 1], alpha, anchor, onset)
-    i_c = i_s + int(np.argmin(wc))
-    lo = i_s + n2
-    wb = _w_b(y[lo : i_s + n3 + 1], t[lo : i_s + n3 + 1], alpha, anchor)
-    i_b = lo + int(np.argmin(wb))
-    if not i_b > i_c:
-        raise InputError(
-            f"{record.name}: eq. 9 put the impact (t_b = {t[i_b]:.6g} s) before the contact "
-            f"loss (t_c = {t[i_c]:.6g} s); no contact change found"
-        )
-    return Commutation(i_s, i_c, i_b, t_s, float(t[i_c]), float(t[i_b]), dt1, dt2, dt3)
-
-def pre_estimate(w_motor_f: ArrayLike, w_load_f: ArrayLike, ts: float, i_c: int, i_b: int) -> float:
-    """Eq. 6: ``theta_ini = -0.5 * integral_{t_c}^{t_b} (w_Mf - w_Lf) dt``.
-
-    Parameters
-    ----------
-    w_motor_f, w_load_f : array_like
-        Filtered motor and load speeds in rad/s.
-    ts : float
-        Sample time in s.
-    i_c, i_b : int
-        Sample indices of ``t_c`` and ``t_b``, ``i_c < i_b``.
-
-    Returns
-    -------
-    float
-        The pre-estimate of the backlash half-width in rad (trapezoidal rule).
-    """
-    d = np.asarray(w_motor_f, float)[i_c : i_b + 1] - np.asarray(w_load_f, float)[i_c : i_b + 1]
-    return float(-0.5 * ts * (d.sum() - 0.5 * (d[0] + d[-1])))
 
 @dataclass
-class _Segment:
-    """The part of a record used by W_1: from t_s over dt_4, and the model start."""
+
+class CriterionWindow:
+    """The part of a record in the criterion ``W_1``: from ``t_s`` over ``dt4``.
+
+    Parameters
+    ----------
+    t, torque, w_motor : numpy.ndarray
+        Time (s), torque (N m) and measured motor speed (rad/s) on the window.
+    w0 : float
+        The measured speed level that starts the model (rad/s).
+    name : str
+        The record's name.
+    """
 
     t: np.ndarray
     torque: np.ndarray
@@ -382,7 +157,29 @@ class _Segment:
     w0: float
     name: str = "record"
 
-def _segment(record: Record, dt4: float, level_window: float) -> _Segment:
+
+def criterion_window(record: Record, dt4: float, level_window: float) -> CriterionWindow:
+    """The window of ``record`` in the criterion ``W_1``.
+
+    Parameters
+    ----------
+    record : Record
+        A step-down experiment.
+    dt4 : float
+        Span after ``t_s`` in s.
+    level_window : float
+        Span before ``t_s`` in s over which the starting speed is averaged.
+
+    Returns
+    -------
+    CriterionWindow
+        The samples from ``t_s`` to ``t_s + dt4`` and the measured starting speed.
+
+    Raises
+    ------
+    InputError
+        If the record ends before ``t_s + dt4``.
+    """
     i_s, t_s, _, _ = find_step_down(record)
     ts = record.ts
     n4 = int(round(dt4 / ts))
@@ -394,10 +191,29 @@ def _segment(record: Record, dt4: float, level_window: float) -> _Segment:
     nl = max(1, min(i_s, int(round(level_window / ts))))
     w0 = float(np.mean(record.w_motor[i_s - nl : i_s]))
     sl = slice(i_s, i_s + n4 + 1)
-    return _Segment(record.t[sl], record.torque[sl], record.w_motor[sl], w0, record.name)
+    return CriterionWindow(record.t[sl], record.torque[sl], record.w_motor[sl], w0, record.name)
 
-def _cost(prior: TwoMassDrive, segments: list[_Segment], thetas: np.ndarray, workers) -> np.ndarray:
-    """Sum over segments of W_1(theta) for every theta (simulated in parallel)."""
+
+def criterion_costs(prior: TwoMassDrive, segments: list[CriterionWindow], thetas: np.ndarray,
+                    workers: int | None = None) -> np.ndarray:
+    """Sum over windows of ``W_1(theta)`` for every theta (simulated in parallel).
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        Prior linear parameters.
+    segments : list of CriterionWindow
+        The windows (:func:`criterion_window`).
+    thetas : numpy.ndarray
+        Backlash half-widths in rad.
+    workers : int, optional
+        Threads for the simulations (default all cores).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``W_1`` in (rad/s)^2 per theta.
+    """
     from ..simulate import simulate_batch
 
     total = np.zeros(thetas.size)
@@ -418,6 +234,7 @@ def _cost(prior: TwoMassDrive, segments: list[_Segment], thetas: np.ndarray, wor
             total[j] += float(e @ e)
     return total
 
+
 def _search(prior, segments, lo: float, hi: float, n_grid: int, workers) -> tuple[float, float]:
     """Grid search of ``W_1`` over ``[lo, hi]``, then zoomed grids around the best point.
 
@@ -427,7 +244,7 @@ def _search(prior, segments, lo: float, hi: float, n_grid: int, workers) -> tupl
     (``scipy.optimize``, about 0.6 s) would cost more than the whole search.
     """
     grid = np.linspace(lo, hi, n_grid)
-    costs = _cost(prior, segments, grid, workers)
+    costs = criterion_costs(prior, segments, grid, workers)
     j = int(np.argmin(costs))
     best_theta, best_cost = float(grid[j]), float(costs[j])
     step = float(grid[1] - grid[0]) if n_grid > 1 else 0.0
@@ -435,15 +252,17 @@ def _search(prior, segments, lo: float, hi: float, n_grid: int, workers) -> tupl
     while step > tol:
         a, b = max(lo, best_theta - step), min(hi, best_theta + step)
         zoom = np.linspace(a, b, ZOOM_POINTS)
-        z_costs = _cost(prior, segments, zoom, workers)
+        z_costs = criterion_costs(prior, segments, zoom, workers)
         k = int(np.argmin(z_costs))
         if z_costs[k] < best_cost:
             best_theta, best_cost = float(zoom[k]), float(z_costs[k])
         step = float(zoom[1] - zoom[0])
     return best_theta, best_cost
 
+
 #: Candidates per zoomed grid of :func:`_search` (21: each zoom narrows the cell tenfold).
 ZOOM_POINTS = 21
+
 
 class TwoStepIdentifier:
     """Paper A's two-step backlash identification (Section 4.3, steps 4-8).
@@ -473,6 +292,10 @@ class TwoStepIdentifier:
         averaged (default 1).
     n_grid : int, optional
         Grid points of the final search before refinement (default 21).
+    allow_far_from_prior : bool, optional
+        Answer even when a record's held speeds are more than
+        :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the prior's (default
+        False: refused, a unit mistake being likelier).
     workers : int, optional
         Threads for the simulations (default all cores).
 
@@ -492,6 +315,9 @@ class TwoStepIdentifier:
         Final search interval ``theta_ini (1 -+ n_theta)`` in rad.
     cost_ : float
         ``W_1`` at ``theta_`` in (rad/s)^2.
+    search_edges_ : list of str
+        The ends of ``bounds_`` that ``theta_`` sits on (:func:`search_edges`; each
+        warned with a :class:`~backlashkit.errors.SearchEdgeWarning`).
     held_speed_gains_ : list of float
         :func:`held_speed_gain` per record (``records``, then the ``final_records``
         not among them): the held speeds over the prior's; one more than
@@ -517,6 +343,7 @@ class TwoStepIdentifier:
         onset: str = "constant",
         level_window: float = 1.0,
         n_grid: int = 21,
+        allow_far_from_prior: bool = False,
         workers: int | None = None,
     ) -> None:
         self.prior = prior
@@ -529,6 +356,7 @@ class TwoStepIdentifier:
         self.onset = onset
         self.level_window = level_window
         self.n_grid = n_grid
+        self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
 
     def fit(self, records, final_records=None) -> TwoStepIdentifier:
@@ -552,15 +380,22 @@ class TwoStepIdentifier:
         Raises
         ------
         InputError
-            If a parameter is invalid, or a record has no step-down, no commutation
-            the method can use, or a pre-estimate that is not positive (each message
-            names the record).
+            If a parameter is invalid, a record is no step-down experiment
+            (:func:`~backlashkit.identify.step.check_step_down`), its held speeds are
+            more than :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the
+            prior's (unless ``allow_far_from_prior``), or it has no commutation the
+            method can use, or a pre-estimate that is not positive (each message names
+            the record).
 
         Warns
         -----
         PriorMismatchWarning
             If a record's held speeds are more than :data:`FAR_FROM_PRIOR` times off
             the prior's response (:func:`held_speed_gain`).
+        StepDownWarning
+            If a record steps down more than once (the largest step-down is used).
+        SearchEdgeWarning
+            If ``theta_`` sits at an end of the search interval.
         """
         prior = check_prior(self.prior)
         n_theta = v.positive("n_theta", self.n_theta)
@@ -575,8 +410,9 @@ class TwoStepIdentifier:
         recs = as_records(records, prior=prior)
         finals = recs if final_records is None else as_records(final_records, "final_records",
                                                                 prior=prior)
-        gains = warn_held_speeds(recs + [f for f in finals if all(f is not r for r in recs)],
-                                  prior)
+        every = recs + [f for f in finals if all(f is not r for r in recs)]
+        check_step_downs(every, prior)
+        gains = check_held_speeds(every, prior, allow_far_from_prior=self.allow_far_from_prior)
         alpha = prior.f_L / prior.J_L
         comms, inis = [], []
         for rec in recs:
@@ -603,9 +439,11 @@ class TwoStepIdentifier:
             comms.append(com)
             inis.append(ini)
         theta_ini = float(np.mean(inis))
-        segments = [_segment(r, dt4, level_window) for r in finals]
+        segments = [criterion_window(r, dt4, level_window) for r in finals]
         lo, hi = theta_ini * (1 - n_theta), theta_ini * (1 + n_theta)
         self.theta_, self.cost_ = _search(prior, segments, lo, hi, n_grid, self.workers)
+        self.search_edges_ = search_edges(self.theta_, lo, hi,
+                                          advice=(" (widen ", Option("n_theta", None), ")"))
         self.theta_ini_ = theta_ini
         self.theta_ini_per_record_ = inis
         self.commutations_ = comms
@@ -614,6 +452,7 @@ class TwoStepIdentifier:
         self.bounds_ = (lo, hi)
         self.held_speed_gains_ = gains
         return self
+
 
 class RegressionIdentifier:
     """Paper A's baseline (Table 2): least squares on ``w_M`` over ``[0, theta_max]``.
@@ -635,6 +474,10 @@ class RegressionIdentifier:
         Span in s before ``t_s`` for the speed level that starts the model (default 1).
     n_grid : int, optional
         Grid points (default 61, a step of 0.25 deg over 15 deg).
+    allow_far_from_prior : bool, optional
+        Answer even when a record's held speeds are more than
+        :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the prior's (default
+        False: refused, a unit mistake being likelier).
     workers : int, optional
         Threads for the simulations (default all cores).
 
@@ -646,6 +489,9 @@ class RegressionIdentifier:
         Criterion at ``theta_`` in (rad/s)^2.
     t_s_ : list of float
         Step-down instant per record in s.
+    search_edges_ : list of str
+        The ends of ``[0, theta_max]`` that ``theta_`` sits on (:func:`search_edges`;
+        each warned with a :class:`~backlashkit.errors.SearchEdgeWarning`).
     held_speed_gains_ : list of float
         :func:`held_speed_gain` per record: the held speeds over the prior's; one more
         than :data:`FAR_FROM_PRIOR` times off 1 raises a
@@ -662,6 +508,7 @@ class RegressionIdentifier:
         dt4: float = DEFAULT_DT4,
         level_window: float = 1.0,
         n_grid: int = 61,
+        allow_far_from_prior: bool = False,
         workers: int | None = None,
     ) -> None:
         self.prior = prior
@@ -669,6 +516,7 @@ class RegressionIdentifier:
         self.dt4 = dt4
         self.level_window = level_window
         self.n_grid = n_grid
+        self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
 
     def fit(self, records) -> RegressionIdentifier:
@@ -687,13 +535,20 @@ class RegressionIdentifier:
         Raises
         ------
         InputError
-            If a parameter is invalid or a record has no step-down.
+            If a parameter is invalid, a record is no step-down experiment
+            (:func:`~backlashkit.identify.step.check_step_down`) or its held speeds are
+            more than :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the
+            prior's (unless ``allow_far_from_prior``).
 
         Warns
         -----
         PriorMismatchWarning
             If a record's held speeds are more than :data:`FAR_FROM_PRIOR` times off
             the prior's response (:func:`held_speed_gain`).
+        StepDownWarning
+            If a record steps down more than once (the largest step-down is used).
+        SearchEdgeWarning
+            If ``theta_`` sits at an end of the search interval.
         """
         prior = check_prior(self.prior)
         theta_max = v.positive("theta_max", self.theta_max)
@@ -701,8 +556,55 @@ class RegressionIdentifier:
         level_window = v.positive("level_window", self.level_window)
         n_grid = v.integer("n_grid", self.n_grid, 2)
         recs = as_records(records, prior=prior)
-        self.held_speed_gains_ = warn_held_speeds(recs, prior)
-        segments = [_segment(r, dt4, level_window) for r in recs]
+        check_step_downs(recs, prior)
+        self.held_speed_gains_ = check_held_speeds(
+            recs, prior, allow_far_from_prior=self.allow_far_from_prior)
+        segments = [criterion_window(r, dt4, level_window) for r in recs]
         self.theta_, self.cost_ = _search(prior, segments, 0.0, theta_max, n_grid, self.workers)
+        self.search_edges_ = search_edges(self.theta_, 0.0, theta_max)
         self.t_s_ = [find_step_down(r)[1] for r in recs]
         return self
+
+
+def cost_curve(
+    prior: TwoMassDrive,
+    records: Any,
+    thetas: Sequence[float] | np.ndarray,
+    *,
+    dt4: float = DEFAULT_DT4,
+    level_window: float = 1.0,
+    workers: int | None = None,
+) -> np.ndarray:
+    """Paper A's criterion ``W_1(theta)`` (sum over records) on a grid of ``theta``.
+
+    The same criterion as the final step of
+    :class:`~backlashkit.identify.TwoStepIdentifier`: squared error of the motor speed
+    over ``[t_s, t_s + dt4]``, the model ``prior.with_theta(theta)`` started at the
+    measured steady state (simulated with :func:`backlashkit.simulate_batch`).
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        Prior linear parameters.
+    records : Record or sequence of Record
+        Step-down experiments.
+    thetas : array_like
+        Backlash half-widths in rad, >= 0.
+    dt4 : float, optional
+        Span of the criterion after ``t_s`` in s (default 1).
+    level_window : float, optional
+        Span in s before ``t_s`` over which the starting speed is averaged (default 1).
+    workers : int, optional
+        Threads for the simulations (default all cores).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``W_1`` in (rad/s)^2 per entry of ``thetas``.
+    """
+    recs = as_records(records)
+    th = np.asarray(thetas, float).reshape(-1)
+    if th.size == 0 or not np.isfinite(th).all() or (th < 0).any():
+        raise InputError("thetas must be a non-empty array of finite values >= 0 (rad)")
+    segments = [criterion_window(r, dt4, level_window) for r in recs]
+    return criterion_costs(prior, segments, th, workers)

@@ -9,9 +9,7 @@ fixed controller alone and the adaptive gain only (the two comparisons of the te
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
+import os
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +23,7 @@ from ..nonlinearities import (
     SmoothFilterInverse,
 )
 
-__all__ = ["PAPER", "add_arguments", "run_cli", "run_tao1995"]
+__all__ = ["PAPER", "checks", "run_tao1995", "summary", "write_report"]
 
 #: The paper's numbers (Section IV).
 PAPER: dict[str, Any] = {
@@ -89,27 +87,20 @@ def run_tao1995(
     }
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the options of ``backlashkit reproduce tao1995``.
+def checks(runs: dict[str, ClosedLoopResponse]) -> list[tuple[str, str, bool]]:
+    """The reproduction's bars: the paper's tracking and convergence, and the two
+    comparisons of its text.
 
     Parameters
     ----------
-    parser : argparse.ArgumentParser
-        The parser of the ``tao1995`` target.
+    runs : dict of str to ClosedLoopResponse
+        As returned by :func:`run_tao1995`.
 
     Returns
     -------
-    None
+    list of tuple of (str, str, bool)
+        ``(bar, measured value, met)``.
     """
-    parser.add_argument(
-        "--json", metavar="FILE", help="write the JSON summary to FILE ('-': stdout)"
-    )
-    parser.add_argument("--report", metavar="DIR", help="write an HTML report (index.html), its "
-                        "figures (PNG, SVG) and the traces (CSV) into DIR")
-    parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
-
-
-def _checks(runs: dict[str, ClosedLoopResponse]) -> list[tuple[str, str, bool]]:
     ex, sm = runs["exact"], runs["smooth-filter"]
     star = PAPER["theta_b_star"]
     rel = max(abs(a - b) / abs(b) for a, b in zip(ex.theta_b[-1], star, strict=True))
@@ -138,54 +129,54 @@ def _checks(runs: dict[str, ClosedLoopResponse]) -> list[tuple[str, str, bool]]:
     ]
 
 
-def run_cli(args: argparse.Namespace) -> int:
-    """Run ``backlashkit reproduce tao1995``.
+def summary(runs: dict[str, ClosedLoopResponse]) -> dict[str, Any]:
+    """The reproduction as a JSON-ready document.
 
     Parameters
     ----------
-    args : argparse.Namespace
-        With ``json``, ``report``, ``force``.
+    runs : dict of str to ClosedLoopResponse
+        As returned by :func:`run_tao1995`.
 
     Returns
     -------
-    int
-        0 when every bar of the reproduction is met, 1 otherwise.
+    dict
+        ``controller`` (the designed gains), ``variants`` (each run's summary),
+        ``paper`` (its ``theta_b_star`` and controller) and ``checks`` (each bar of
+        :func:`checks` with its measured value and whether it is met).
     """
-    from ..cli.main import check_reproduce_outputs
-
-    json_path = getattr(args, "json", None)
-    rep = check_reproduce_outputs(json_path, getattr(args, "report", None),
-                                  bool(getattr(args, "force", False)))
-    runs = run_tao1995()
-    doc = {
+    return {
         "controller": runs["exact"].summary()["controller"],
         "variants": {k: r.summary() for k, r in runs.items()},
         "paper": {
             "theta_b_star": list(PAPER["theta_b_star"]),
             "controller": list(PAPER["controller"]),
         },
+        "checks": [{"bar": b, "value": v, "met": bool(m)} for b, v, m in checks(runs)],
     }
-    checks = _checks(runs)
-    doc["checks"] = [{"bar": b, "value": v, "met": bool(m)} for b, v, m in checks]
-    if json_path == "-":
-        json.dump(doc, sys.stdout, indent=2)
-        sys.stdout.write("\n")
-    else:
-        if json_path is not None:
-            Path(json_path).write_text(json.dumps(doc, indent=2) + "\n")
-        for b, v, m in checks:
-            print(f"{'MET ' if m else 'MISS'}  {b}: {v}")
-    if rep is not None:
-        _write_report(rep, runs, checks)
-    return 0 if all(m for _, _, m in checks) else 1
 
 
-def _write_report(rep: Path, runs: dict[str, ClosedLoopResponse], checks) -> None:
-    """``index.html`` (the bars and Figs. 5-6), the figures (PNG, SVG) and one trace CSV
-    per controller variant, into ``rep``."""
+def write_report(directory: str | os.PathLike[str],
+                 runs: dict[str, ClosedLoopResponse]) -> Path:
+    """Write the reproduction's HTML report into ``directory``.
+
+    ``index.html`` (the bars of :func:`checks` and Figs. 5-6), the figures (PNG, SVG)
+    and one trace CSV per controller variant.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        Output directory, created if absent; its files of these names are overwritten.
+    runs : dict of str to ClosedLoopResponse
+        As returned by :func:`run_tao1995`.
+
+    Returns
+    -------
+    pathlib.Path
+        Path of ``index.html``.
+    """
     from matplotlib.figure import Figure
 
-    from ..cli.control import write_trace
+    from ..control.closed_loop import write_trace
     from ..htmlpage import (
         bars_table,
         figure,
@@ -193,6 +184,7 @@ def _write_report(rep: Path, runs: dict[str, ClosedLoopResponse], checks) -> Non
         save_figure,
     )
 
+    rep = Path(directory)
     rep.mkdir(parents=True, exist_ok=True)
     save_figure(runs["exact"].plot(), rep, "fig5_exact_inverse")
     save_figure(runs["smooth-filter"].plot(), rep, "fig6_smooth_inverse_alpha6")
@@ -218,7 +210,7 @@ def _write_report(rep: Path, runs: dict[str, ClosedLoopResponse], checks) -> Non
         "inverse with alpha = 6 (Fig. 6), fixed controller alone (none), adaptive gain only "
         f"(gain-only). Closed-loop traces as CSV: {traces}.</p>",
         "<h2>Bars</h2>",
-        bars_table(checks),
+        bars_table(checks(runs)),
         "<h2>Fig. 5: exact adaptive inverse</h2>",
         figure("fig5_exact_inverse", "Closed loop with the adaptive backlash inverse"),
         "<h2>Fig. 6: smooth inverse (alpha = 6)</h2>",
@@ -226,5 +218,6 @@ def _write_report(rep: Path, runs: dict[str, ClosedLoopResponse], checks) -> Non
         "<h2>Every variant</h2>",
         figure("comparison", "Tracking error e and backlash output v of every variant"),
     ]
-    (rep / "index.html").write_text(
-        page("Tao & Kokotović (1995): reproduction", sections), encoding="utf-8")
+    index = rep / "index.html"
+    index.write_text(page("Tao & Kokotović (1995): reproduction", sections), encoding="utf-8")
+    return index

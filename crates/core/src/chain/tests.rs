@@ -1,0 +1,265 @@
+use super::*;
+
+fn paper_drive(theta: f64) -> ChainParams {
+    ChainParams::new(
+        vec![4.88e-3, 6.8e-2],
+        vec![0.5e-2, 0.5e-2],
+        vec![78.0],
+        vec![1.575e-2],
+        vec![theta],
+    )
+}
+
+fn paper_input(ts: f64) -> Vec<f64> {
+    let n = (80.0 / ts) as usize + 1;
+    (0..n)
+        .map(|i| if (i as f64) * ts < 40.0 { 0.157 } else { 0.0 })
+        .collect()
+}
+
+#[test]
+fn zero_backlash_matches_linear_steady_state() {
+    // With theta = 0 the paper law is linear: the speed settles at u / (f_M + f_L)
+    // (time constant (J_M + J_L) / (f_M + f_L) = 7.3 s, so 400 s is 55 of them).
+    let p = paper_drive(0.0);
+    let u = vec![0.157; 400_001];
+    let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &u, &[0.0; 3]).unwrap();
+    let last = &out.states[out.states.len() - 3..];
+    assert!((last[0] - 15.7).abs() < 1e-6, "{last:?}");
+    assert!((last[1] - 15.7).abs() < 1e-6);
+    assert!((last[2] - 0.5e-2 * 15.7 / 78.0).abs() < 1e-9);
+}
+
+#[test]
+fn relation_4_holds_after_the_step_down() {
+    // Paper A, eq. 4: theta = -1/2 int_{t_c}^{t_b} (w_M - w_L) dt, i.e. the twist
+    // moves by exactly 2 theta between the first two contact changes after t_s.
+    let theta = 3.49e-2;
+    let p = paper_drive(theta);
+    let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &paper_input(1e-3), &[0.0; 3]).unwrap();
+    let after: Vec<_> = out.events.iter().filter(|e| e.time > 40.0).collect();
+    assert!(after.len() >= 2, "{:?}", out.events);
+    assert_eq!((after[0].from, after[0].to), (1, 0));
+    assert_eq!((after[1].from, after[1].to), (0, -1));
+    assert!(after[0].time > 40.0 && after[0].time < after[1].time);
+}
+
+#[test]
+fn steady_state_start_stays_put() {
+    let theta = 0.02;
+    let p = paper_drive(theta);
+    let u0 = 0.3;
+    let w = u0 / 1e-2;
+    let x0 = [w, w, theta + 0.5e-2 * w / 78.0];
+    for law in [Law::Paper, Law::NoPull] {
+        let out = simulate_chain(&p, law, 0.0, 1e-3, &vec![u0; 1000], &x0).unwrap();
+        assert!(out.events.is_empty());
+        let last = &out.states[out.states.len() - 3..];
+        for i in 0..3 {
+            assert!(
+                (last[i] - x0[i]).abs() < 1e-9 * x0[i].abs().max(1.0),
+                "{law:?} {last:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn event_located_inside_the_sample_free_flight() {
+    // From rest in the middle of the gap, under torque u the motor alone accelerates:
+    // w_M(t) = (u/f_M)(1 - exp(-f_M t / J_M)), load at rest, so the twist reaches
+    // theta at the root of phi(t) = (u/f_M)(t - (J_M/f_M)(1 - exp(-f_M t/J_M))).
+    let p = paper_drive(0.01);
+    let u = 0.2;
+    let (jm, fm) = (4.88e-3, 0.5e-2);
+    let phi = |t: f64| (u / fm) * (t - (jm / fm) * (1.0 - (-fm * t / jm).exp()));
+    let (mut lo, mut hi) = (0.0, 1.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if phi(mid) < 0.01 {
+            lo = mid
+        } else {
+            hi = mid
+        }
+    }
+    let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &vec![u; 100], &[0.0; 3]).unwrap();
+    let e = out.events[0];
+    assert_eq!((e.from, e.to), (0, 1));
+    assert!((e.time - lo).abs() < 1e-12, "{} vs {}", e.time, lo);
+    assert!(
+        ((e.time / 1e-3).fract()).abs() > 1e-3,
+        "event should not sit on the grid"
+    );
+}
+
+#[test]
+fn no_pull_torque_never_negative_on_positive_flank() {
+    let p = paper_drive(0.0349);
+    let out = simulate_chain(
+        &p,
+        Law::NoPull,
+        0.0,
+        1e-3,
+        &paper_input(1e-3)[..45_000],
+        &[0.0; 3],
+    )
+    .unwrap();
+    for (row, m) in out.states.chunks(3).zip(&out.modes) {
+        if *m == 1 {
+            let t = 78.0 * (row[2] - 0.0349) + 1.575e-2 * (row[0] - row[1]);
+            assert!(t >= -1e-9, "{t}");
+        }
+    }
+    // and the paper law does pull at some point after the step-down
+    let out = simulate_chain(
+        &p,
+        Law::Paper,
+        0.0,
+        1e-3,
+        &paper_input(1e-3)[..45_000],
+        &[0.0; 3],
+    )
+    .unwrap();
+    let min_t = out
+        .states
+        .chunks(3)
+        .zip(&out.modes)
+        .filter(|(_, m)| **m == 1)
+        .map(|(r, _)| 78.0 * (r[2] - 0.0349) + 1.575e-2 * (r[0] - r[1]))
+        .fold(f64::INFINITY, f64::min);
+    assert!(min_t < 0.0);
+}
+
+#[test]
+fn batch_matches_single_runs_for_any_worker_count() {
+    let params: Vec<_> = (0..8).map(|i| paper_drive(0.005 * i as f64)).collect();
+    let u = paper_input(1e-3)[..5000].to_vec();
+    let xs = vec![0.0; 3 * params.len()];
+    let (b, n) = (params.len(), u.len());
+    let run = |workers| {
+        let mut st = vec![0.0; b * n * 3];
+        let mut md = vec![0i8; b * n];
+        let ev = simulate_chain_batch_into(
+            &params,
+            Law::Paper,
+            0.0,
+            1e-3,
+            n,
+            &u,
+            &xs,
+            &mut st,
+            &mut md,
+            workers,
+        )
+        .unwrap();
+        (st, md, ev)
+    };
+    let (one, two) = (run(1), run(2));
+    for (i, p) in params.iter().enumerate() {
+        let single = simulate_chain(p, Law::Paper, 0.0, 1e-3, &u, &[0.0; 3]).unwrap();
+        assert_eq!(single.states[..], one.0[i * n * 3..(i + 1) * n * 3]);
+        assert_eq!(single.states[..], two.0[i * n * 3..(i + 1) * n * 3]);
+        assert_eq!(single.modes[..], two.1[i * n..(i + 1) * n]);
+        assert_eq!(single.events, two.2[i].0);
+    }
+}
+
+#[test]
+fn invalid_parameters_are_reported() {
+    let mut p = paper_drive(0.01);
+    p.j[1] = -1.0;
+    let err = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &[0.0; 10], &[0.0; 3]).unwrap_err();
+    assert!(err.to_string().contains("J[1]"), "{err}");
+    let p = paper_drive(0.01);
+    let err = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &[0.0; 10], &[0.0; 5]).unwrap_err();
+    assert!(err.to_string().contains("initial state"), "{err}");
+}
+
+/// The motor alone (a gap far wider than its travel) with Coulomb friction `fc`.
+fn free_motor(f_m: f64, fc: f64, fs: f64) -> ChainParams {
+    let mut p = paper_drive(100.0);
+    p.f[0] = f_m;
+    p.fc = vec![fc, 0.0];
+    p.fs = vec![fs, 0.0];
+    p
+}
+
+#[test]
+fn coulomb_block_stops_at_closed_form_time_and_sticks() {
+    // J w' = -fc: the speed reaches 0 at J w0 / fc and stays there exactly.
+    let (jm, fc, w0) = (4.88e-3, 0.02, 3.1);
+    let p = free_motor(0.0, fc, fc);
+    let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &[0.0; 1000], &[w0, 0.0, 0.0]).unwrap();
+    assert_eq!(out.events.len(), 1, "{:?}", out.events);
+    let e = out.events[0];
+    // friction switch of inertia 0 is reported as N - 1 + 0 = 1
+    assert_eq!((e.index, e.from, e.to), (1, 1, 0));
+    assert!((e.time - jm * w0 / fc).abs() < 1e-12, "{e:?}");
+    let last = &out.states[out.states.len() - 3..];
+    assert_eq!(last[0], 0.0);
+    // modes: shaft, then the sticky inertia (the load has no friction switch)
+    assert_eq!(p.n_switches(), 2);
+    assert_eq!(&out.modes[out.modes.len() - 2..], &[0, 0]);
+}
+
+#[test]
+fn breakaway_on_the_held_input() {
+    // Stuck at rest; the staircase u_k = 0.003 k first exceeds fs = 0.05 at k = 17.
+    let p = free_motor(0.5e-2, 0.03, 0.05);
+    let u: Vec<f64> = (0..40).map(|k| 0.003 * k as f64).collect();
+    let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &u, &[0.0; 3]).unwrap();
+    assert_eq!(out.events.len(), 1, "{:?}", out.events);
+    let e = out.events[0];
+    assert_eq!((e.from, e.to), (0, 1));
+    assert!((e.time - 0.017).abs() < 1e-15, "{e:?}");
+}
+
+#[test]
+fn current_loop_lags_the_set_point() {
+    // Free motor without friction, T(0) = 0: T = u (1 - exp(-t / tau)).
+    let mut p = paper_drive(100.0);
+    p.tau_i = 2e-3;
+    let u = vec![0.3; 50];
+    let out = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &u, &[0.0; 4]).unwrap();
+    for k in 0..50 {
+        let t = k as f64 * 1e-3;
+        let torque = out.states[4 * k + 3];
+        assert!(
+            (torque - 0.3 * (1.0 - (-t / 2e-3).exp())).abs() < 1e-15,
+            "{k}"
+        );
+    }
+}
+
+#[test]
+fn modelica_reports_flanks_only() {
+    // Modelica's example (J = 5 on a fixed flange, c = 20e3, d = 50, b/2 = pi/8): the
+    // doubled-spring sub-modes (+-2) are internal; modes and events show +-1 only.
+    let p = ChainParams::new(
+        vec![5.0, 1e12],
+        vec![0.0, 0.0],
+        vec![20e3],
+        vec![50.0],
+        vec![std::f64::consts::FRAC_PI_8],
+    );
+    let x0 = [0.0, 0.0, std::f64::consts::FRAC_PI_2];
+    let out = simulate_chain(&p, Law::Modelica, 0.0, 5e-4, &[0.0; 2001], &x0).unwrap();
+    assert!(out.modes.iter().all(|m| m.abs() <= 1));
+    assert!(out.events.len() > 10);
+    for e in &out.events {
+        assert!(e.from == 0 || e.to == 0, "{e:?}");
+    }
+}
+
+#[test]
+fn friction_and_loop_parameters_are_checked() {
+    let mut p = paper_drive(0.01);
+    p.fc = vec![0.02, 0.0];
+    p.fs = vec![0.01, 0.0];
+    let err = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &[0.0; 10], &[0.0; 3]).unwrap_err();
+    assert!(err.to_string().contains("fs[0] must be >= fc[0]"), "{err}");
+    let mut p = paper_drive(0.01);
+    p.tau_i = f64::NAN;
+    let err = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &[0.0; 10], &[0.0; 3]).unwrap_err();
+    assert!(err.to_string().contains("tau_i must be finite"), "{err}");
+}

@@ -1,0 +1,218 @@
+"""The model the joint estimator fits: which parameters, which samples, how simulated.
+
+A record is fitted over a :class:`Span`: from rest at its first sample, or from the
+model's own steady state ``pre_window`` seconds before the torque step-down. The
+parameters are packed in the row layout of the compiled kernel
+(:func:`backlashkit.simulate.simulate_packed`), and :func:`simulate_span` simulates many
+rows at once.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .. import validate as v
+from ..errors import InputError
+from ..plants import TwoMassDrive
+from ..simulate import simulate_packed
+from .record import Record
+from .step import find_step_down
+
+#: Linear parameters of a :class:`~backlashkit.TwoMassDrive`, in the fitted order.
+LINEAR_PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
+
+#: Order of a two-mass drive's values in a packed kernel parameter row
+#: (:class:`~backlashkit.DriveChain` fields ``J, f, k, d, theta``).
+PACKED = ("J_M", "J_L", "f_M", "f_L", "k_sh", "f_sh", "theta")
+
+#: A record starts at rest when its first speeds are within this many noise standard
+#: deviations of 0 (a Gaussian sample exceeds 4 sigma once in 16 000)...
+REST_SIGMAS = 4.0
+#: ... or below this fraction of their mean over the last REST_WINDOW samples before
+#: the step-down: a high-pass noise estimate misses most of a filtered noise, whose
+#: first sample can then exceed REST_SIGMAS of its "standard deviations".
+REST_FRACTION = 0.25
+REST_WINDOW = 20
+
+#: Longest coarse step in s of the exact simulation through a held torque: the flow of
+#: a held torque is exact whatever the step, so this only bounds the rounding.
+HOLD_STEP = 0.02
+
+
+def drive_with(base: TwoMassDrive, names: Sequence[str], values: np.ndarray) -> TwoMassDrive:
+    """``base`` with the parameters ``names`` set to ``values``."""
+    return replace(base, **{n: float(x) for n, x in zip(names, values, strict=True)})
+
+
+def rel_std(prior_rel_std, names: Sequence[str]) -> dict[str, float | None]:
+    """Parameter -> relative std (None: estimated without penalty); absent = fixed."""
+    if prior_rel_std is None:
+        return {n: None for n in names}
+    if isinstance(prior_rel_std, Mapping):
+        out: dict[str, float | None] = {}
+        for key, val in prior_rel_std.items():
+            if key == "theta":
+                continue  # theta is always estimated, without a prior
+            if key not in names:
+                raise InputError(
+                    f"prior_rel_std has unknown parameter {key!r}; allowed: {', '.join(names)}"
+                )
+            x = v.nonnegative(f"prior_rel_std[{key!r}]", val)
+            if x > 0:
+                out[key] = x
+        return out
+    x = v.nonnegative("prior_rel_std", prior_rel_std)
+    return {n: x for n in names} if x > 0 else {}
+
+
+@dataclass
+class Span:
+    """The part of a record the model is fitted to, and how the model starts there."""
+
+    record: Record
+    k: int  # index of the record (its noise levels)
+    i0: int
+    t: np.ndarray
+    torque: np.ndarray
+    y_m: np.ndarray
+    y_l: np.ndarray
+    level: float | None  # torque held before the step-down (steady start) or None (rest)
+    hold: float | None = None  # start: from rest after `level` held this long (s)
+
+
+def starts_at_rest(rec: Record, s_m: float, s_l: float) -> bool:
+    """Whether both speeds start at rest (``start="auto"``)."""
+    if (abs(rec.w_motor[0]) <= REST_SIGMAS * s_m + 1e-12
+            and abs(rec.w_load[0]) <= REST_SIGMAS * s_l + 1e-12):
+        return True
+    try:
+        i_s = find_step_down(rec)[0]
+    except InputError:
+        return False
+    before = slice(max(0, i_s - REST_WINDOW), i_s)
+    return all(abs(w[0]) <= REST_FRACTION * abs(float(np.mean(w[before])))
+               for w in (rec.w_motor, rec.w_load))
+
+
+def spans(recs: list[Record], start: str, pre_window: float, sig0) -> list[Span]:
+    """One span per record: from rest, or from ``pre_window`` s before the step-down."""
+    out = []
+    for k, rec in enumerate(recs):
+        s_m, s_l = sig0[k]
+        mode = ("rest" if starts_at_rest(rec, s_m, s_l) else "steady") if start == "auto" \
+            else start
+        if mode == "rest":
+            i0, level = 0, None
+        else:
+            i_s, t_s, level, _ = find_step_down(rec)
+            n_pre = int(round(pre_window / rec.ts))
+            if n_pre > i_s:
+                raise InputError(
+                    f"{rec.name}: the record starts {rec.t[i_s] - rec.t[0]:.6g} s before the "
+                    f"step-down at t = {t_s:.6g} s: record at least {pre_window:g} s of the held "
+                    "torque before it (start='steady' fits the model from there, "
+                    "pre_window)"
+                )
+            i0 = i_s - n_pre
+        sl = slice(i0, None)
+        out.append(Span(rec, k, i0, rec.t[sl], rec.torque[sl], rec.w_motor[sl],
+                        rec.w_load[sl], level))
+    return out
+
+
+def screen_spans(spans_: list[Span]) -> list[Span]:
+    """Cheaper spans for the short-horizon stages of the fit (same model, exactly).
+
+    A record started from rest whose torque is one level held until the step-down is
+    fitted there only in short windows after ``t = 0`` and after the step-down, yet the
+    model must be simulated through the whole hold to reach the second window. The
+    record is split into the rest start up to the step-down and a span from the
+    step-down on, whose initial state is simulated through the hold on a coarse grid
+    (steps of at most :data:`HOLD_STEP`): the engine's flow is exact for a held torque
+    whatever the step, and it locates the contact changes inside a step, so only the
+    samples nobody looks at are skipped.
+    """
+    out = []
+    for sp in spans_:
+        if sp.level is not None:
+            out.append(sp)
+            continue
+        try:
+            i_s, _, level, _ = find_step_down(sp.record)
+        except InputError:
+            out.append(sp)
+            continue
+        if i_s < 3 or np.any(sp.torque[:i_s] != level):
+            out.append(sp)
+            continue
+        out.append(replace(sp, t=sp.t[:i_s], torque=sp.torque[:i_s], y_m=sp.y_m[:i_s],
+                           y_l=sp.y_l[:i_s]))
+        out.append(replace(sp, i0=sp.i0 + i_s, t=sp.t[i_s:], torque=sp.torque[i_s:],
+                           y_m=sp.y_m[i_s:], y_l=sp.y_l[i_s:], level=level,
+                           hold=float(sp.t[i_s] - sp.t[0])))
+    return out
+
+
+def initial_states(p: np.ndarray, level: float | None) -> np.ndarray:
+    """Initial states for packed parameter rows ``p``: rest, or steady under ``level``."""
+    if level is None:
+        return np.zeros((p.shape[0], 3))
+    fs = p[:, 2] + p[:, 3]
+    if not np.all(fs > 0):
+        raise InputError(
+            "start='steady' needs f_M + f_L > 0 (a finite steady state), got "
+            f"f_M + f_L = {float(np.min(fs))!r}"
+        )
+    w = level / fs
+    twist = p[:, 3] * w / p[:, 4]
+    return np.column_stack([w, w, np.where(w >= 0, p[:, 6], -p[:, 6]) + twist])
+
+
+def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None
+                  ) -> np.ndarray:
+    """States ``(len(p), end, 3)`` of packed parameter rows ``p`` over a span.
+
+    What the compiled core refuses (contact chatter, a mode too fast for the sample
+    time) becomes an :class:`InputError` naming the record; the searches catch it as
+    the ``ValueError`` it still is.
+    """
+    try:
+        if span.hold is not None:  # from rest through the held torque, on a coarse grid
+            n = max(2, math.ceil(span.hold / HOLD_STEP))
+            held = simulate_packed(2, p, 0.0, span.hold / n, np.full((1, n + 1), span.level),
+                                   np.zeros((p.shape[0], 3)), law=law, workers=workers)
+            x0 = held[:, -1, :]
+        else:
+            x0 = initial_states(p, span.level)
+        end = span.t.size if end is None else max(end, 2)
+        return simulate_packed(2, p, span.t[0], span.record.ts,
+                               span.torque[np.newaxis, :end], x0, law=law, workers=workers)
+    except InputError:
+        raise
+    except ValueError as exc:
+        text = " ".join(str(exc).split())
+        raise InputError(f"{span.record.name}: cannot simulate the drive on this record: "
+                         f"{text}") from exc
+
+
+def model_commutation(drive: TwoMassDrive, span: Span, law: str):
+    """``(t_s, t_c, t_b)`` of the identified model on a span: the step-down and its first
+    contact loss and the next contact made (``None`` for what does not happen)."""
+    try:
+        _, t_s, _, _ = find_step_down(span.record)
+    except InputError:
+        return (None, None, None)
+    p = np.array([[getattr(drive, n) for n in PACKED]])
+    x0 = initial_states(p, span.level)[0]
+    res = drive.simulate(span.t, span.torque, law=law, initial_state=x0)
+    lost = next((e.time for e in res.events if e.time >= t_s and e.kind == "contact_lost"), None)
+    made = None
+    if lost is not None:
+        made = next((e.time for e in res.events if e.time > lost and e.kind == "contact_made"),
+                    None)
+    return (float(t_s), None if lost is None else float(lost),
+            None if made is None else float(made))

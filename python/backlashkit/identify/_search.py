@@ -1,0 +1,576 @@
+"""The joint search's stages, as plain functions over explicit state.
+
+:class:`Problem` holds what every stage fits (the spans of the records, the estimated
+parameters, the prior's penalty) and builds :class:`Residual` functions over chosen
+spans and windows; :func:`run` calls the stages in order: :func:`grid_minima`,
+:func:`first_window`, :func:`continue_on`, :func:`whole_record`, :func:`restart`,
+:func:`reestimate_noise`, :func:`whiten_noise`, :func:`uncertainty`. The
+configuration is :mod:`backlashkit.identify.search`'s; ``docs/design/joint-search.md``
+says why each stage exists.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from ..errors import InputError
+from ..plants import TwoMassDrive
+from ..signals import highpass_noise_std
+from ._lm import LMState, lm
+from ._model import LINEAR_PARAMS, PACKED, Span, screen_spans, simulate_span
+from ._model import spans as record_spans
+from .intervals import IntervalInputs, ThetaInterval
+from .noise import sample_noise, whiten
+from .record import Record
+from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
+from .two_step import TwoStepIdentifier
+
+#: First-window solutions costing more than this times the best one's are not
+#: continued: the right basin was within 1.1 times the best where the first window
+#: ranked it wrongly (``benchmarks/robustness_joint.py``).
+CONTINUE_RATIO = 1.25
+#: Candidates closer than this in every log-parameter count as one point.
+SAME_POINT = 1e-3
+#: End points of the continuation paths within this (chi-square units) of the best on
+#: the longest short window, and more than DISTINCT apart, make the search ambiguous.
+AMBIGUITY_MARGIN = 30.0
+#: Largest log-parameter difference of two end points that count as one basin.
+DISTINCT = 1e-2
+#: Candidates whose cost (chi-square units) on the longest short window exceeds the
+#: best one's by more than this are not refined on the whole record: that cost ranks
+#: candidates as the whole record does, to a few units.
+WHOLE_RECORD_MARGIN = 10.0
+#: A restart is refined on the final data only if it beats the best solution by more
+#: than this (chi-square units) on the longest short window.
+RESTART_MARGIN = 1.0
+#: Iterations a restart gets on the longest short window before it must be below the
+#: solution it restarts from: one climbing back to the same basin is still far above
+#: it then, one falling into a better basin already below.
+RESTART_SCREEN_ITER = 5
+#: A held-theta refit of the profile search ending more than this (chi-square units)
+#: below the estimate's cost restarts the final refinement from there, at most
+#: RECENTRE_MAX times: a rattling shaft's likelihood is rough at the scale of 1-2
+#: units, and the refinement can stop on a bump next to a lower point.
+RECENTRE_MARGIN = 0.5
+RECENTRE_MAX = 2
+#: A torque change larger than this, relative to the largest torque, is a jump (a
+#: window starts there); smaller ones are rounding.
+JUMP_RTOL = 1e-9
+#: Noise levels are floored at this fraction of the record's largest speed, so that a
+#: noise-free record still has finite weights.
+NOISE_FLOOR = 1e-9
+
+
+def selection(spans: Sequence[Span], horizon: float | None) -> list:
+    """Samples of each span within ``horizon`` s after its start and every torque jump
+    (a slice of the whole span for None: views, not copies, of the long arrays)."""
+    out: list = []
+    for sp in spans:
+        if horizon is None:
+            out.append(slice(0, sp.t.size))
+            continue
+        u = sp.torque
+        scale = max(float(np.max(np.abs(u))), 1e-300)
+        jumps = np.r_[0, 1 + np.flatnonzero(np.abs(np.diff(u)) > JUMP_RTOL * scale)]
+        keep = np.zeros(sp.t.size, bool)
+        width = max(2, int(round(horizon / sp.record.ts)))
+        for j in jumps:
+            keep[j : j + width] = True
+        out.append(np.flatnonzero(keep))
+    return out
+
+
+def _size(sel) -> int:
+    return sel.stop if isinstance(sel, slice) else sel.size
+
+
+@dataclass
+class Problem:
+    """What every stage fits: spans, estimated parameters (logarithms), the prior."""
+
+    spans: list[Span]
+    screen: list[Span]  # the same model on cheaper spans (holds on a coarse grid)
+    free: list[str]
+    names: tuple[str, ...]
+    base: np.ndarray  # a packed parameter row at the prior, theta 0
+    cols: list[int]  # where the estimated parameters go in it
+    p_prior: np.ndarray
+    pen: np.ndarray  # relative std of the prior per free parameter (inf: no penalty)
+    law: str
+    workers: int | None
+    fd_step: float
+
+    def final_spans(self, final_h: float | None) -> list[Span]:
+        """The spans of the final stages: the whole spans, or the cheaper ones when
+        only windows are fitted (they skip the holds)."""
+        return self.spans if final_h is None else self.screen
+
+    def simulate(self, z_rows: np.ndarray, spans: Sequence[Span],
+                 ends: list[int] | None = None) -> list[np.ndarray]:
+        """States of log-parameter rows over spans (each up to ``ends[k]`` samples)."""
+        p = np.repeat(self.base[np.newaxis, :], len(z_rows), axis=0)
+        p[:, self.cols] = np.exp(z_rows)
+        return [simulate_span(p, sp, self.law, self.workers, None if ends is None else ends[k])
+                for k, sp in enumerate(spans)]
+
+    def residual(self, spans: Sequence[Span], horizon: float | None, sig: np.ndarray,
+                 ar: np.ndarray | None = None) -> Residual:
+        """The weighted residual over ``spans`` within ``horizon`` (:class:`Residual`)."""
+        return Residual(self, spans, horizon, sig, ar)
+
+    def refine(self, res: Residual, z0: np.ndarray, max_iter: int, bounds=None,
+               state: LMState | None = None) -> LMState:
+        """Levenberg-Marquardt on ``res`` from ``z0`` (forward-difference Jacobian)."""
+        return lm(res.at, res.forward_jacobian, z0, max_iter=max_iter, bounds=bounds,
+                  state=state)
+
+    def central_jacobian(self, res: Residual, z: np.ndarray) -> np.ndarray:
+        """Central-difference Jacobian of ``res`` at ``z`` (for the uncertainty)."""
+        n, h = len(self.names), self.fd_step
+        zz = np.repeat(z[np.newaxis, :], 2 * n, axis=0)
+        for i in range(n):
+            zz[2 * i, i] += h
+            zz[2 * i + 1, i] -= h
+        rr = res(zz)
+        return ((rr[0::2] - rr[1::2]) / (2 * h)).T
+
+
+class Residual:
+    """Weighted residual rows of log-parameter rows: every selected sample of ``w_M``
+    then ``w_L`` per span, divided by its noise level, then the prior's rows. With
+    ``ar`` (record, channel, lag) each channel is whitened by ``A(q)`` first and
+    ``sig`` is the innovation's std."""
+
+    def __init__(self, problem: Problem, spans: Sequence[Span], horizon: float | None,
+                 sig: np.ndarray, ar: np.ndarray | None = None) -> None:
+        self.problem, self.spans, self.sig, self.ar = problem, list(spans), sig, ar
+        self.sels = selection(spans, horizon)
+        self.sizes = [_size(s_) for s_ in self.sels]
+        self.ends = [s_.stop if isinstance(s_, slice) else int(s_[-1]) + 1 for s_ in self.sels]
+        self.lag = 0 if ar is None else ar.shape[-1]  # samples without a past, dropped
+        self.n_res = 2 * sum(m - self.lag for m in self.sizes) + len(problem.free)
+        self.ys = [(sp.y_m[s_], sp.y_l[s_]) for sp, s_ in zip(spans, self.sels, strict=True)]
+
+    def __call__(self, z_rows: np.ndarray) -> np.ndarray:
+        pb, lag = self.problem, self.lag
+        sims = pb.simulate(z_rows, self.spans, self.ends)
+        out = np.empty((len(z_rows), self.n_res))
+        pos = 0
+        for sp, y2, s_, x, m in zip(self.spans, self.ys, self.sels, sims, self.sizes,
+                                    strict=True):
+            for c, y in enumerate(y2):  # w_M, then w_L
+                block = out[:, pos : pos + m - lag]
+                if self.ar is None:
+                    np.subtract(y, x[:, s_, c], out=block)
+                else:
+                    block[:] = whiten(y - x[:, s_, c], self.ar[sp.k, c])
+                block /= self.sig[sp.k, c]
+                pos += m - lag
+        p = np.exp(z_rows[:, 1:])
+        out[:, pos:] = (p - pb.p_prior) / (pb.pen * pb.p_prior)  # 0 where no penalty
+        return out
+
+    def at(self, z: np.ndarray) -> np.ndarray:
+        """The residual at one point (inf where the model cannot be simulated)."""
+        try:
+            return self(z[np.newaxis, :])[0]
+        except ValueError:  # e.g. a step to a mode too fast for the sample time
+            return np.full(1, np.inf)
+
+    def forward_jacobian(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Forward differences (half the simulations of central ones) while iterating."""
+        n, h = z.size, self.problem.fd_step
+        zz = np.repeat(z[np.newaxis, :], n, axis=0) + h * np.eye(n)
+        return ((self(zz) - r) / h).T
+
+    def channels(self, r: np.ndarray):
+        """``(k, c, part)``: the part of ``r`` of record ``k``'s channel ``c``, per span."""
+        pos = 0
+        for sp, m in zip(self.spans, self.sizes, strict=True):
+            for c in (0, 1):
+                yield sp.k, c, r[pos : pos + m - self.lag]
+                pos += m - self.lag
+
+    def prior_rows(self, r: np.ndarray) -> np.ndarray:
+        """The prior's rows of ``r``."""
+        return r[self.n_res - len(self.problem.free):]
+
+
+def resplit(z: np.ndarray, free: Sequence[str], pair: tuple[str, str],
+            shift: float) -> np.ndarray | None:
+    """Log-parameters ``z`` (theta first) with the ratio of a pair of parameters
+    multiplied by ``e^shift``, their sum kept, and ``k_sh`` moved so that the ringing
+    frequency ``k_sh (1/J_M + 1/J_L)`` is kept; None if the pair is not estimated."""
+    if pair[0] not in free or pair[1] not in free:
+        return None
+    z = z.copy()
+    ia, ib = 1 + free.index(pair[0]), 1 + free.index(pair[1])
+    omega2 = None
+    if "k_sh" in free and {"J_M", "J_L"} <= set(free):
+        jm, jl = math.exp(z[1 + free.index("J_M")]), math.exp(z[1 + free.index("J_L")])
+        omega2 = math.exp(z[1 + free.index("k_sh")]) * (1 / jm + 1 / jl)
+    total = math.exp(z[ia]) + math.exp(z[ib])
+    xa = total / (1.0 + math.exp(-(z[ia] - z[ib] + shift)))
+    if not (0.0 < xa < total and math.isfinite(total)):  # one of the pair dwarfs the other
+        return None
+    z[ia], z[ib] = math.log(xa), math.log(total - xa)
+    if omega2 is not None:
+        jm, jl = math.exp(z[1 + free.index("J_M")]), math.exp(z[1 + free.index("J_L")])
+        z[1 + free.index("k_sh")] = math.log(omega2 / (1 / jm + 1 / jl))
+    return z
+
+
+def distinct(states: Sequence[LMState], limit: float, worst: float,
+             taken: Sequence[LMState] = ()) -> list[LMState]:
+    """Up to ``limit`` of ``states`` (in order, until one costs more than ``worst``)
+    farther than :data:`SAME_POINT` from each other and from ``taken``."""
+    out: list[LMState] = []
+    for st in states:
+        if len(out) == limit or st.cost > worst:
+            break
+        if all(np.max(np.abs(st.z - c_.z)) > SAME_POINT for c_ in [*taken, *out]):
+            out.append(st)
+    return out
+
+
+def basins(ends: Sequence[LMState]) -> int:
+    """Distinct end points (:data:`DISTINCT`) within :data:`AMBIGUITY_MARGIN` of the best."""
+    best = min(st.cost for st in ends)
+    found: list[np.ndarray] = []
+    for st in sorted(ends, key=lambda st_: st_.cost):
+        if st.cost <= best + AMBIGUITY_MARGIN and all(
+                np.max(np.abs(st.z - z)) > DISTINCT for z in found):
+            found.append(st.z)
+    return len(found)
+
+
+def grid_minima(pb: Problem, rows0: Residual, grid: ThetaGrid, z_anchor: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 1: the grid's points ``zg`` (log-parameters) and the indices of its local
+    minima on the first window, lowest cost first."""
+    thetas = grid.thetas()
+    # the stiffness sets the ringing frequency: a wrong prior k_sh shifts its phase by
+    # periods within the first window, so k_sh can be gridded too (rows)
+    k_scales = grid.stiffness_scales() if "k_sh" in pb.free else [1.0]
+    blocks = []
+    for ks in k_scales:
+        zk = z_anchor.copy()
+        if "k_sh" in pb.free:
+            zk[pb.free.index("k_sh")] += math.log(ks)
+        blocks.append(np.column_stack([np.log(thetas), np.tile(zk, (thetas.size, 1))]))
+    zg = np.concatenate(blocks)
+    costs = np.sum(rows0(zg) ** 2, axis=1).reshape(len(k_scales), thetas.size)
+    pad = np.pad(costs, 1, constant_values=np.inf)
+    is_min = ((costs <= pad[1:-1, :-2]) & (costs <= pad[1:-1, 2:])
+              & (costs <= pad[:-2, 1:-1]) & (costs <= pad[2:, 1:-1]))
+    minima = np.flatnonzero(is_min.ravel())
+    return zg, minima[np.argsort(costs.ravel()[minima])]
+
+
+def two_step_start(drive: TwoMassDrive, recs: list[Record], workers
+                   ) -> tuple[float, float] | None:
+    """Paper A's two-step estimate and its pre-estimate, or None where it fails."""
+    try:
+        with warnings.catch_warnings():  # a start only: the joint fit says what matters
+            warnings.simplefilter("ignore")
+            est = TwoStepIdentifier(drive, allow_far_from_prior=True, workers=workers).fit(recs)
+    except InputError:
+        return None
+    return float(est.theta_), float(est.theta_ini_)
+
+
+def first_window(pb: Problem, rows0: Residual, z_starts: list[np.ndarray],
+                 cfg: FirstHorizon, box) -> list[LMState]:
+    """Stage 2: every start refined on the first window, then the best one from other
+    splits of ``J_M + J_L`` and ``f_M + f_L``; lowest cost first."""
+    states = [pb.refine(rows0, z0, cfg.max_iter, box) for z0 in z_starts]
+    states.sort(key=lambda st: st.cost)
+    variants = [resplit(states[0].z, pb.free, pair, d)
+                for pair in (("J_M", "J_L"), ("f_M", "f_L"))
+                for x in cfg.split_shifts for d in (-x, x)]
+    variants = [z for z in variants if z is not None]
+    if variants:
+        states += [pb.refine(rows0, z, cfg.max_iter, box) for z in variants]
+        states.sort(key=lambda st: st.cost)
+    return states
+
+
+def continue_on(pb: Problem, path: Sequence[float], states: list[LMState],
+                windows: dict[float, Residual], sig: np.ndarray, max_iter: int
+                ) -> list[LMState]:
+    """Stage 3: ``states`` refined on each window of ``path`` in turn (``windows``
+    caches the residuals by window)."""
+    for hz in path:
+        if hz not in windows:
+            windows[hz] = pb.residual(pb.screen, hz, sig)
+        states = [pb.refine(windows[hz], st.z, max_iter) for st in states]
+    return states
+
+
+def whole_record(pb: Problem, ends: list[LMState], rows_full: Residual, max_iter: int
+                 ) -> LMState:
+    """Stage 4: the distinct ends within :data:`WHOLE_RECORD_MARGIN` of the best refined
+    on the final data; the lowest final cost."""
+    ends.sort(key=lambda st: st.cost)
+    kept = distinct(ends, math.inf, ends[0].cost + WHOLE_RECORD_MARGIN)
+    finals = [pb.refine(rows_full, st.z, max_iter) for st in kept]
+    return min(finals, key=lambda st: st.cost)
+
+
+def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residual,
+            cfg: Restarts, max_iter: int) -> LMState:
+    """Stage 5: the best solution restarted with ``k_sh`` and the friction split shifted;
+    a restart is kept if it lowers the final cost (:class:`~.search.Restarts`)."""
+    shifts = cfg.shifts(pb.free)
+    if not shifts:
+        return best
+    ref = pb.refine(rows_short, best.z, max_iter)
+    for kind, d_ in shifts:  # each from the best solution so far
+        if kind == "k_sh":
+            z0 = best.z.copy()
+            z0[1 + pb.free.index("k_sh")] += d_
+        else:
+            z0 = resplit(best.z, pb.free, ("f_M", "f_L"), d_)
+            if z0 is None:
+                continue
+        st = pb.refine(rows_short, z0, min(RESTART_SCREEN_ITER, max_iter))
+        if not st.cost < ref.cost:
+            continue
+        if not st.done:
+            st = pb.refine(rows_short, st.z, max_iter - RESTART_SCREEN_ITER, state=st)
+        if st.cost < ref.cost - RESTART_MARGIN:
+            st = pb.refine(rows_full, st.z, max_iter)
+            if st.cost < best.cost:
+                best = st
+    return best
+
+
+def reestimate_noise(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
+                     n_recs: int, passes: int, max_iter: int) -> tuple[LMState, np.ndarray]:
+    """Stage 6: each record's and channel's noise level from the residuals
+    (``sqrt(RSS / N)``), then a refit; ``passes`` times."""
+    spans = pb.final_spans(final_h)
+    for _ in range(passes):
+        r = best.r
+        sq, count, pos = np.zeros_like(sig), np.zeros(n_recs), 0
+        for sp, s_ in zip(spans, selection(spans, final_h), strict=True):
+            m = _size(s_)
+            sq[sp.k] += (np.sum(r[pos : pos + m] ** 2), np.sum(r[pos + m : pos + 2 * m] ** 2))
+            count[sp.k] += m
+            pos += 2 * m
+        sig = np.maximum(sig * np.sqrt(sq / count[:, np.newaxis]), 1e-300)
+        best = pb.refine(pb.residual(spans, final_h, sig), best.z, max_iter)
+    return best, sig
+
+
+def whiten_noise(pb: Problem, best: LMState, sig: np.ndarray, noise_model, n_recs: int,
+                 noise_iter: int, max_iter: int
+                 ) -> tuple[LMState, np.ndarray, np.ndarray | None]:
+    """Stage 7: with a coloured noise model, ``A(q)`` and the innovation's level fitted
+    to the residuals of the whole records, and a refit on the whitened residuals."""
+    ar = None
+    passes = noise_model._whitening_passes(noise_iter)
+    if passes:
+        sig = sig.copy()  # the earlier stages' residual functions keep theirs
+    for _ in range(passes):
+        sims = pb.simulate(best.z[np.newaxis, :], pb.spans)
+        coef: dict[tuple[int, int], np.ndarray] = {}
+        for sp, x in zip(pb.spans, sims, strict=True):
+            for c, y in enumerate((sp.y_m, sp.y_l)):
+                coef[sp.k, c], var = noise_model._fit_channel(y - x[0, :, c])
+                sig[sp.k, c] = math.sqrt(max(var, 1e-300))
+        ar = np.array([[coef[k, c] for c in (0, 1)] for k in range(n_recs)])
+        best = pb.refine(pb.residual(pb.spans, None, sig, ar), best.z, max_iter)
+    return best, sig, ar
+
+
+@dataclass
+class Uncertain:
+    """The final point, its Fisher covariance (natural units) and its interval."""
+
+    best: LMState
+    values: np.ndarray
+    cov: np.ndarray
+    std: np.ndarray
+    interval: ThetaInterval
+
+
+def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_iter: int,
+                refit: Callable[[np.ndarray, np.random.Generator], float]) -> Uncertain:
+    """Stage 8: Gauss-Newton covariance and the interval object's interval; a profile
+    refit well below the estimate's cost moves the estimate there (at most
+    :data:`RECENTRE_MAX` times). ``refit(z, rng)``: the bootstrap's refit."""
+    for k_centre in range(RECENTRE_MAX + 1):
+        z = best.z
+        # the prior's rows are in the residual: its information is in J^T J
+        jz = pb.central_jacobian(rows_unc, z)
+        info = jz.T @ jz
+        try:
+            cov_z = np.linalg.inv(info)
+        except np.linalg.LinAlgError:
+            cov_z = np.linalg.pinv(info)
+        values = np.exp(z)
+        cov = cov_z * np.outer(values, values)  # delta method: dp = p dz
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        found = interval._interval(IntervalInputs(
+            float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
+            pb.fd_step, partial(refit, z)))
+        if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
+            break
+        st = pb.refine(rows_unc, found.lowest_z, max_iter)
+        if st.cost > best.cost - RECENTRE_MARGIN:
+            break
+        best = st
+    return Uncertain(best, values, cov, std, found)  # z is best.z on every exit
+
+
+def resample(pb: Problem, z: np.ndarray, sig: np.ndarray, ar: np.ndarray | None,
+             rng: np.random.Generator) -> list[Record]:
+    """Records simulated from log-parameters ``z`` with the fitted noise added."""
+    sims = pb.simulate(z[np.newaxis, :], pb.spans)
+    records = []
+    for sp, x in zip(pb.spans, (x[0] for x in sims), strict=True):
+        w_m, w_l = (x[:, c] + sample_noise(rng, sig[sp.k, c],
+                                           None if ar is None else ar[sp.k, c], sp.t.size)
+                    for c in (0, 1))
+        records.append(Record(sp.t, sp.torque, w_m, w_l, name=f"{sp.record.name} (bootstrap)"))
+    return records
+
+
+def residuals_and_fit(spans: Sequence[Span], sims: list[np.ndarray]):
+    """Residuals ``(w_M, w_L)`` per span and the NRMSE fit % array ``(n_spans, 2)``."""
+    residuals, fits = [], []
+    for sp, x in zip(spans, sims, strict=True):
+        em, el = sp.y_m - x[0, :, 0], sp.y_l - x[0, :, 1]
+        residuals.append((em, el))
+        fits.append([
+            100.0 * (1.0 - np.linalg.norm(e) / max(np.linalg.norm(y - y.mean()), 1e-300))
+            for e, y in ((em, sp.y_m), (el, sp.y_l))
+        ])
+    return residuals, np.array(fits)
+
+
+def refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
+    """Raise when the model explains a speed worse than its mean (fit % <= 0)."""
+    worst = np.unravel_index(int(np.argmin(fits)), fits.shape)
+    if not fits[worst] > 0:
+        raise InputError(
+            f"{recs[worst[0]].name}: the identified model does not explain "
+            f"{('w_motor', 'w_load')[worst[1]]} (fit {fits[worst]:.3g} %, worse than its "
+            "mean): these speeds do not show a two-mass drive responding to this torque; "
+            "check the columns, units and the prior"
+        )
+
+
+def build_problem(prior: TwoMassDrive, recs: list[Record], rel: dict, noise,
+                  search: JointSearch, law: str, workers) -> tuple[Problem, np.ndarray]:
+    """The problem and the starting noise levels ``(n_records, 2)``: ``noise`` for every
+    record, or a high-pass estimate of each record's and channel's."""
+    free = [n for n in LINEAR_PARAMS if n in rel and getattr(prior, n) > 0]
+    names = ("theta", *free)
+    if noise is not None:
+        sig0 = [np.array(noise, float)] * len(recs)
+    else:
+        sig0 = [np.array([highpass_noise_std(r.w_motor), highpass_noise_std(r.w_load)])
+                for r in recs]
+    spans_ = record_spans(recs, search.start, float(search.pre_window), sig0)
+    sigma = np.array(sig0, float).reshape(len(recs), 2)
+    scale = [max(float(np.max(np.abs(r.w_motor))), float(np.max(np.abs(r.w_load))))
+             for r in recs]
+    sigma = np.maximum(sigma, NOISE_FLOOR * np.array(scale)[:, np.newaxis] + 1e-300)
+    pb = Problem(
+        spans=spans_, screen=screen_spans(spans_), free=free, names=names,
+        base=np.array([getattr(prior, n) for n in PACKED[:-1]] + [0.0]),
+        cols=[PACKED.index(n) for n in names],
+        p_prior=np.array([getattr(prior, n) for n in free]),
+        pen=np.array([rel[n] if rel[n] is not None else np.inf for n in free]),
+        law=law, workers=workers, fd_step=search.fd_step,
+    )
+    return pb, sigma
+
+
+@dataclass
+class Outcome:
+    """What one search found, for the estimator to publish."""
+
+    problem: Problem
+    unc: Uncertain  # the final point, its covariance and interval
+    sigma: np.ndarray  # noise (innovation) std per record and channel
+    ar: np.ndarray | None
+    rows_unc: Residual  # the residual of the final point's likelihood
+    sims: list[np.ndarray]  # the model at the estimate over the spans
+    starts: list[float]
+    two_step: tuple[float, float] | None
+    ambiguous: bool
+
+
+def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record], *,
+        start_drive: TwoMassDrive, z_anchor: np.ndarray, fixed_noise: bool, noise_model,
+        interval, refit: Callable[[list[Record]], float]) -> Outcome:
+    """The whole search from ``z_anchor`` (log linear parameters), then the noise
+    levels, the uncertainty and the interval. ``refit(records)``: ``theta`` of a
+    bootstrap resample's fit."""
+    short = [search.first.horizon, *search.continuation.horizons]
+    rows0 = pb.residual(pb.screen, short[0], sigma)
+    zg, minima = grid_minima(pb, rows0, search.grid, z_anchor)
+    n_starts = search.grid.starts
+    z_starts = [zg[i] for i in minima[:n_starts]]
+    starts = [float(math.exp(z[0])) for z in z_starts]
+    two_step = None
+    if search.grid.two_step_start:
+        two_step = two_step_start(start_drive, recs, pb.workers)
+        if two_step is not None:
+            starts.append(two_step[0])
+            z_starts.append(np.concatenate([[math.log(two_step[0])], z_anchor]))
+    box = search.first.box(search.grid.theta_max, z_anchor)
+    states = first_window(pb, rows0, z_starts, search.first, box)
+    cont, max_iter = search.continuation, search.max_iter
+    cands = distinct(states, cont.candidates, CONTINUE_RATIO * states[0].cost)
+    # two paths, the second finer and from the best candidate only: a long step can
+    # jump to a wrong basin where the ringing is rich, a short one elsewhere
+    paths = cont.paths(short[0])
+    windows: dict[float, Residual] = {}
+    ends: list[LMState] = []
+    for k_path, path in enumerate(paths):
+        ends += continue_on(pb, path, cands if k_path == 0 else cands[:1], windows, sigma,
+                            max_iter)
+    # distinct ends of nearly equal cost: the landscape is multimodal here, so continue
+    # more first-window solutions (more grid minima among their starts)
+    ambiguous = bool(len(paths[0]) and basins(ends) > 1)
+    if cont.ambiguity_starts and ambiguous:
+        more = minima[n_starts : n_starts + cont.ambiguity_starts]
+        states += [pb.refine(rows0, zg[i], search.first.max_iter, box) for i in more]
+        states.sort(key=lambda st: st.cost)
+        extra = distinct(states, cont.ambiguity_starts, math.inf, taken=cands)
+        ends += continue_on(pb, paths[0], extra, windows, sigma, max_iter)
+    final_h = search.final_horizon
+    rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
+    best = whole_record(pb, ends, rows_full, max_iter)
+    best = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
+                   search.restarts, max_iter)
+    best, sig = reestimate_noise(pb, best, sigma, final_h, len(recs),
+                                 0 if fixed_noise else search.noise_iter, max_iter)
+    best, sig, ar = whiten_noise(pb, best, sig, noise_model, len(recs), search.noise_iter,
+                                 max_iter)
+    # a model that explains a speed worse than its mean has fitted nothing: say so
+    # before the uncertainty (whose refits at such a point can take minutes)
+    checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
+    refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1])
+    rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
+    unc = uncertainty(pb, best, rows_unc, interval, max_iter,
+                      partial(_refit_resample, pb, sig, ar, refit))
+    if unc.best.z is not checked_z:  # the profile search re-centred the estimate
+        sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
+    return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous)
+
+
+def _refit_resample(pb: Problem, sig: np.ndarray, ar: np.ndarray | None,
+                    refit: Callable[[list[Record]], float], z: np.ndarray,
+                    rng: np.random.Generator) -> float:
+    return refit(resample(pb, z, sig, ar, rng))

@@ -1,0 +1,238 @@
+"""The Cramér-Rao bound of ``theta`` for a drive, an experiment and a noise level.
+
+:func:`cramer_rao_bound` gives the lower bound on the standard deviation of any
+unbiased estimate of ``theta`` (backlash half-width, rad) from both measured speeds,
+with the linear parameters known or estimated jointly, under white or autoregressive
+Gaussian noise; :class:`CramerRaoBound` holds it. Units are SI.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import validate as v
+from ..errors import InputError
+from ..plants import TwoMassDrive
+from ._model import LINEAR_PARAMS, drive_with, rel_std
+from .noise import innovation_ratio, whiten
+
+__all__ = ["CramerRaoBound", "cramer_rao_bound"]
+
+ArrayLike = Sequence[float] | np.ndarray
+
+@dataclass(frozen=True)
+class CramerRaoBound:
+    """Cramér-Rao bound of an experiment.
+
+    Parameters
+    ----------
+    names : tuple of str
+        Estimated parameters, ``"theta"`` first.
+    values : numpy.ndarray
+        Their true values.
+    fisher : numpy.ndarray
+        Fisher information matrix in natural units (order ``names``), including the
+        prior's information when one was given.
+    noise_std : tuple of float
+        White-noise standard deviations ``(s_M, s_L)`` in rad/s used.
+    n_samples : int
+        Samples per channel.
+
+    Notes
+    -----
+    Fisher information of independent experiments adds: ``crb_a + crb_b`` is the bound
+    for both experiments together (same parameter names).
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    fisher: np.ndarray
+    noise_std: tuple[float, float]
+    n_samples: int
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Inverse of the Fisher matrix: the bound on the covariance."""
+        return np.linalg.inv(self.fisher)
+
+    @property
+    def std(self) -> dict[str, float]:
+        """Bound on the standard deviation of every parameter."""
+        d = np.sqrt(np.diag(self.covariance))
+        return dict(zip(self.names, (float(x) for x in d), strict=True))
+
+    @property
+    def theta_std(self) -> float:
+        """Bound on the standard deviation of ``theta`` in rad."""
+        return self.std["theta"]
+
+    def __add__(self, other: CramerRaoBound) -> CramerRaoBound:
+        if not isinstance(other, CramerRaoBound) or other.names != self.names:
+            raise InputError("only bounds over the same parameter names can be combined")
+        return CramerRaoBound(self.names, self.values, self.fisher + other.fisher,
+                              self.noise_std, self.n_samples + other.n_samples)
+
+
+def cramer_rao_bound(
+    drive: TwoMassDrive,
+    t: ArrayLike,
+    torque: ArrayLike,
+    *,
+    noise_std: tuple[float, float] | None = None,
+    snr_db: float | tuple[float, float] | None = None,
+    estimate: Sequence[str] | str = ("theta",),
+    prior_rel_std: None | float | Mapping[str, float] = None,
+    law: str = "paper",
+    initial_state: ArrayLike | None = None,
+    fd_step: float = 1e-6,
+    noise_ar: ArrayLike | None = None,
+) -> CramerRaoBound:
+    """Cramér-Rao bound of ``theta`` from both measured speeds with white or AR noise.
+
+    ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the central-difference sensitivity of
+    speed ``c`` (motor, load) to the estimated parameters; with autoregressive noise
+    (``noise_ar``) the sensitivities are whitened by ``A(q)`` first and ``s_c`` is the
+    innovation's standard deviation (the likelihood of
+    :class:`~backlashkit.identify.noise.ARNoise`, conditional on the first ``p`` samples).
+
+    Parameters
+    ----------
+    drive : TwoMassDrive
+        The true drive (with ``theta``).
+    t, torque : array_like
+        Uniform time grid in s and motor torque in N m of the experiment.
+    noise_std : tuple of float, optional
+        Noise standard deviations ``(s_M, s_L)`` in rad/s.
+    snr_db : float or tuple of float, optional
+        Instead of ``noise_std``: SNR in dB of ``(w_M, w_L)`` (one value for both),
+        ``10 log10(mean(w^2) / noise_variance)`` over the record as in
+        :func:`backlashkit.signals.add_noise`.
+    estimate : sequence of str or "all", optional
+        Parameters estimated: ``("theta",)`` (default, linear parameters known) or
+        ``"all"`` (theta and the six linear parameters) or any list with ``"theta"``.
+    prior_rel_std : None, float or dict, optional
+        Relative std of a Gaussian prior on the linear parameters, added to the
+        information as ``1 / (rel_std p)^2`` (as in :class:`JointIdentifier`).
+    law : {"paper", "no-pull"}, optional
+        Contact law (default ``"paper"``).
+    initial_state : array_like, optional
+        State at ``t[0]`` (default rest), known.
+    fd_step : float, optional
+        Relative central-difference step (default 1e-6).
+    noise_ar : array_like, optional
+        Coefficients ``a_1 .. a_p`` of ``A(q)`` of autoregressive noise (as
+        :class:`~backlashkit.identify.noise.ARNoise` fits them, ``JointIdentifier.noise_ar_``):
+        one row for both speeds or rows ``(w_M, w_L)``. ``noise_std`` and ``snr_db``
+        then give the noise's own level, not its innovation's. Default: white noise.
+
+    Returns
+    -------
+    CramerRaoBound
+        The bound (``.theta_std``, ``.fisher``, ``.names``).
+
+    Raises
+    ------
+    InputError
+        If the drive has no ``theta``, no or both noise levels are given, a name is
+        unknown, a parameter to estimate is 0, or ``noise_ar`` is not a stationary
+        autoregression.
+    """
+    from ..simulate import simulate_batch
+
+    if not isinstance(drive, TwoMassDrive):
+        raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
+    theta = drive._require_theta()
+    if (noise_std is None) == (snr_db is None):
+        raise InputError("give exactly one of noise_std=(s_M, s_L) and snr_db")
+    names = _estimated(estimate)
+    values = np.array([getattr(drive, n) for n in names], float)
+    zero = [n for n, x in zip(names, values, strict=True) if not x > 0]
+    if zero:
+        raise InputError(f"cannot estimate parameter(s) {zero} at value 0 (e.g. theta = {theta!r})")
+    h = v.positive("fd_step", fd_step)
+    n = len(names)
+    drives = []
+    for i in range(n):
+        for sgn in (1.0, -1.0):
+            x = values.copy()
+            x[i] *= 1.0 + sgn * h
+            drives.append(drive_with(drive, names, x))
+    runs = simulate_batch([drive, *drives], t, torque, law=law, initial_state=initial_state)
+    nominal = runs[0]
+    sig = _noise_levels(noise_std, snr_db, nominal)
+    ar, ratios = _autoregression(noise_ar)
+    fisher = np.zeros((n, n))
+    for c, (ch, s) in enumerate((("w_motor", sig[0]), ("w_load", sig[1]))):
+        sens = np.column_stack([
+            (getattr(runs[1 + 2 * i], ch) - getattr(runs[2 + 2 * i], ch)) / (2 * h * values[i])
+            for i in range(n)
+        ])
+        if ar is not None:  # whitened sensitivities, weighted by the innovation
+            s = s * math.sqrt(ratios[c])
+            sens = whiten(sens.T, ar[c]).T
+        fisher += sens.T @ sens / s**2
+    if prior_rel_std is not None:
+        rel = rel_std(prior_rel_std, LINEAR_PARAMS)
+        for i, name in enumerate(names[1:], start=1):
+            r = rel.get(name)
+            if r is not None and r > 0:
+                fisher[i, i] += 1.0 / (r * values[i]) ** 2
+    return CramerRaoBound(names, values, fisher, (float(sig[0]), float(sig[1])),
+                          int(np.size(nominal.t)))
+
+
+def _estimated(estimate) -> tuple[str, ...]:
+    """The estimated parameters' names, ``theta`` first, in the fitted order."""
+    all_names = ("theta", *LINEAR_PARAMS)
+    if isinstance(estimate, str):
+        if estimate != "all":
+            raise InputError(f"estimate must be 'all' or a sequence of names, got {estimate!r}")
+        return all_names
+    names = tuple(estimate)
+    bad = [n for n in names if n not in all_names]
+    if bad or "theta" not in names or len(set(names)) != len(names):
+        raise InputError(
+            f"estimate must list distinct names among {', '.join(all_names)} including "
+            f"'theta', got {estimate!r}"
+        )
+    return ("theta", *[n for n in LINEAR_PARAMS if n in names])
+
+
+def _noise_levels(noise_std, snr_db, nominal) -> tuple[float, float]:
+    """Noise std ``(s_M, s_L)``: given, or from the SNR of the nominal speeds."""
+    if noise_std is not None:
+        try:
+            s_m, s_l = noise_std
+        except (TypeError, ValueError):
+            raise InputError(f"noise_std must be a pair (s_M, s_L), got {noise_std!r}") from None
+        return (v.positive("noise_std[0] (s_M)", s_m), v.positive("noise_std[1] (s_L)", s_l))
+    snr = (snr_db, snr_db) if np.ndim(snr_db) == 0 else tuple(snr_db)
+    if len(snr) != 2:
+        raise InputError(f"snr_db must be a number or a pair (w_M, w_L), got {snr_db!r}")
+    s_m, s_l = (
+        math.sqrt(float(np.mean(w**2)) / 10.0 ** (v.finite_scalar("snr_db", s) / 10.0))
+        for w, s in ((nominal.w_motor, snr[0]), (nominal.w_load, snr[1]))
+    )
+    return (s_m, s_l)
+
+
+def _autoregression(noise_ar) -> tuple[np.ndarray | None, list[float]]:
+    """``A(q)`` per speed (rows ``w_M, w_L``) and its innovation ratios, or None."""
+    if noise_ar is None:
+        return None, [1.0, 1.0]
+    ar = np.atleast_2d(np.asarray(noise_ar, float))
+    if ar.shape[0] == 1:
+        ar = np.repeat(ar, 2, axis=0)
+    if ar.ndim != 2 or ar.shape[0] != 2 or ar.shape[1] < 1 or not np.isfinite(ar).all():
+        raise InputError(
+            "noise_ar must be the coefficients a_1 .. a_p of A(q), one row for both "
+            f"speeds or two rows (w_M, w_L), got {noise_ar!r}"
+        )
+    try:
+        return ar, [innovation_ratio(row) for row in ar]
+    except InputError as exc:
+        raise InputError(f"noise_ar: {exc}") from None

@@ -1,0 +1,363 @@
+"""Figures of a backlash identification, each on its own axes.
+
+The plot helpers take ``ax=`` and return the figure; they use
+:class:`matplotlib.figure.Figure`, never ``pyplot``, and change no global state.
+:func:`backlashkit.identify.report.write_identification_report` puts them on a page.
+
+Every ``theta`` is the backlash **half-width** in rad. Units are SI.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import InputError
+from .commutation import fir_lowpass
+from .record import Record
+from .step import find_step_down
+
+if TYPE_CHECKING:
+    import matplotlib.axes
+    import matplotlib.figure
+
+__all__ = [
+    "autocorrelation",
+    "fit_percent",
+    "plot_commutation",
+    "plot_cost",
+    "plot_profile",
+    "plot_residual_acf",
+    "plot_speed_fit",
+]
+
+
+def fit_percent(y: Sequence[float] | np.ndarray, y_hat: Sequence[float] | np.ndarray) -> float:
+    """Normalised fit ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)`` in %.
+
+    Parameters
+    ----------
+    y : array_like
+        Measured signal.
+    y_hat : array_like
+        Model output, same length.
+
+    Returns
+    -------
+    float
+        100 for a perfect fit, 0 for the mean, negative when worse than the mean;
+        NaN when ``y`` is constant.
+    """
+    y = np.asarray(y, float)
+    y_hat = np.asarray(y_hat, float)
+    if y.shape != y_hat.shape:
+        raise InputError(f"y and y_hat must have the same shape, got {y.shape} and {y_hat.shape}")
+    den = float(np.linalg.norm(y - y.mean()))
+    if den == 0.0:
+        return math.nan
+    return 100.0 * (1.0 - float(np.linalg.norm(y - y_hat)) / den)
+
+
+def _short(name: str, width: int = 40) -> str:
+    return name if len(name) <= width else "..." + name[-(width - 3):]
+
+
+def autocorrelation(x: Sequence[float] | np.ndarray, max_lag: int) -> np.ndarray:
+    """Normalised autocorrelation ``r(k) / r(0)`` of a signal, mean removed.
+
+    Parameters
+    ----------
+    x : array_like
+        The signal, at least 2 samples.
+    max_lag : int
+        Largest lag, ``0 <= max_lag < len(x)``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``max_lag + 1`` values for lags ``0 .. max_lag`` (the first is 1; all zero for
+        a constant signal).
+    """
+    x = np.asarray(x, float) - np.mean(x)
+    if not 0 <= max_lag < x.size:
+        raise InputError(f"max_lag must be in [0, {x.size - 1}], got {max_lag!r}")
+    r0 = float(x @ x)
+    if r0 == 0.0:
+        return np.zeros(max_lag + 1)
+    return np.array([float(x[: x.size - k] @ x[k:]) for k in range(max_lag + 1)]) / r0
+
+
+def _ax(ax, figsize=(8.0, 3.2)):
+    if ax is None:
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=figsize, layout="constrained")
+        return fig, fig.subplots()
+    return ax.figure, ax
+
+
+def plot_speed_fit(
+    t: Sequence[float] | np.ndarray,
+    measured: Sequence[float] | np.ndarray,
+    simulated: Sequence[float] | np.ndarray,
+    *,
+    label: str = "w_M",
+    ax: matplotlib.axes.Axes | None = None,
+) -> matplotlib.figure.Figure:
+    """Plot a measured and a simulated speed with the fit in % in the legend.
+
+    Parameters
+    ----------
+    t : array_like
+        Time in s.
+    measured, simulated : array_like
+        Speeds in rad/s, one per ``t``.
+    label : str, optional
+        Name of the speed (default ``"w_M"``).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding the axes.
+    """
+    fig, ax = _ax(ax)
+    fit = fit_percent(measured, simulated)
+    ax.plot(t, measured, color="0.55", lw=0.8, label=f"{label} measured")
+    ax.plot(t, simulated, color="C3", lw=1.3, label=f"{label} simulated (fit {fit:.1f} %)")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"{label} [rad/s]")
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def plot_commutation(
+    record: Record,
+    t_c: float,
+    t_b: float,
+    *,
+    cutoff_motor: float = 50.0,
+    cutoff_load: float = 20.0,
+    margin: float | None = None,
+    ax: matplotlib.axes.Axes | None = None,
+) -> matplotlib.figure.Figure:
+    """Zoom on the passage through the backlash after the step-down (paper A, Figs. 4-6).
+
+    Raw speeds in grey, FIR-filtered speeds in colour, ``t_s``, ``t_c`` and ``t_b``
+    marked, and the area between the filtered speeds over ``[t_c, t_b]`` shaded: eq. 6
+    gives ``theta_ini = -0.5`` times its signed integral (shown in the title).
+
+    Parameters
+    ----------
+    record : Record
+        The experiment.
+    t_c, t_b : float
+        Contact-loss and impact instants in s.
+    cutoff_motor, cutoff_load : float, optional
+        FIR cut-offs in rad/s (default 50 and 20, as the identifier's).
+    margin : float, optional
+        Time shown before ``t_s`` and after ``t_b`` in s; default half of
+        ``t_b - t_s``.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding the axes.
+    """
+    fig, ax = _ax(ax)
+    _, t_s, _, _ = find_step_down(record)
+    ts = record.ts
+    wmf = fir_lowpass(record.w_motor, cutoff_motor, ts)
+    wlf = fir_lowpass(record.w_load, cutoff_load, ts)
+    margin = 0.5 * (t_b - t_s) if margin is None else margin
+    t = record.t
+    win = (t >= t_s - margin) & (t <= t_b + margin)
+    ax.plot(t[win], record.w_motor[win], color="C0", alpha=0.25, lw=0.6)
+    ax.plot(t[win], record.w_load[win], color="C1", alpha=0.25, lw=0.6)
+    ax.plot(t[win], wmf[win], color="C0", lw=1.4, label="w_M filtered")
+    ax.plot(t[win], wlf[win], color="C1", lw=1.4, label="w_L filtered")
+    i_c = int(np.argmin(np.abs(t - t_c)))
+    i_b = int(np.argmin(np.abs(t - t_b)))
+    sl = slice(i_c, i_b + 1)
+    ax.fill_between(t[sl], wmf[sl], wlf[sl], color="C2", alpha=0.3,
+                    label="integral of w_M - w_L")
+    d = wmf[sl] - wlf[sl]
+    theta_ini = -0.5 * ts * (d.sum() - 0.5 * (d[0] + d[-1]))
+    for x, name, style in ((t_s, "t_s", ":"), (t_c, "t_c", "--"), (t_b, "t_b", "--")):
+        ax.axvline(x, color="k", ls=style, lw=0.8)
+        ax.annotate(name, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -12),
+                    textcoords="offset points", fontsize="small")
+    ax.set_title(f"{_short(record.name)}: t_c = {t_c:.4f} s, t_b = {t_b:.4f} s, "
+                 f"-0.5 integral = {theta_ini:.4g} rad", fontsize="medium")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("speed [rad/s]")
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def plot_cost(
+    thetas: Sequence[float] | np.ndarray,
+    costs: Sequence[float] | np.ndarray,
+    *,
+    theta: float | None = None,
+    theta_ini: float | None = None,
+    bounds: tuple[float, float] | None = None,
+    ax: matplotlib.axes.Axes | None = None,
+) -> matplotlib.figure.Figure:
+    """Plot the criterion against ``theta`` with the search window and estimates.
+
+    Parameters
+    ----------
+    thetas : array_like
+        Backlash half-widths in rad.
+    costs : array_like
+        Criterion per ``theta`` in (rad/s)^2.
+    theta : float, optional
+        Final estimate in rad (marked).
+    theta_ini : float, optional
+        Pre-estimate in rad (marked).
+    bounds : tuple of float, optional
+        Search window in rad, e.g. ``theta_ini (1 -+ n_theta)`` (shaded).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding the axes.
+    """
+    fig, ax = _ax(ax)
+    deg = 180.0 / math.pi
+    th = np.asarray(thetas, float)
+    ax.plot(th * deg, costs, color="k", lw=1.2, marker=".", ms=3, label="W_1(theta)")
+    if bounds is not None:
+        ax.axvspan(bounds[0] * deg, bounds[1] * deg, color="C2", alpha=0.2,
+                   label="search window")
+    if theta_ini is not None:
+        ax.axvline(theta_ini * deg, color="C2", ls="--", lw=1,
+                   label=f"theta_ini = {theta_ini:.4g} rad")
+    if theta is not None:
+        ax.axvline(theta * deg, color="C3", lw=1.3, label=f"theta = {theta:.4g} rad")
+    c = np.asarray(costs, float)
+    if c.size and c.min() > 0 and c.max() / c.min() > 20:  # several decades: log scale
+        ax.set_yscale("log")
+    ax.set_xlabel("theta (half-width) [deg]")
+    ax.set_ylabel("W_1 [(rad/s)^2]")
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(alpha=0.3, which="both")
+    return fig
+
+
+def plot_profile(
+    profile: Sequence[Sequence[float]] | np.ndarray,
+    *,
+    ci95: tuple[float, float] | None = None,
+    theta: float | None = None,
+    std: float | None = None,
+    ax: matplotlib.axes.Axes | None = None,
+) -> matplotlib.figure.Figure:
+    """Plot a profile likelihood of ``theta`` with the 95 % level and interval.
+
+    With ``theta`` and its Fisher ``std`` the quadratic the Fisher interval assumes,
+    ``(log(t / theta) / (std / theta))^2``, is drawn too: where the points leave it,
+    the likelihood is not quadratic and the two intervals differ.
+
+    Parameters
+    ----------
+    profile : array_like, shape (k, 2)
+        Rows ``(theta, rise)``: half-width in rad and the cost rise of the refit with
+        ``theta`` held, in chi-square units (``JointIdentifier.profile_``).
+    ci95 : tuple of float, optional
+        The interval in rad (shaded).
+    theta : float, optional
+        The estimate in rad.
+    std : float, optional
+        Its Fisher standard error in rad.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding the axes.
+    """
+    from .intervals import CHI2_95
+
+    fig, ax = _ax(ax)
+    deg = 180.0 / math.pi
+    p = np.asarray(profile, float).reshape(-1, 2)
+    if theta is not None and std is not None and theta > 0 and std > 0:
+        lo, hi = float(np.min(p[:, 0])), float(np.max(p[:, 0]))
+        span = max(hi - lo, 4.0 * std)
+        grid = np.linspace(max(lo - 0.15 * span, theta * 1e-3), hi + 0.15 * span, 200)
+        ax.plot(grid * deg, (np.log(grid / theta) / (std / theta)) ** 2, color="C0",
+                ls=":", lw=1.2, label="Fisher (quadratic)")
+    ax.plot(p[:, 0] * deg, p[:, 1], color="k", ls="none", marker="o", ms=5,
+            label="refit with theta held")
+    ax.axhline(CHI2_95, color="C3", ls="--", lw=1, label="95 % level (3.84)")
+    if ci95 is not None:
+        ax.axvspan(ci95[0] * deg, ci95[1] * deg, color="C0", alpha=0.15,
+                   label="95 % interval")
+    ax.set_xlabel("theta (half-width) [deg]")
+    ax.set_ylabel("cost rise [chi-square units]")
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def plot_residual_acf(
+    residual: Sequence[float] | np.ndarray,
+    *,
+    ts: float = 1.0,
+    max_lag: int | None = None,
+    label: str | None = None,
+    ax: matplotlib.axes.Axes | None = None,
+) -> matplotlib.figure.Figure:
+    """Plot the residual's normalised autocorrelation with the 95 % white-noise band.
+
+    Parameters
+    ----------
+    residual : array_like
+        Measured minus simulated output.
+    ts : float, optional
+        Sample time in s (the lag axis is in ms; default 1).
+    max_lag : int, optional
+        Largest lag in samples; default ``min(N // 4, 200)``.
+    label : str, optional
+        Legend label of the curve.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure when omitted (a second call with the same
+        axes adds a curve).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding the axes.
+    """
+    fig, ax = _ax(ax)
+    e = np.asarray(residual, float)
+    n = e.size
+    max_lag = min(n // 4, 200) if max_lag is None else max_lag
+    r = autocorrelation(e, max_lag)
+    lags = np.arange(max_lag + 1) * ts * 1e3
+    ax.plot(lags, r, lw=1.0, marker=".", ms=2, label=label)
+    band = 1.96 / math.sqrt(n)
+    ax.axhspan(-band, band, color="0.5", alpha=0.15)
+    ax.axhline(band, color="0.4", ls="--", lw=0.8)
+    ax.axhline(-band, color="0.4", ls="--", lw=0.8)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("lag [ms]")
+    ax.set_ylabel("autocorrelation")
+    ax.set_title(f"residual w_M - w_M,sim (band ±1.96/sqrt(N), N = {n})", fontsize="medium")
+    if label is not None:
+        ax.legend(loc="best", fontsize="small")
+    ax.grid(alpha=0.3)
+    return fig
