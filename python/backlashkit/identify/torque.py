@@ -44,9 +44,9 @@ PLATEAU_SAMPLES = 5000
 #: :func:`torque_levels` refuses a level whose samples, averaged over RAMP_WINDOW
 #: samples, depart from it by more than RAMP_SIGMAS std of that average's noise (and
 #: than TORQUE_NOISE_LIMIT of the largest torque): a ramp, a smooth torque, or a step
-#: the noise hides from one sample to the next, not a step through noise. On 20
-#: records of 80 s at 1 ms each with white noise and noise filtered over 3-200
-#: samples, none was refused (a scratch run; ``tests/test_torque.py`` checks 10 each).
+#: the noise hides from one sample to the next, not a step through noise
+#: (``tests/test_torque.py`` checks records with white noise and noise filtered over
+#: 10-200 samples: none is refused).
 RAMP_WINDOW = 51
 RAMP_SIGMAS = 8.0
 #: Samples per block of the estimate of that noise.
