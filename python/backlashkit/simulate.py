@@ -361,10 +361,6 @@ def simulate_packed(
     return states
 
 
-#: The historical private name of :func:`simulate_packed`.
-_simulate_packed = simulate_packed
-
-
 @dataclass(frozen=True)
 class Sensitivity:
     """How much a simulation's result depends on rounding (see :func:`assess_sensitivity`).
