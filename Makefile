@@ -29,7 +29,7 @@ demo: setup
 	$(BIN)/backlashkit simulate examples/paper_drive.toml --experiment step-down \
 	    --amplitude 0.157 --hold 40 --out out/paper_experiment.csv \
 	    --plot out/paper_experiment.png --force
-	$(BIN)/backlashkit reproduce tao1995 --report out/tao1995 --json out/tao1995.json --force
+	$(BIN)/backlashkit reproduce tao1995 --report out/tao1995 --json-out out/tao1995.json --force
 
 test: setup test-rust lint test-python
 

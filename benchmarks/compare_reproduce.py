@@ -4,7 +4,7 @@ Every value must be identical except the timings (keys containing ``seconds``) a
 worker count (``jobs``), which do not change the estimates. Used to show that a change
 leaves the reproduction's estimates as they were, to the last digit::
 
-    backlashkit reproduce ravanbod2002 --runs 10 --seed 2002 --jobs 2 --json new.json
+    backlashkit reproduce ravanbod2002 --runs 10 --seed 2002 --jobs 2 --json-out new.json
     python benchmarks/compare_reproduce.py old.json new.json
 
 Prints ``IDENTICAL (timings excluded)`` and exits 0, or the first 50 differences and

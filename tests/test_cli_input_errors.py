@@ -394,7 +394,8 @@ def test_outputs_the_system_refuses_are_refused_before_computing(exp_csv, tmp_pa
         (["simulate", DRIVE_TOML, "--experiment", "step-down", "--amplitude", "0.157",
           "--hold", "1", "--out", str(tmp_path / "ok.csv"), "--plot", "/proc/p.png"], "--plot"),
         (["control", str(EXAMPLES / "tao1995.toml"), "--trace", "/proc/x.csv"], "--trace"),
-        (["reproduce", "ravanbod2002", "--runs", "2", "--json", "/proc/x.json"], "--json"),
+        (["reproduce", "ravanbod2002", "--runs", "2", "--json-out", "/proc/x.json"],
+         "--json-out"),
         (["identify", str(exp_csv), "--drive", DRIVE_TOML, "--report", "/proc/rep"],
          "the report into"),
     ):
@@ -565,8 +566,8 @@ def test_third_qa_pass(exp, exp_csv, tmp_path, capsys):
                  str(tmp_path / "s.csv")]) == 0
     capsys.readouterr()
     if Path("/proc/self").is_dir():
-        err = _one_line_error(capsys, ["reproduce", "tao1995", "--json", "/proc/x.json"])
-        assert "cannot write --json /proc/x.json" in err
+        err = _one_line_error(capsys, ["reproduce", "tao1995", "--json-out", "/proc/x.json"])
+        assert "cannot write --json-out /proc/x.json" in err
     zero = tmp_path / "zero.toml"
     zero.write_text(Path(DRIVE_TOML).read_text() + "\n[uncertainty]\n" + "".join(
         f"{n} = 0\n" for n in ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")))

@@ -70,7 +70,7 @@ def test_bad_scenarios_one_line_errors(tmp_path, capsys, edit, needle):
 
 def test_reproduce_runner(tmp_path, capsys):
     out = tmp_path / "r.json"
-    assert main(["reproduce", "tao1995", "--json", str(out), "--report",
+    assert main(["reproduce", "tao1995", "--json-out", str(out), "--report",
                  str(tmp_path / "rep")]) == 0
     doc = json.loads(out.read_text())
     assert set(doc["variants"]) == {"exact", "smooth-filter", "none", "gain-only"}
@@ -84,5 +84,5 @@ def test_reproduce_runner(tmp_path, capsys):
     assert 'src="fig6_smooth_inverse_alpha6.png"' in page and "MET" in page
     assert "MISSED" not in page  # the runner returned 0: every bar met
     capsys.readouterr()
-    assert main(["reproduce", "tao1995", "--json", str(out)]) == 2
+    assert main(["reproduce", "tao1995", "--json-out", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err

@@ -80,7 +80,7 @@ def test_progress_and_order():
     calls = []
     assert map_tasks(abs, [-3, 2, -1], jobs=2,
                      progress=lambda d, n: calls.append((d, n))) == [3, 2, 1]
-    assert calls == [(1, 3), (2, 3), (3, 3)]
+    assert calls == [(0, 3), (1, 3), (2, 3), (3, 3)]
 
 
 def test_a_task_error_reaches_the_caller():

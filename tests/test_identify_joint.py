@@ -45,6 +45,11 @@ N_TRIALS = 20
 MIN_COVERED = 17
 
 
+#: Paper A's model (viscous friction, the torque applied exactly): the tests of the
+#: search's stages on kernel-made trials pin it, so that they test those stages.
+PAPER_MODEL = {"friction": "viscous", "actuator": None}
+
+
 @pytest.fixture(scope="module")
 def short():
     t = signals.time_grid(4.0, 1e-3)
@@ -204,7 +209,12 @@ def test_std_across_trials_near_crb(trials, short):
 def test_fitted_attributes(trials):
     e = trials[0]
     assert e.estimated_ == ("theta", *LINEAR_PARAMS)
-    assert set(e.params_) == set(LINEAR_PARAMS) and e.drive_.theta == e.theta_
+    assert set(e.params_) == {*LINEAR_PARAMS, "fc_M", "fc_L", "tau_i"}
+    assert e.drive_.theta == e.theta_
+    # ideal records: the tests of friction and current loop keep paper A's model
+    assert (e.friction_, e.fc_M_, e.fc_L_, e.tau_i_) == ("viscous", 0.0, 0.0, 0.0)
+    assert [c.term for c in e.choices_] == ["friction", "actuator"]
+    assert not any(c.kept for c in e.choices_)
     assert e.noise_std_.shape == (1, 2) and np.all(e.noise_std_ > 0)
     assert e.fit_percent_.shape == (1, 2) and np.all(e.fit_percent_ > 90)
     (res_m, res_l), = e.residuals_
@@ -313,7 +323,7 @@ def test_known_noise_and_subset_of_parameters(short):
     _, _, clean = short
     prior = TRUE.with_theta(None)
     e = JointIdentifier(prior, prior_rel_std={"k_sh": 0.1, "J_M": 0.0, "theta": 1.0},
-                        noise=(0.5, 0.5)).fit(_noisy(clean, 30, 4))
+                        noise=(0.5, 0.5), **PAPER_MODEL).fit(_noisy(clean, 30, 4))
     assert e.estimated_ == ("theta", "k_sh")
     assert e.params_["J_M"] == P_TRUE["J_M"]
     assert e.noise_std_.tolist() == [[0.5, 0.5]]
@@ -432,8 +442,9 @@ def test_friction_restarts_cross_the_ridge_of_a_wrong_split():
     # without the second search too, which also leaves this minimum (misfit_restart)
     with pytest.warns(bk.CorrelatedResidualsWarning):
         stuck = JointIdentifier(prior, search=JointSearch(
-            restarts=Restarts(friction=(), misfit=False)), interval=fisher).fit(recs)
-    fit = JointIdentifier(prior, interval=fisher).fit(recs)
+            restarts=Restarts(friction=(), misfit=False)), interval=fisher,
+            **PAPER_MODEL).fit(recs)
+    fit = JointIdentifier(prior, interval=fisher, **PAPER_MODEL).fit(recs)
     assert fit.search.restarts.friction == (1.0,)  # the default
     assert not fit.misfit_restarted_  # the friction restart alone reached it
     assert stuck.params_["f_M"] < 0.7 * drive.f_M and stuck.theta_ < 0.98 * drive.theta
@@ -496,8 +507,8 @@ def test_ambiguity_starts_continue_more_candidates():
     whose interval covers the truth."""
     drive, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
     usual = JointIdentifier(prior, search=JointSearch(
-        continuation=Continuation(ambiguity_starts=0))).fit(recs)
-    fit = JointIdentifier(prior).fit(recs)
+        continuation=Continuation(ambiguity_starts=0)), **PAPER_MODEL).fit(recs)
+    fit = JointIdentifier(prior, **PAPER_MODEL).fit(recs)
     assert usual.ambiguous_ and fit.ambiguous_  # detected either way; acted on if asked
     assert usual.theta_ < 0.8 * drive.theta and usual.params_["k_sh"] > 1.3 * drive.k_sh
     assert abs(usual.theta_ - drive.theta) > 1.96 * usual.std_
@@ -555,7 +566,7 @@ def test_profile_interval_follows_a_rattling_likelihood():
     says, and its interval, asymmetric, covers the truth (at about half its upper
     half-width)."""
     drive, recs, prior = _robustness_trial(5, 6, 17, 20, 5.0, 20.0)
-    fit = JointIdentifier(prior).fit(recs)
+    fit = JointIdentifier(prior, **PAPER_MODEL).fit(recs)
     assert fit.interval_ == "profile" and fit.ci95_bounded_ == (True, True)
     assert abs(fit.theta_ - drive.theta) > 1.96 * fit.std_  # Fisher's misses
     lo, hi = fit.ci95_

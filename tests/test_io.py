@@ -92,7 +92,8 @@ BAD_TOML = {
     "missing key": (toml_text(drop=("k_sh",)), r"missing key\(s\) k_sh in \[drive\]"),
     "missing keys": (toml_text(drop=("J_M", "f_L")), r"missing key\(s\) J_M, f_L"),
     "extra key": (toml_text(extra="").replace("[drive]", "[drive]\nJ_m = 1.0"),
-                  r"unknown key\(s\) J_m in \[drive\]; allowed keys: J_M, J_L, k_sh"),
+                  r"unknown key\(s\) J_m in \[drive\] \(did you mean J_M\?\); allowed keys: "
+                  r"J_M, J_L, k_sh"),
     "total gap key": (toml_text({**PAPER, "b": 0.07}), r"unknown key\(s\) b"),
     "unknown table": (toml_text(extra="[drvie]\nx = 1\n"), r"unknown top-level key\(s\) drvie"),
     "no drive table": ("[motor]\nJ = 1.0\n", "motor"),
@@ -113,6 +114,55 @@ BAD_TOML = {
                        r"not valid TOML: .*line 4"),
     "duplicate key": (toml_text() + "J_M = 1.0\n", r"not valid TOML: .*line 9"),
 }
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (toml_text().replace("k_sh", "k_hs"),
+         "unknown key(s) k_hs in [drive] (did you mean k_sh?); allowed keys: J_M,"),
+        (toml_text().replace("J_L", "JL").replace("f_sh", "f_hs"),
+         "unknown key(s) JL, f_hs in [drive] (did you mean J_L or f_sh?); allowed keys"),
+        (toml_text(extra="[drvie]\nx = 1\n"),
+         "unknown top-level key(s) drvie (did you mean [drive]?); allowed tables"),
+        (toml_text(extra="[uncertainty]\nJ_LL = 0.1\n"),
+         "unknown key(s) J_LL in [uncertainty] (did you mean J_L?); allowed keys"),
+        (toml_text().replace("[drive]", "theta_x = 1\n[drive]"),  # too far from any table
+         "unknown top-level key(s) theta_x; allowed tables"),
+        (toml_text(extra="[actuator]\ntau = 1e-3\n"),
+         "[actuator] takes exactly the key(s) tau_i (tau_i: current-loop time constant in s); "
+         "got tau (did you mean tau_i?)"),
+    ],
+    ids=["swap", "two", "table", "uncertainty", "no guess", "actuator"],
+)
+def test_a_typo_gets_did_you_mean(tmp_path, text, message):
+    """A misspelt key is named with the allowed key it most looks like (difflib), by
+    every reader of the file, and by the command line on one line."""
+    from backlashkit.cli import main
+    from backlashkit.io import read_actuator_toml
+
+    path = write(tmp_path, text)
+    reader = (read_actuator_toml if "[actuator]" in message else
+              read_uncertainty_toml if "[uncertainty]" in message else read_drive_toml)
+    with pytest.raises(InputError) as info:
+        reader(path)
+    assert str(info.value).startswith(f"{path}: {message}")
+    if reader is read_drive_toml:
+        argv = ["simulate", str(path), "--experiment", "step-down", "--amplitude", "0.1",
+                "--hold", "1", "--out", str(tmp_path / "x.csv")]
+        assert main(argv) == 2
+        assert not (tmp_path / "x.csv").exists()
+
+
+def test_did_you_mean_in_the_cli_message(tmp_path, capsys):
+    from backlashkit.cli import main
+
+    path = write(tmp_path, toml_text().replace("k_sh", "k_hs"), "my drive.toml")
+    assert main(["simulate", str(path), "--experiment", "step-down", "--amplitude", "0.1",
+                 "--hold", "1", "--out", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}: unknown key(s) k_hs in [drive] (did you mean " \
+        "k_sh?)" in err
 
 
 @pytest.mark.parametrize("case", list(BAD_TOML), ids=list(BAD_TOML))

@@ -70,7 +70,8 @@ def test_document_structure(small):
     json.dumps(small, allow_nan=False)  # valid JSON
     text = format_tables(small)
     assert "Table 1" in text and "0.0311" in text  # the paper's two-step mean at 40 %
-    assert len(checks(small)) == 3
+    assert len(checks(small)) == 4
+    assert joint["paper_model"] == 1.0  # ideal records: no friction, no current loop
 
 
 def test_results_do_not_depend_on_jobs(small):
@@ -86,6 +87,7 @@ def test_joint_meets_the_bars_at_err_p_40():
     2.70e-3 for the two-step method) and std within 1.5x of its Cramér-Rao bound."""
     doc = run_ravanbod2002(runs=10, err_p=[0.4], jobs=1)
     j = doc["rows"][0]["methods"]["joint"]
+    assert j["paper_model"] >= 0.9  # issue 20: auto keeps paper A's model (95 % over 40)
     assert abs(j["mean"] - THETA) <= BAR_BIAS * THETA
     assert j["std"] <= BAR_STD
     assert j["std"] <= BAR_CRB * doc["crb"]["theta_joint"]
@@ -110,7 +112,7 @@ def test_validation(kwargs, pattern):
 def test_cli_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "r.json"
     out.write_text("{}")
-    code = cli.main(["reproduce", "ravanbod2002", "--runs", "2", "--json", str(out)])
+    code = cli.main(["reproduce", "ravanbod2002", "--runs", "2", "--json-out", str(out)])
     err = capsys.readouterr().err
     assert code == 2 and "already exists" in err and "--force" in err
     assert out.read_text() == "{}"
@@ -138,7 +140,7 @@ def test_cli_errors_name_the_flag(argv, message, capsys):
 def test_cli_json_and_report(tmp_path, capsys):
     rep = tmp_path / "rep"
     code = cli.main(["reproduce", "ravanbod2002", "--runs", "2", "--err-p", "0.2", "--seed",
-                     "5", "--json", "-", "--report", str(rep)])
+                     "5", "--json", "--report", str(rep)])
     captured = capsys.readouterr()
     doc = json.loads(captured.out)
     assert code in (0, 1) and code == (0 if all(c["met"] for c in doc["checks"]) else 1)
@@ -168,6 +170,7 @@ def test_a_refused_fit_is_recorded_not_fatal(monkeypatch):
     j = doc["rows"][0]["methods"]["joint"]
     assert j["failures"] == 2 and j["mean"] is None and j["coverage95"] == 0
     assert doc["rows"][0]["methods"]["regression"]["failures"] == 0
-    (bar, value, met), = checks(doc)
+    (bar, value, met), (_, share, kept) = checks(doc)
     assert not met and value == "2 refused"
+    assert share == "0%" and not kept  # a refused run keeps no model
     assert "(2 refused)" in format_tables(doc)

@@ -246,7 +246,7 @@ def simulate_adaptive(p: dict[str, Any]) -> dict[str, np.ndarray]:
     Parameters
     ----------
     p : dict
-        The packed problem built by :func:`backlashkit.control.closed_loop.simulate`
+        The packed problem built by :func:`backlashkit.control.problem.build_problem`
         (matrices of the plant, filters, ``H(s)``, gains, reference, step ``h``,
         ``n_steps``, output decimation ``n_sub``, optional per-step ``noise``/``dist``).
 

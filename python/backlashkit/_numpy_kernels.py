@@ -1,6 +1,6 @@
 """Plain-NumPy reference of the compiled drive-chain kernel (``backlashkit._core``).
 
-Same algorithm as ``crates/core/src/hybrid.rs`` and ``chain.rs``, written for reading
+Same algorithm as ``crates/core/src/hybrid/`` and ``chain/``, written for reading
 and for parity tests, not for speed (about 100 times slower). The matrix exponentials
 come from :func:`scipy.linalg.expm` rather than the kernel's own Taylor scaling and
 squaring, so parity also checks that part. Signature and outputs match

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["CorrelatedResidualsWarning", "Diagnostic", "InputError", "Option",
-           "PriorMismatchWarning", "SearchEdgeWarning", "SensitivityWarning",
-           "StepDownWarning"]
+           "PriorMismatchWarning", "QuantisedSpeedsWarning", "SearchEdgeWarning",
+           "SensitivityWarning", "StepDownWarning"]
 
 
 @dataclass(frozen=True)
@@ -204,3 +204,19 @@ class SearchEdgeWarning(Diagnostic, UserWarning):
         The parameter the message is about, when it starts with its name.
     """
 
+
+class QuantisedSpeedsWarning(Diagnostic, UserWarning):
+    """A record's speeds are an encoder's differenced counts.
+
+    Such a speed is the mean over the sample, not the speed at the sample, and its noise
+    is the difference of two quantisation errors (lag-1 autocorrelation -0.5): the
+    joint estimator's model has neither yet, so its ``theta`` may be biased by about a
+    percent and its interval too narrow.
+
+    Parameters
+    ----------
+    *parts : str or Option
+        The message (see :class:`Diagnostic`).
+    param : str, optional
+        The parameter the message is about, when it starts with its name.
+    """

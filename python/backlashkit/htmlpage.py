@@ -106,19 +106,19 @@ def table(header: Sequence[str], rows: Iterable[Sequence[Any]], *, left: int = 1
 
 
 def bars_table(checks: Iterable[tuple[str, Any, bool]]) -> str:
-    """The table of a reproduction's bars.
+    """The table of a reproduction's checks against its paper (its bars).
 
     Parameters
     ----------
     checks : iterable of (str, object, bool)
-        ``(bar, measured value, met)`` per bar.
+        ``(what is checked, measured value, met)`` per check.
 
     Returns
     -------
     str
         The HTML table, "MET" or "MISSED" in the last column.
     """
-    return table(("bar", "measured", "met"),
+    return table(("check", "measured", "result"),
                  ((b, v, ("MET", "met") if m else ("MISSED", "miss")) for b, v, m in checks),
                  left=2)
 

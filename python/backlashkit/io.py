@@ -72,8 +72,33 @@ ACTUATOR_KEYS = ("tau_i",)
 TOP_LEVEL_TABLES = ("drive", "uncertainty", "actuator")
 
 
+#: How alike (difflib's ratio, case ignored) a misspelt key and an allowed one must be
+#: for "did you mean": 0.7 takes a swap (``k_hs`` for ``k_sh``, 0.75), a missing
+#: underscore (``JL`` for ``J_L``, 0.8) or a wrong case (``J_m``, 1.0), but guesses
+#: nothing for ``J_X`` (0.67 to any of ``J_M``, ``J_L``: either could be meant).
+SUGGEST_CUTOFF = 0.7
+
+
 def _fmt_keys(keys: Sequence[str]) -> str:
     return ", ".join(keys)
+
+
+def _did_you_mean(unknown: Sequence[str], allowed: Sequence[str], *,
+                  brackets: bool = False) -> str:
+    """`` (did you mean k_sh?)`` for the unknown keys that look like an allowed one."""
+    import difflib
+
+    by_lower = {a.lower(): a for a in allowed}
+    guesses = []
+    for key in unknown:
+        close = difflib.get_close_matches(key.lower(), list(by_lower), n=1,
+                                          cutoff=SUGGEST_CUTOFF)
+        if close:
+            name = by_lower[close[0]]
+            guesses.append(f"[{name}]" if brackets else name)
+    if not guesses:
+        return ""
+    return f" (did you mean {' or '.join(dict.fromkeys(guesses))}?)"
 
 
 def load_toml(path: PathLike) -> dict[str, Any]:
@@ -112,12 +137,13 @@ def load_toml(path: PathLike) -> dict[str, Any]:
 def _check_top_level(doc: Mapping[str, Any], path: PathLike) -> None:
     unknown = [k for k in doc if k not in TOP_LEVEL_TABLES]
     if unknown:
-        hint = ""
+        header = ""
         if set(unknown) & set(DRIVE_KEYS):  # the parameters without their table header
-            hint = " (the drive's parameters belong under a [drive] line)"
+            header = " (the drive's parameters belong under a [drive] line)"
         raise InputError(
-            f"{path}: unknown top-level key(s) {_fmt_keys(unknown)}; allowed tables: "
-            f"[{'], ['.join(TOP_LEVEL_TABLES)}]{hint}"
+            f"{path}: unknown top-level key(s) {_fmt_keys(unknown)}"
+            f"{'' if header else _did_you_mean(unknown, TOP_LEVEL_TABLES, brackets=True)}; "
+            f"allowed tables: [{'], ['.join(TOP_LEVEL_TABLES)}]{header}"
         )
 
 
@@ -180,7 +206,8 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
     unknown = [k for k in table if k not in DRIVE_KEYS + FRICTION_KEYS]
     if unknown:
         raise InputError(
-            f"{path}: unknown key(s) {_fmt_keys(unknown)} in [drive]; allowed keys: "
+            f"{path}: unknown key(s) {_fmt_keys(unknown)} in [drive]"
+            f"{_did_you_mean(unknown, DRIVE_KEYS + FRICTION_KEYS)}; allowed keys: "
             f"{_fmt_keys(DRIVE_KEYS + FRICTION_KEYS)}"
         )
     required = DRIVE_KEYS if require_theta else DRIVE_KEYS[:-1]
@@ -233,6 +260,7 @@ def read_actuator_toml(path: PathLike) -> CurrentLoop | None:
         raise InputError(
             f"{path}: [actuator] takes exactly the key(s) {_fmt_keys(ACTUATOR_KEYS)} "
             f"(tau_i: current-loop time constant in s); got {_fmt_keys(list(table))}"
+            f"{_did_you_mean(unknown, ACTUATOR_KEYS)}"
         )
     tau_i = _number(path, "actuator", "tau_i", table["tau_i"])
     try:
@@ -278,8 +306,8 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     unknown = [k for k in table if k not in linear]
     if unknown:
         raise InputError(
-            f"{path}: unknown key(s) {_fmt_keys(unknown)} in [uncertainty]; allowed keys: "
-            f"{_fmt_keys(linear)}"
+            f"{path}: unknown key(s) {_fmt_keys(unknown)} in [uncertainty]"
+            f"{_did_you_mean(unknown, linear)}; allowed keys: {_fmt_keys(linear)}"
         )
     out = {}
     for key, value in table.items():

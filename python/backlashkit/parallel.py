@@ -33,17 +33,19 @@ a thread pool) leave the caller's BLAS alone.
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from multiprocessing import get_context
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
 from .errors import InputError
 
-__all__ = ["dask_client", "iter_tasks", "map_tasks", "process_pool", "task_seeds"]
+__all__ = ["ProgressBar", "dask_client", "iter_tasks", "map_tasks", "process_pool",
+           "task_seeds"]
 
 #: Seconds to wait for a Dask scheduler before calling it unreachable: a scheduler on
 #: the network answers in well under a second; the default of distributed (30 s) makes
@@ -79,6 +81,71 @@ def process_pool(jobs: int) -> ProcessPoolExecutor:
     """
     return ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
                                initializer=_one_blas_thread)
+
+
+class ProgressBar:
+    """A progress bar on stderr: tasks done out of the total, and the time left.
+
+    Pass it as the ``progress=`` of :func:`map_tasks` (or call it as
+    ``bar(done, total)``). It draws with ``tqdm`` only when its stream is a terminal and
+    ``quiet`` is False, so a log file, a pipe or a test sees nothing, and it never
+    writes to stdout, where ``--json`` goes. Use it as a context manager, or call
+    :meth:`close`, to end the bar's line.
+
+    Parameters
+    ----------
+    desc : str
+        What is counted, shown before the bar (e.g. ``"ravanbod2002"``).
+    unit : str, optional
+        Name of one task (default ``"fit"``).
+    quiet : bool, optional
+        Draw nothing (the command line's ``--quiet``).
+    stream : file object, optional
+        Where to draw (default ``sys.stderr``, looked up at construction).
+    """
+
+    def __init__(self, desc: str, *, unit: str = "fit", quiet: bool = False,
+                 stream: IO[str] | None = None) -> None:
+        self.desc, self.unit = desc, unit
+        self.stream = sys.stderr if stream is None else stream
+        isatty = getattr(self.stream, "isatty", None)
+        self.shown = not quiet and callable(isatty) and bool(isatty())
+        self._bar: Any = None
+
+    def __repr__(self) -> str:
+        return f"ProgressBar({self.desc!r}, unit={self.unit!r}, shown={self.shown})"
+
+    def __call__(self, done: int, total: int) -> None:
+        """Show ``done`` of ``total`` tasks (the first call starts the clock).
+
+        Parameters
+        ----------
+        done : int
+            Tasks finished so far (tasks already done before the run count too).
+        total : int
+            All tasks.
+        """
+        if not self.shown:
+            return
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, initial=done, desc=self.desc, unit=self.unit,
+                             file=self.stream, dynamic_ncols=True)
+        else:
+            self._bar.update(done - self._bar.n)
+
+    def close(self) -> None:
+        """End the bar's line (nothing when it was never drawn)."""
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+    def __enter__(self) -> ProgressBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def task_seeds(seed: int | np.random.SeedSequence | None,
@@ -254,7 +321,8 @@ def map_tasks(
     seed : int or numpy.random.SeedSequence, optional
         Root seed of the tasks' random streams (:func:`task_seeds`).
     progress : callable, optional
-        ``progress(done, total)`` after every finished task.
+        ``progress(done, total)`` once before the first task (``done`` 0: a
+        :class:`ProgressBar` starts its clock) and after every finished task.
 
     Returns
     -------
@@ -271,6 +339,8 @@ def map_tasks(
         The first error raised by ``fn`` (in order of completion).
     """
     results: list[Any] = [None] * len(tasks)
+    if progress is not None:
+        progress(0, len(tasks))
     for done, (i, result) in enumerate(
             iter_tasks(fn, tasks, executor=executor, jobs=jobs, seed=seed), start=1):
         results[i] = result

@@ -1,4 +1,4 @@
-"""Plots of simulation results (and, later, identification reports).
+"""Plots of simulation results, and the legend placement every plot shares.
 
 Every plot function takes ``ax=`` and returns the figure; none calls ``plt.show()``
 or changes matplotlib's global state (figures are created with
@@ -18,14 +18,32 @@ if TYPE_CHECKING:
 
     from .simulate import DriveResponse
 
-__all__ = ["plot_drive_response"]
+__all__ = ["legend_outside", "plot_drive_response"]
+
+
+def legend_outside(ax: matplotlib.axes.Axes, **kwargs) -> None:
+    """Put the legend of ``ax`` to the right of its axes, where it covers no data.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Axes with labelled artists (nothing is drawn when none is labelled).
+    **kwargs
+        Passed to :meth:`matplotlib.axes.Axes.legend` (e.g. ``handles``, ``title``).
+    """
+    handles = kwargs.pop("handles", None)
+    if handles is None and not ax.get_legend_handles_labels()[0]:
+        return
+    kwargs.setdefault("fontsize", "small")
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+              borderaxespad=0.0, **kwargs)
 
 
 def _axes(ax, n: int):
     if ax is None:
         from matplotlib.figure import Figure
 
-        fig = Figure(figsize=(8, 2.4 * n), layout="constrained")
+        fig = Figure(figsize=(9, 2.4 * n), layout="constrained")
         return fig, list(fig.subplots(n, 1, sharex=True))
     axes = list(ax) if isinstance(ax, Sequence) else [ax]
     if len(axes) != n:
@@ -36,42 +54,62 @@ def _axes(ax, n: int):
 def plot_drive_response(
     response: DriveResponse, *, ax: Sequence[matplotlib.axes.Axes] | None = None
 ) -> matplotlib.figure.Figure:
-    """Plot speeds, twists (with the gap) and shaft torques against time.
+    """Plot speeds, torques (applied and in the shafts) and twists against time.
 
-    Contact changes are marked by thin vertical lines on the twist axes.
+    The applied motor torque is drawn under the speeds, with the shaft torques; the
+    twist panel marks the gap's edges ``±theta`` (dashed) and every contact change (a
+    thin grey line; where contacts chatter the lines merge into a grey band). Legends
+    sit to the right of the axes.
 
     Parameters
     ----------
     response : DriveResponse
         A simulation result.
     ax : sequence of three matplotlib Axes, optional
-        Axes for speeds, twists and shaft torques; new ones when omitted.
+        Axes for the speeds, the torques and the twists; new ones when omitted.
 
     Returns
     -------
     matplotlib.figure.Figure
         The figure holding the axes.
     """
-    fig, (ax_w, ax_phi, ax_t) = _axes(ax, 3)
+    from matplotlib.lines import Line2D
+
+    fig, (ax_w, ax_t, ax_phi) = _axes(ax, 3)
     t = response.t
     n = response.n_inertias
     names = ["motor", "load"] if n == 2 else [f"inertia {i + 1}" for i in range(n)]
     for i in range(n):
         ax_w.plot(t, response.speeds[:, i], label=names[i], lw=1)
     ax_w.set_ylabel("speed [rad/s]")
-    ax_w.legend(loc="best", fontsize="small")
+    ax_t.plot(t, response.torque, color="k", lw=1.2, drawstyle="steps-post", zorder=3,
+              label="applied (motor)")
+    if response.loop_torque is not None:
+        ax_t.plot(t, response.loop_torque, color="0.45", lw=1, ls="--",
+                  label="delivered by the current loop")
     for j in range(n - 1):
-        line = ax_phi.plot(t, response.twists[:, j], lw=1, label=f"shaft {j + 1}")[0]
+        shaft = "shaft" if n == 2 else f"shaft {j + 1}"
+        line = ax_phi.plot(t, response.twists[:, j], lw=1, label=f"{shaft} twist")[0]
         th = response.drive.theta[j]
         for sign in (1, -1):
             ax_phi.axhline(sign * th, color=line.get_color(), ls="--", lw=0.7)
-        ax_t.plot(t, response.shaft_torques[:, j], lw=1, color=line.get_color())
-    for ev in response.events:
+        ax_t.plot(t, response.shaft_torques[:, j], lw=1, color=line.get_color(),
+                  label=f"{shaft} torque")
+    contacts = response.contact_events
+    for ev in contacts:
         ax_phi.axvline(ev.time, color="0.8", lw=0.5, zorder=0)
-    ax_phi.set_ylabel("twist [rad]\n(dashed: ±theta)")
-    ax_t.set_ylabel("shaft torque [N m]")
-    ax_t.set_xlabel("time [s]")
-    ax_w.set_title(
-        f"drive response ({response.law.value} law, {len(response.events)} contact changes)"
-    )
+    twists = ax_phi.get_legend_handles_labels()[0]
+    handles = twists + [
+        Line2D([], [], color=twists[0].get_color() if n == 2 else "0.3", ls="--", lw=0.7,
+               label="gap edges ±theta"),
+        Line2D([], [], color="0.8", lw=4, label="contact changes"),
+    ]
+    ax_t.set_ylabel("torque [N m]")
+    ax_phi.set_ylabel("twist [rad]")
+    ax_phi.set_xlabel("time [s]")
+    for a in (ax_w, ax_t):
+        legend_outside(a)
+    legend_outside(ax_phi, handles=handles)
+    ax_w.set_title(f"Simulated drive: speeds, torques and shaft twist "
+                   f"({len(contacts)} contact changes)")
     return fig

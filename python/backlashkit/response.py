@@ -306,12 +306,14 @@ class DriveResponse(StateColumns):
         return self.shaft_torques[:, 0]
 
     def plot(self, ax: Sequence[matplotlib.axes.Axes] | None = None) -> matplotlib.figure.Figure:
-        """Plot speeds, twist and shaft torque against time, with contact changes.
+        """Plot speeds, torques (applied and shaft) and twist against time, with the
+        contact changes (:func:`backlashkit.report.plot_drive_response`).
 
         Parameters
         ----------
         ax : sequence of three matplotlib Axes, optional
-            Axes for speeds, twist and shaft torque. New ones are created when omitted.
+            Axes for the speeds, the torques and the twist. New ones are created when
+            omitted.
 
         Returns
         -------

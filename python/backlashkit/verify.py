@@ -15,6 +15,9 @@ every step is scanned at interior points together with the exact time derivative
 each switching function, so a short excursion is caught (and a near miss is recorded
 as a graze).
 
+The engine is :mod:`backlashkit._reference_engine`; the model it integrates, written
+from the physics, is :mod:`backlashkit._reference_model`.
+
 Public functions
 ----------------
 reference_simulate
@@ -42,9 +45,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import integrate, optimize
+from scipy import integrate
 
-from ._reference_model import ReferenceModel as _Model
+from ._reference_engine import SolverOptions, prepare, run, segments
+from ._reference_model import ReferenceModel
 from .errors import InputError
 from .laws import ShaftLaw
 from .response import FrictionEvent, StateColumns
@@ -65,28 +69,6 @@ __all__ = [
     "reference_simulate",
 ]
 
-_SOLVERS: dict[str, type[integrate.OdeSolver]] = {
-    "DOP853": integrate.DOP853,
-    "RK45": integrate.RK45,
-    "RK23": integrate.RK23,
-    "Radau": integrate.Radau,
-    "BDF": integrate.BDF,
-    "LSODA": integrate.LSODA,
-}
-
-#: Interior points at which every solver step is scanned for switching-function roots.
-_SCAN_POINTS = 8
-#: A local extremum of a switching function closer than this (relative to the twist
-#: scale of the shaft) to zero is recorded as a graze.
-_GRAZE_RTOL = 1e-6
-#: A switching function within this fraction of the twist scale of zero is on its
-#: boundary (a located event leaves it within a few ulp of zero, whatever the solver
-#: tolerance); the direction of motion then decides.
-_ON_BOUNDARY_RTOL = 1e-10
-#: Highest Lie derivative used to decide the direction of motion on a boundary.
-_MAX_LIE_ORDER = 4
-#: Zero-length restarts in a row after which the run is declared chattering.
-_MAX_ZERO_LENGTH_RESTARTS = 64
 
 # --------------------------------------------------------------------------- results
 
@@ -285,222 +267,6 @@ class AccuracyReport:
         )
 
 
-# --------------------------------------------------------------------------- model
-
-
-def _chain_of(drive: DriveChain | TwoMassDrive) -> DriveChain:
-    to_chain = getattr(drive, "to_chain", None)
-    if to_chain is None:
-        raise InputError(
-            f"drive must be a TwoMassDrive or a DriveChain, got {type(drive).__name__}"
-        )
-    return to_chain()
-
-
-def _prepare(drive, t, torque, law, initial_state, actuator=None):
-    chain = _chain_of(drive)
-    t_arr = np.asarray(t, dtype=float)
-    u = np.asarray(torque, dtype=float)
-    if t_arr.ndim != 1 or t_arr.size < 2:
-        raise InputError("t must be a 1-D grid with at least 2 samples")
-    if not np.all(np.diff(t_arr) > 0):
-        raise InputError("t must be strictly increasing")
-    if u.shape != t_arr.shape:
-        raise InputError(f"torque must have one sample per time step ({t_arr.size}), got {u.size}")
-    if not (np.all(np.isfinite(t_arr)) and np.all(np.isfinite(u))):
-        raise InputError("t and torque must be finite")
-    n = len(chain.J)
-    tau_i = 0.0 if actuator is None else float(actuator.tau_i)
-    s = 2 * n - 1
-    x0 = np.zeros(s) if initial_state is None else np.asarray(initial_state, dtype=float).ravel()
-    if tau_i > 0 and x0.size == s:
-        x0 = np.append(x0, u[0])  # the loop settled at the first set-point
-    s += int(tau_i > 0)
-    if x0.size != s or not np.all(np.isfinite(x0)):
-        raise InputError(f"initial_state must have {s} finite entries")
-    law_ = ShaftLaw.parse(law)
-
-    J, f = np.asarray(chain.J, float), np.asarray(chain.f, float)
-    k, d, theta = (np.asarray(a, float) for a in (chain.k, chain.d, chain.theta))
-    u_max = float(np.max(np.abs(u[:-1]))) if u.size > 1 else 0.0
-    duration = float(t_arr[-1] - t_arr[0])
-    twist_scale = np.maximum.reduce(
-        [theta, np.abs(x0[n:]), np.full(n - 1, u_max) / k, np.full(n - 1, 1e-12)]
-    )
-    fc = np.asarray(getattr(chain, "fc", np.zeros(n)), float)
-    fs = np.asarray(getattr(chain, "fs", fc), float)
-
-    # Speed scale: initial speeds, the terminal speed u/sum(f) or, if friction is
-    # too weak to reach it within the record, the speed gained in the record.
-    gain = duration / J.sum()
-    if f.sum() > 0:
-        gain = min(gain, 1.0 / f.sum())
-    w_scale = max(float(np.max(np.abs(x0[:n]))), u_max * gain, 1e-12)
-    scale = np.concatenate([np.full(n, w_scale), twist_scale] + ([[u_max or 1.0]] if tau_i else []))
-    model = _Model(J, f, k, d, theta, law_, twist_scale, fc, fs, tau_i, w_scale)
-    return model, t_arr, u, x0, law_, scale
-
-
-# --------------------------------------------------------------------------- engine
-
-
-def _lie_sign(h: np.ndarray, value: float, a: np.ndarray, c: np.ndarray, x: np.ndarray,
-              eps: float, rate: float) -> int:
-    """Sign of the motion of ``h @ x + h0`` (current value ``value``) at ``x`` under
-    ``dx/dt = A x + c``: the sign of the first Lie derivative that is not negligible
-    (0 when the function is stationary to the order examined)."""
-    del value
-    v = a @ x + c
-    for order in range(1, _MAX_LIE_ORDER + 1):
-        g = float(h @ v)
-        if abs(g) > eps * rate**order:
-            return 1 if g > 0 else -1
-        v = a @ v
-    return 0
-
-
-def _settle(model: _Model, t: float, x: np.ndarray, modes: tuple[int, ...], u: float,
-            events: list[ReferenceEvent], event_states: list[np.ndarray],
-            eps_rel: float) -> tuple[int, ...]:
-    """Apply every contact change that takes place at ``t`` itself.
-
-    A switching function that is already positive, or is on zero (within ``eps_rel``
-    of the twist scale) and increasing under the current dynamics, fires at once. This
-    covers the initial state, flank-to-flank switches of a shaft without backlash and
-    tangencies; repeated until the configuration is consistent.
-    """
-    for _ in range(4 * model.n + 4):
-        a, c = model.field(modes, u)
-        rate = max(float(np.max(np.abs(np.linalg.eigvals(a)))), 1.0)
-        fired = None
-        for shaft, target, hmat, h0 in model.guards(modes, u):
-            eps = eps_rel * model.scale(shaft)
-            vals = hmat @ x + h0
-            if vals.min() > eps:
-                fired = (shaft, target)
-            elif vals.min() >= -eps:
-                signs = [
-                    _lie_sign(hmat[r], vals[r], a, c, x, eps, rate)
-                    for r in range(vals.size)
-                    if vals[r] <= eps
-                ]
-                if signs and all(sg > 0 for sg in signs):
-                    fired = (shaft, target)
-            if fired is not None:
-                break
-        if fired is None:
-            return modes
-        shaft, target = fired
-        modes = _switch(model, modes, shaft, target, t, x, u, events, event_states)
-    raise RuntimeError(f"contact configuration does not settle at t = {t!r} s (chatter)")
-
-
-def _switch(model, modes, index, target, t, x, u, events, event_states) -> tuple[int, ...]:
-    """Apply a switch (the model may set a stuck speed to 0 in ``x``); record its
-    events and the state at each."""
-    modes, new = model.switch(modes, index, target, t, x, u)
-    for e in new:
-        if not isinstance(e, FrictionEvent):
-            e = ReferenceEvent(float(e[0]), int(e[1]), e[2], e[3])
-        events.append(e)
-        event_states.append(np.array(x, dtype=float))
-    return modes
-
-
-def _guard_fn(dense, hmat, h0):
-    def q(tt: float) -> float:
-        return float(np.min(hmat @ dense(tt) + h0))
-
-    return q
-
-
-def _guard_rate_fn(dense, hmat, h0, a, c):
-    def dq(tt: float) -> float:
-        x = dense(tt)
-        vals = hmat @ x + h0
-        r = int(np.argmin(vals))
-        return float(hmat[r] @ (a @ x + c))
-
-    return dq
-
-
-def _root(fun, lo: float, hi: float) -> float:
-    """First-found root of ``fun`` on ``[lo, hi]`` with ``fun(lo) <= 0 < fun(hi)``:
-    the returned point has ``fun > 0`` or is within a few ulp of the crossing."""
-    flo, fhi = fun(lo), fun(hi)
-    if flo > 0:
-        return lo
-    if fhi <= 0:
-        return hi
-    r = optimize.brentq(fun, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=400)
-    return float(r)
-
-
-def _scan_step(model, modes, guards, a, c, dense, t_old, t_new, first_step, grazes, eps_rel):
-    """Earliest crossing of a switching function inside ``(t_old, t_new]``.
-
-    Returns ``(time, shaft, target)`` or ``None``. Records grazes in ``grazes``.
-    """
-    taus = np.linspace(t_old, t_new, _SCAN_POINTS + 1)
-    xs = dense(taus)  # (s, M+1)
-    dxs = a @ xs + c[:, None]
-    best = None
-    for shaft, target, hmat, h0 in guards:
-        scale = model.scale(shaft)
-        vals = hmat @ xs + h0[:, None]
-        arg = np.argmin(vals, axis=0)
-        q = vals[arg, np.arange(taus.size)]
-        dq = (hmat @ dxs)[arg, np.arange(taus.size)]
-        eps = eps_rel * scale
-        # On zero right after a restart (the switch that caused it, or a tangency that
-        # _settle judged not to enter): the crossing sought is a later one.
-        on_zero = first_step and abs(q[0]) <= eps
-        if on_zero:
-            q = q.copy()
-            q[0] = 0.0
-        dt = taus[1] - taus[0]
-        bound = np.maximum(q[:-1], q[1:]) + dt * np.maximum(np.abs(dq[:-1]), np.abs(dq[1:]))
-        cross = q[1:] > 0
-        turn = (dq[:-1] > 0) & (dq[1:] < 0) & (bound > -_GRAZE_RTOL * scale)
-        if not (cross.any() or turn.any()):
-            continue
-        qf = _guard_fn(dense, hmat, h0)
-        dqf = _guard_rate_fn(dense, hmat, h0, a, c)
-        for i in range(_SCAN_POINTS):
-            lo, hi = taus[i], taus[i + 1]
-            if best is not None and lo >= best[0]:
-                break
-            hit = None
-            if i == 0 and on_zero and cross[0]:
-                # q leaves zero downwards (or stays), dips, then crosses: find the dip
-                # (minimum) first, then the crossing after it; without a dip below
-                # zero, fire where q clears eps
-                a_ = lo
-                if dq[0] <= 0 < dq[1]:
-                    a_ = optimize.brentq(dqf, lo, hi, xtol=1e-300)
-                if a_ > lo and qf(a_) < 0:
-                    hit = _root(qf, a_, hi)
-                else:
-                    hit = _root(lambda s, qf=qf, eps=eps: qf(s) - eps, lo, hi)
-            elif q[i] > 0:
-                # cannot happen after _settle; fire at once rather than lose the event
-                hit = lo
-            elif cross[i]:
-                hit = _root(qf, lo, hi)
-            elif turn[i]:
-                tm = optimize.brentq(dqf, lo, hi, xtol=1e-300)
-                qm = qf(tm)
-                if qm > 0:
-                    hit = _root(qf, lo, tm)
-                if abs(qm) < _GRAZE_RTOL * scale:
-                    grazes.append(ReferenceGraze(float(tm), int(shaft), float(qm)))
-            if hit is not None:
-                if best is None or hit < best[0]:
-                    best = (hit, shaft, target)
-                break
-    return best
-
-
 def reference_simulate(
     drive: DriveChain | TwoMassDrive,
     t: Sequence[float] | np.ndarray,
@@ -589,116 +355,45 @@ def reference_simulate(
     RuntimeError
         The solver failed or the contact configuration chatters.
     """
-    model, t_arr, u, x0, law_, scale = _prepare(drive, t, torque, law, initial_state, actuator)
-    if method not in _SOLVERS:
-        raise InputError(f"method must be one of {sorted(_SOLVERS)}, got {method!r}")
-    solver_cls = _SOLVERS[method]
-    atol_arr = rtol * scale if atol is None else np.broadcast_to(
-        np.asarray(atol, float), scale.shape).copy()
-    eps_rel = _ON_BOUNDARY_RTOL
+    model, t_arr, u, x0, law_, scale = prepare(drive, t, torque, law, initial_state, actuator)
+    options = SolverOptions.build(method, rtol, atol, max_step, scale)
+    trace = run(model, t_arr, u, x0, options)
+    return _result(model, trace, t_arr, u, law_, options)
 
-    n_grid = t_arr.size
-    states = np.empty((n_grid, model.s))
-    modes_out = np.empty((n_grid, model.n - 1 + len(model.sticky)), dtype=np.int8)
-    events: list[ReferenceEvent] = []
-    event_states: list[np.ndarray] = []
-    grazes: list[ReferenceGraze] = []
 
-    x = x0.copy()
-    modes = model.classify(x, float(u[0]))
-    states[0] = x
-    modes_out[0] = modes
-    filled = 1  # grid points [0, filled) are done
-    n_steps = n_restarts = nfev = 0
+def _as_event(e) -> ReferenceEvent | FrictionEvent:
+    """An event of the model as the reference reports it."""
+    if isinstance(e, FrictionEvent):
+        return e
+    return ReferenceEvent(float(e[0]), int(e[1]), e[2], e[3])
 
-    # Constant-torque segments: u[i] is held on [t[i], t[i+1]); the last sample unused.
-    change = np.flatnonzero(np.diff(u[:-1]) != 0) + 1
-    starts = np.concatenate([[0], change])
-    ends = np.concatenate([change, [n_grid - 1]])
 
-    t_cur = float(t_arr[0])
-    for i0, i1 in zip(starts, ends, strict=True):
-        ui = float(u[i0])
-        t_end = float(t_arr[i1])
-        modes = _settle(model, t_cur, x, modes, ui, events, event_states, eps_rel)
-        zero_len = 0
-        while t_cur < t_end:
-            a, c = model.field(modes, ui)
-            guards = model.guards(modes, ui)
-
-            def fun(_t, y, a=a, c=c):
-                return a @ y + c
-
-            kwargs = dict(rtol=rtol, atol=atol_arr, max_step=max_step)
-            if method in ("Radau", "BDF", "LSODA"):
-                kwargs["jac"] = a
-            solver = solver_cls(fun, t_cur, x, t_end, **kwargs)
-            n_restarts += 1
-            hit = None
-            first = True
-            while solver.status == "running":
-                msg = solver.step()
-                if solver.status == "failed":
-                    raise RuntimeError(f"{method} failed at t = {solver.t!r} s: {msg}")
-                n_steps += 1
-                t_old, t_new = float(solver.t_old), float(solver.t)
-                dense = solver.dense_output()
-                hit = _scan_step(model, modes, guards, a, c, dense, t_old, t_new, first,
-                                 grazes, eps_rel)
-                first = False
-                t_stop = hit[0] if hit is not None else t_new
-                # grid points in [t_old, t_stop) (t_end itself belongs to what follows)
-                stop = int(np.searchsorted(t_arr, t_stop, side="left"))
-                stop = min(stop, i1)
-                if stop > filled:
-                    pts = t_arr[filled:stop]
-                    states[filled:stop] = dense(pts).T
-                    modes_out[filled:stop] = modes
-                    filled = stop
-                if hit is not None:
-                    break
-            nfev += int(solver.nfev)
-            if hit is None:
-                x = np.asarray(solver.y, dtype=float).copy()
-                t_cur = t_end
-                break
-            te, shaft, target = hit
-            x = np.asarray(dense(te), dtype=float).copy()
-            zero_len = zero_len + 1 if te <= t_cur else 0
-            if zero_len > _MAX_ZERO_LENGTH_RESTARTS:
-                raise RuntimeError(f"contact chatter at t = {te!r} s")
-            t_cur = te
-            modes = _switch(model, modes, shaft, target, te, x, ui, events, event_states)
-            modes = _settle(model, t_cur, x, modes, ui, events, event_states, eps_rel)
-        # grid points at the end of the segment up to (not including) t_end are filled;
-        # t_end is filled by the next segment's first step or below.
-    states[-1] = x
-    modes_out[-1] = modes
+def _result(model, trace, t_arr, u, law_, options) -> ReferenceResult:
+    """The reference's result from the engine's trace (the loop torque apart)."""
     n_base = 2 * model.n - 1
+    n_grid = t_arr.size
     stuck = None
     if model.sticky:
         stuck = np.zeros((n_grid, model.n), dtype=bool)
-        stuck[:, model.sticky] = modes_out[:, model.n - 1 :] == 0
-    if filled < n_grid - 1:  # pragma: no cover - defensive
-        raise RuntimeError("internal error: grid not filled")
+        stuck[:, model.sticky] = trace.modes[:, model.n - 1 :] == 0
     return ReferenceResult(
         t=t_arr,
         torque=u,
-        states=states[:, :n_base],
-        modes=np.sign(modes_out[:, : model.n - 1]).astype(np.int8),
-        events=tuple(events),
-        event_states=np.array(event_states, dtype=float).reshape(-1, model.s),
-        grazes=tuple(grazes),
+        states=trace.states[:, :n_base],
+        modes=np.sign(trace.modes[:, : model.n - 1]).astype(np.int8),
+        events=tuple(_as_event(e) for e in trace.events),
+        event_states=np.array(trace.event_states, dtype=float).reshape(-1, model.s),
+        grazes=tuple(ReferenceGraze(*g) for g in trace.grazes),
         law=law_,
-        method=method,
-        rtol=float(rtol),
-        atol=atol_arr,
-        n_steps=n_steps,
-        n_restarts=n_restarts,
-        nfev=nfev,
+        method=options.method,
+        rtol=float(options.rtol),
+        atol=options.atol,
+        n_steps=trace.n_steps,
+        n_restarts=trace.n_restarts,
+        nfev=trace.nfev,
         n_inertias=model.n,
         stuck_array=stuck,
-        loop_torque=states[:, n_base].copy() if model.tau_i > 0 else None,
+        loop_torque=trace.states[:, n_base].copy() if model.tau_i > 0 else None,
     )
 
 
@@ -858,38 +553,37 @@ def naive_simulate(
     numpy.ndarray
         States on ``t``, shape ``(n, 2N - 1)``.
     """
-    model, t_arr, u, x0, law_, scale = _prepare(drive, t, torque, law, initial_state)
-    n = model.n
-    k, d, theta = model.k, model.d, model.theta
-
-    def fun(_t, x, ui):
-        w, phi = x[:n], x[n:]
-        dphi = w[:-1] - w[1:]
-        pos = k * (phi - theta) + d * dphi
-        neg = k * (phi + theta) + d * dphi
-        if law_ is ShaftLaw.PAPER:
-            torq = np.where(phi >= theta, pos, np.where(phi <= -theta, neg, 0.0))
-        else:
-            torq = np.where(phi >= theta, np.maximum(pos, 0.0),
-                            np.where(phi <= -theta, np.minimum(neg, 0.0), 0.0))
-        load = -model.f * w
-        load[0] += ui
-        load[:-1] -= torq
-        load[1:] += torq
-        return np.concatenate([load / model.J, dphi])
-
+    model, t_arr, u, x0, law_, scale = prepare(drive, t, torque, law, initial_state)
     out = np.empty((t_arr.size, model.s))
     out[0] = x0
     x = x0
-    change = np.flatnonzero(np.diff(u[:-1]) != 0) + 1
-    starts = np.concatenate([[0], change])
-    ends = np.concatenate([change, [t_arr.size - 1]])
     tol = rtol * scale if atol is None else atol
-    for i0, i1 in zip(starts, ends, strict=True):
-        sol = integrate.solve_ivp(fun, (t_arr[i0], t_arr[i1]), x, method=method, rtol=rtol,
-                                  atol=tol, t_eval=t_arr[i0 : i1 + 1], args=(float(u[i0]),))
+    for i0, i1 in zip(*segments(u), strict=True):
+        sol = integrate.solve_ivp(_naive_rhs, (t_arr[i0], t_arr[i1]), x, method=method,
+                                  rtol=rtol, atol=tol, t_eval=t_arr[i0 : i1 + 1],
+                                  args=(float(u[i0]), model, law_))
         if sol.status != 0:
             raise RuntimeError(sol.message)
         out[i0 : i1 + 1] = sol.y.T
         x = sol.y[:, -1]
     return out
+
+
+def _naive_rhs(_t, x: np.ndarray, ui: float, model: ReferenceModel, law: ShaftLaw) -> np.ndarray:
+    """Right-hand side with the contact law evaluated from the state (no modes)."""
+    n = model.n
+    k, d, theta = model.k, model.d, model.theta
+    w, phi = x[:n], x[n:]
+    dphi = w[:-1] - w[1:]
+    pos = k * (phi - theta) + d * dphi
+    neg = k * (phi + theta) + d * dphi
+    if law is ShaftLaw.PAPER:
+        torq = np.where(phi >= theta, pos, np.where(phi <= -theta, neg, 0.0))
+    else:
+        torq = np.where(phi >= theta, np.maximum(pos, 0.0),
+                        np.where(phi <= -theta, np.minimum(neg, 0.0), 0.0))
+    load = -model.f * w
+    load[0] += ui
+    load[:-1] -= torq
+    load[1:] += torq
+    return np.concatenate([load / model.J, dphi])

@@ -91,8 +91,10 @@ def run(args: argparse.Namespace) -> int:
     resp = sc.run(inverse=sc.make_inverse(args.inverse))
     if trace is not None:
         write_trace(trace, resp)
+        print(f"backlashkit: wrote {trace}", file=sys.stderr)
     if plot is not None:
         resp.plot().savefig(plot)
+        print(f"backlashkit: wrote {plot}", file=sys.stderr)
     summary = resp.summary()
     from ..delay.loops import mrc_delay_margin  # the linear loop, delay at the plant input
 

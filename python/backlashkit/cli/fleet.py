@@ -4,7 +4,6 @@ its wear."""
 from __future__ import annotations
 
 import argparse
-import sys
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -59,29 +58,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return p
 
 
-class _Bar:
-    """tqdm's bar on stderr (tests done of total, time left), when stderr is a terminal."""
-
-    def __init__(self, quiet: bool) -> None:
-        self.bar = None
-        self.show = not quiet and sys.stderr.isatty()
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.show:
-            return
-        if self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, initial=done, unit="test", file=sys.stderr,
-                            desc="fleet", dynamic_ncols=True)
-        else:
-            self.bar.update(done - self.bar.n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``backlashkit fleet``.
 
@@ -97,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from ..fleet import identify_fleet, read_manifest, wear_trends, write_wear_report
     from ..fleet.report import check_report_dir
-    from ..parallel import dask_client
+    from ..parallel import ProgressBar, dask_client
     from .main import flag_names
 
     manifest = read_manifest(args.manifest)
@@ -114,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--dask-local must be a positive integer, got {args.dask_local}")
     if Path(args.out).resolve() == manifest.path.resolve():
         raise InputError("--out must not be the manifest itself")
-    bar = _Bar(args.quiet)
+    bar = ProgressBar("fleet", unit="test", quiet=args.quiet)
     client = (dask_client(n_workers=args.dask_local) if args.dask_local is not None
               else dask_client(address=args.scheduler) if args.scheduler is not None
               else nullcontext())

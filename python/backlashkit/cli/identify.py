@@ -30,18 +30,22 @@ from ..errors import (
     InputError,
     Option,
     PriorMismatchWarning,
+    QuantisedSpeedsWarning,
     SearchEdgeWarning,
     StepDownWarning,
 )
 from ..identify.intervals import ParametricBootstrap
+from ..identify.joint import LINEAR_PARAMS
 from ..identify.noise import ARNoise
 from ..identify.readers import read_records
 from ..identify.record import Record
 from ..identify.report import check_report_directory
 from ..identify.step import REFUSE_FROM_PRIOR
+from ..identify.terms import FRICTION_CHOICES
 from ..identify.torque import torque_levels
 from ..identify.two_step import RegressionIdentifier, TwoStepIdentifier
 from ..io import read_drive_toml, read_uncertainty_toml
+from ._identify_text import print_result
 from .files import add_file_options, file_options, reader_errors
 from .main import flag_names, word
 from .report import add_report_option, maybe_write_report
@@ -161,6 +165,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         f"step-down are more than {REFUSE_FROM_PRIOR:g} times the prior's (two-step, "
         "regression) (default: refused, a unit or column mistake being likelier)"
     )
+    _add_joint_options(p)
+    g = p.add_argument_group("reading the experiment files (all files alike)")
+    add_file_options(g, columns_help="the file's names of our columns t, torque, w_motor, "
+                     "w_load, e.g. 't=time,w_motor=n_mot,w_load=n_load' (unmapped ones keep "
+                     "our names)")
+    g.add_argument("--speed-unit", choices=("rad/s", "rpm"), default=None,
+                   help="unit of the speeds in the files; rpm are converted (default "
+                   f"{_default(read_records, 'speed_unit')})")
+    g.add_argument("--torque-levels", action="store_true",
+                   help="replace a noisy measured torque by its piecewise-constant levels "
+                   "(the model takes the torque as its exact input; default: a noisy torque "
+                   "is an error)")
+    p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
+    add_report_option(p)
+    p.set_defaults(func=run)
+    return p
+
+
+def _add_joint_options(p: argparse.ArgumentParser) -> None:
+    """The options of the joint method (and ``--friction``, shared with the others)."""
     p.add_argument(
         "--prior-rel-std", type=float, default=None, metavar="REL",
         help="joint: relative std of every linear parameter of the prior (overrides the "
@@ -189,26 +213,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="joint --noise ar or auto: order of the autoregressive model "
                    f"(default {_default(ARNoise, 'order')})")
     p.add_argument(
+        "--friction", choices=FRICTION_CHOICES, default=None,
+        help="Coulomb friction torques fc_M, fc_L fitted and kept where the data call for "
+        "them (auto), never (viscous) or always (coulomb); default auto for joint, viscous "
+        "(paper A's model) for two-step and regression"
+    )
+    p.add_argument(
+        "--current-loop", default=None, metavar="auto|none|TAU",
+        help="joint: the drive's current loop, a first-order lag of the torque: its time "
+        "constant fitted and kept where the data call for it (auto, the default), none, "
+        "or known (TAU in s)"
+    )
+    p.add_argument(
         "--final-horizon", type=float, default=None, metavar="S",
         help="joint: final fit and interval on S seconds after the start and every torque "
         "jump of each record instead of the whole record (where the shaft rattles: "
         "better calibrated intervals, larger std)"
     )
-    g = p.add_argument_group("reading the experiment files (all files alike)")
-    add_file_options(g, columns_help="the file's names of our columns t, torque, w_motor, "
-                     "w_load, e.g. 't=time,w_motor=n_mot,w_load=n_load' (unmapped ones keep "
-                     "our names)")
-    g.add_argument("--speed-unit", choices=("rad/s", "rpm"), default=None,
-                   help="unit of the speeds in the files; rpm are converted (default "
-                   f"{_default(read_records, 'speed_unit')})")
-    g.add_argument("--torque-levels", action="store_true",
-                   help="replace a noisy measured torque by its piecewise-constant levels "
-                   "(the model takes the torque as its exact input; default: a noisy torque "
-                   "is an error)")
-    p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
-    add_report_option(p)
-    p.set_defaults(func=run)
-    return p
 
 
 def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]:
@@ -239,9 +260,6 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     return out
 
 
-#: A fit this close to 100 % (rms residual over the speed's spread) leaves no noise to
-#: model: a measured speed has noise far above it (a 16-bit encoder: about 1e-5).
-NOISE_FREE = 1e-7
 
 
 def _noise_model_flag(option: Option) -> str:
@@ -255,13 +273,13 @@ FLAGS = {
     "order": "--noise-order", "sample_time": "--sample-time",
     "allow_far_from_prior": "--allow-far-from-prior",
     "method": "--method", "torque_levels": "--torque-levels", "noise_model": _noise_model_flag,
-    "force": "--force",
+    "force": "--force", "friction": "--friction", "actuator": "--current-loop",
 }
 
 #: Warnings of the library that ``identify`` says as notes (printed after theta, and
 #: the ``notes`` of ``--json``).
 NOTED = (PriorMismatchWarning, StepDownWarning, CorrelatedResidualsWarning,
-         SearchEdgeWarning)
+         SearchEdgeWarning, QuantisedSpeedsWarning)
 
 
 def _num(x: float | None) -> float | None:
@@ -292,6 +310,7 @@ def run(args: argparse.Namespace) -> int:
 def _check_options(args: argparse.Namespace) -> None:
     """Refuse a flag that the chosen method does not read."""
     for option, value in (("--bootstrap", args.bootstrap), ("--interval", args.interval),
+                          ("--current-loop", args.current_loop),
                           ("--final-horizon", args.final_horizon), ("--noise", args.noise),
                           ("--noise-order", args.noise_order),
                           ("--prior-rel-std", args.prior_rel_std)):
@@ -376,7 +395,7 @@ def _run(args: argparse.Namespace, flags: dict[str, Any]) -> int:
     if args.json:
         print(json.dumps(result, allow_nan=False))
         return 0
-    _print_result(args, est, out, notes, records + (finals or []))
+    print_result(args, est, out, notes, records + (finals or []))
     return 0
 
 
@@ -415,10 +434,32 @@ def _joint_identifier(args: argparse.Namespace, prior: Any) -> Any:
         noise_model = ARNoise(**order)
     elif args.noise in (None, "auto"):
         noise_model = AutoNoise(**order)
+    terms: dict[str, Any] = {}
+    if args.friction is not None:
+        terms["friction"] = args.friction
+    if args.current_loop is not None:
+        terms["actuator"] = _current_loop(args.current_loop)
     return JointIdentifier(prior, prior_rel_std=rel, interval=interval,
-                           noise_model=noise_model,
+                           noise_model=noise_model, **terms,
                            search=JointSearch(final_horizon=args.final_horizon),
                            allow_far_from_prior=args.allow_far_from_prior)
+
+
+def _current_loop(text: str) -> Any:
+    """``--current-loop``: "auto", "none" or a time constant in s."""
+    from ..actuator import CurrentLoop
+
+    if text in ("auto", "none"):
+        return None if text == "none" else "auto"
+    try:
+        tau = float(text)
+    except ValueError:
+        raise InputError(f"--current-loop must be auto, none or a time constant in s, got "
+                         f"{text!r}") from None
+    try:
+        return CurrentLoop(tau_i=tau)
+    except InputError as exc:
+        raise InputError(f"--current-loop: {exc}") from None
 
 
 def _fit_joint(args: argparse.Namespace, prior: Any, records: list[Record],
@@ -454,10 +495,22 @@ def _fit_joint(args: argparse.Namespace, prior: Any, records: list[Record],
         "param_std": est.param_std_,
         "prior_rel_std": est.prior_rel_std,
         "far_from_prior": est.far_from_prior_,
+        **_terms_json(est),
     }
     return est, {"theta_ini": est.theta_ini_, "per_record": per_record,
                  "bounds": [float(x) for x in est.search.grid.bounds],
                  "std": est.std_, "ci95": [float(x) for x in est.ci95_], "extra": extra}
+
+
+def _terms_json(est: Any) -> dict[str, Any]:
+    """What the model chose of friction and current loop, with standard errors (None
+    where a value was not estimated)."""
+    out: dict[str, Any] = {"friction": est.friction_}
+    for name in ("fc_M", "fc_L", "tau_i"):
+        out[name] = est.params_[name]
+        out[f"{name}_std"] = _num(est.param_std_.get(name))
+    out["model_choices"] = [c.reason() for c in est.choices_]
+    return out
 
 
 def _given(args: argparse.Namespace, **names: str) -> dict[str, Any]:
@@ -469,7 +522,7 @@ def _given(args: argparse.Namespace, **names: str) -> dict[str, Any]:
 def _fit_two_step(args: argparse.Namespace, prior: Any, records: list[Record],
                   finals: list[Record] | None) -> tuple[Any, dict[str, Any]]:
     options = _given(args, n_theta="n_theta", cutoff_motor="cutoff_motor",
-                     cutoff_load="cutoff_load", onset="onset")
+                     cutoff_load="cutoff_load", onset="onset", friction="friction")
     est = TwoStepIdentifier(prior, allow_far_from_prior=args.allow_far_from_prior,
                             **options).fit(records, final_records=finals)
     rows = zip(records, est.commutations_, est.theta_ini_per_record_,
@@ -478,19 +531,25 @@ def _fit_two_step(args: argparse.Namespace, prior: Any, records: list[Record],
                    "theta_ini": ini, "held_speed_gain": gain}
                   for rec, com, ini, gain in rows]
     return est, {"theta_ini": est.theta_ini_, "per_record": per_record,
-                 "bounds": list(est.bounds_), "extra": {"onset": est.onset}}
+                 "bounds": list(est.bounds_),
+                 "extra": {"onset": est.onset, **_friction_json(est)}}
 
 
 def _fit_regression(args: argparse.Namespace, prior: Any, records: list[Record],
                     finals: list[Record] | None) -> tuple[Any, dict[str, Any]]:
-    est = RegressionIdentifier(prior, allow_far_from_prior=args.allow_far_from_prior
-                               ).fit(records)
+    est = RegressionIdentifier(prior, allow_far_from_prior=args.allow_far_from_prior,
+                               **_given(args, friction="friction")).fit(records)
     per_record = [{"file": rec.name, "t_s": t_s, "t_c": None, "t_b": None, "theta_ini": None,
                    "held_speed_gain": gain}
                   for rec, t_s, gain in zip(records, est.t_s_, est.held_speed_gains_,
                                             strict=True)]
     return est, {"theta_ini": None, "per_record": per_record,
-                 "bounds": [0.0, float(est.theta_max)]}
+                 "bounds": [0.0, float(est.theta_max)], "extra": _friction_json(est)}
+
+
+def _friction_json(est: Any) -> dict[str, Any]:
+    """The friction model of paper A's methods (no standard errors: they have none)."""
+    return {"friction": est.friction_, "fc_M": est.fc_M_, "fc_L": est.fc_L_}
 
 
 def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMessage],
@@ -511,14 +570,8 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
                    "a step-down to 0 that the speeds follow shows it)")
     out += _held_notes(est)
     out += _noted(caught, flags, (PriorMismatchWarning,))
-    misfit = 1.0 - float(np.min(est.fit_percent_)) / 100.0  # rms residual / spread
-    if misfit < NOISE_FREE:  # a residual this small is no noise, white or coloured
-        out.append(f"the model reproduces every speed to {max(misfit, 1e-16):.1g} of its "
-                   "spread (noise-free, simulated records?): the residual is numerical "
-                   "error, so std and interval only say that theta is determined to that "
-                   "precision")
-    else:
-        out += _noted(caught, flags, (CorrelatedResidualsWarning,))
+    out += _noted(caught, flags, (CorrelatedResidualsWarning,))
+    out += _noted(caught, flags, (QuantisedSpeedsWarning,))
     if est.ambiguous_:
         out.append("the search ended in distinct minima of nearly equal cost (the likelihood "
                    "is multimodal on these records); the interval describes the best one "
@@ -529,7 +582,7 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
 def _held_notes(est: Any) -> list[str]:
     """Which linear parameters the [uncertainty] table held at the prior's values."""
     rel = est.prior_rel_std
-    held = [n for n in est.params_ if n not in est.estimated_]
+    held = [n for n in LINEAR_PARAMS if n not in est.estimated_]
     if not isinstance(rel, dict) or not held:
         return []
     out = []
@@ -544,41 +597,3 @@ def _held_notes(est: Any) -> list[str]:
         out.append(f"{', '.join(exact)} held at the prior's values: [uncertainty] gives "
                    "them a relative std of 0 (known exactly)")
     return out
-
-
-def _print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes: list[str],
-                  everything: list[Record]) -> None:
-    """The result as text on stdout."""
-    theta_ini, std, ci95, bounds = out["theta_ini"], out.get("std"), out.get("ci95"), \
-        out["bounds"]
-    print(f"method {args.method}; theta is the backlash HALF-width")
-    print(f"{'file':<30} {'t_s (s)':>10} {'t_c (s)':>10} {'t_b (s)':>10} {'theta_ini (rad)':>16}")
-    for row in out["per_record"]:
-        cells = [f"{row[k]:10.4f}" if row[k] is not None else f"{'-':>10}"
-                 for k in ("t_s", "t_c", "t_b")]
-        ini = f"{row['theta_ini']:16.5g}" if row["theta_ini"] is not None else f"{'-':>16}"
-        print(f"{row['file'][-30:]:<30} {' '.join(cells)} {ini}")
-    if theta_ini is not None:
-        print(f"theta_ini = {theta_ini:.5g} rad ({math.degrees(theta_ini):.4g} deg)")
-    if std is None:
-        print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
-              f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
-              "method")
-        for note in notes:
-            print(f"note: {note}")
-        return
-    how = {"fisher": " (Fisher)", "profile": " (profile likelihood)"}.get(est.interval_, "")
-    if est.interval_ == "bootstrap":
-        how = f" (parametric bootstrap, {est.bootstrap_thetas_.size} refits)"
-    if est.search.final_horizon is not None:
-        how += f" (fitted on {est.search.final_horizon:g} s after each torque jump)"
-    print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
-          f"std {std:.3g} rad, 95% interval [{ci95[0]:.5g}, {ci95[1]:.5g}] rad{how}")
-    for note in notes:
-        print(f"note: {note}")
-    for name in est.estimated_[1:]:
-        print(f"{name:<9} = {est.params_[name]:.5g} (std {est.param_std_[name]:.3g})")
-    for rec, (a, b), (sm, sl) in zip(everything, est.fit_percent_, est.noise_std_,
-                                      strict=True):
-        print(f"{rec.name[-30:]:<30} fit % (w_M, w_L) = ({a:.1f}, {b:.1f}); noise std = "
-              f"({sm:.3g}, {sl:.3g}) rad/s")

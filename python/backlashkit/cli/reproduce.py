@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
+from ..parallel import ProgressBar
 from .main import flag_names, missing_directory
 
 __all__ = ["add_parser", "check_reproduce_outputs"]
@@ -55,23 +56,32 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return p
 
 
-def _output_arguments(parser: argparse.ArgumentParser, *, json_help: str,
+def _output_arguments(parser: argparse.ArgumentParser, *, what: str,
                       report_help: str) -> None:
-    parser.add_argument("--json", metavar="FILE", help=json_help)
+    parser.add_argument("--json", action="store_true",
+                        help=f"print {what} as JSON on stdout (the tables then go to stderr)")
+    parser.add_argument("--json-out", metavar="FILE",
+                        help=f"write {what} as JSON to FILE")
     parser.add_argument("--report", metavar="DIR", help=report_help)
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress bar on stderr (there is none when stderr is not "
+                             "a terminal)")
 
 
-def check_reproduce_outputs(json_path: str | None, report: str | None,
+def check_reproduce_outputs(json_out: str | None, report: str | None,
                             force: bool) -> Path | None:
-    """Refuse, before any run, the ``--json FILE`` and ``--report DIR`` of a ``reproduce``
-    target that exist (without ``--force``), sit in a missing directory or cannot be
-    written; return the report directory.
+    """Refuse, before any run, the ``--json-out FILE`` and ``--report DIR`` of a
+    ``reproduce`` target that exist (without ``--force``), sit in a missing directory or
+    cannot be written; return the report directory.
+
+    A ``--json-out`` that exists but is no regular file (``/dev/null``, a pipe) is
+    written to without ``--force``: nothing of the user's is overwritten.
 
     Parameters
     ----------
-    json_path : str or None
-        ``--json`` (``"-"``: standard output).
+    json_out : str or None
+        ``--json-out``.
     report : str or None
         ``--report``.
     force : bool
@@ -84,12 +94,14 @@ def check_reproduce_outputs(json_path: str | None, report: str | None,
     """
     from ..io import check_writable
 
-    if json_path not in (None, "-"):
-        if Path(json_path).exists() and not force:
-            raise InputError(f"--json {json_path} already exists; pass --force to overwrite it")
-        if not Path(json_path).parent.is_dir():
-            raise InputError(missing_directory("--json", Path(json_path)))
-        check_writable(json_path, "--json")
+    if json_out is not None:
+        path = Path(json_out)
+        if path.is_file() and not force:
+            raise InputError(f"--json-out {json_out} already exists; pass --force to "
+                             "overwrite it")
+        if not path.exists() and not path.parent.is_dir():
+            raise InputError(missing_directory("--json-out", path))
+        check_writable(json_out, "--json-out")
     if report is None:
         return None
     rep = Path(report)
@@ -99,6 +111,16 @@ def check_reproduce_outputs(json_path: str | None, report: str | None,
         raise InputError(f"--report {rep} is not empty; pass --force to overwrite its files")
     check_writable(rep, "--report", directory=True)
     return rep
+
+
+def _write_json(args: argparse.Namespace, body: str) -> None:
+    """``--json`` on stdout, ``--json-out`` to its file (announced on stderr)."""
+    if args.json:
+        sys.stdout.write(body)
+    if args.json_out is not None:
+        with open(args.json_out, "w", encoding="utf-8") as fh:
+            fh.write(body)
+        print(f"backlashkit: wrote {args.json_out}", file=sys.stderr)
 
 
 def _bar_lines(bars) -> str:
@@ -130,10 +152,9 @@ def _ravanbod2002_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--snr-step1", default=None, metavar="SNR_M,SNR_L",
                         help="step-1 SNR of w_M,w_L in dB (default the paper's "
                         f"{','.join(f'{x:g}' for x in default['snr1'])})")
-    _output_arguments(parser, json_help="write the JSON document to FILE ('-': stdout, the "
-                      "tables then go to stderr)", report_help="write an HTML report "
-                      "(index.html), the JSON and a figure of the estimates (PNG, SVG) "
-                      "into DIR")
+    _output_arguments(parser, what="the whole document", report_help="write an HTML "
+                      "report (index.html), the JSON and a figure of the estimates (PNG, "
+                      "SVG) into DIR")
 
 
 def _numbers(option: str, text: str) -> list[float]:
@@ -150,7 +171,7 @@ def run_ravanbod2002(args: argparse.Namespace) -> int:
     ----------
     args : argparse.Namespace
         With ``runs``, ``seed``, ``jobs``, ``err_p``, ``snr_step1``, ``json``,
-        ``report``, ``force``.
+        ``json_out``, ``report``, ``force``, ``quiet``.
 
     Returns
     -------
@@ -159,8 +180,7 @@ def run_ravanbod2002(args: argparse.Namespace) -> int:
     """
     from ..papers import ravanbod2002 as paper
 
-    json_path = args.json
-    rep = check_reproduce_outputs(json_path, args.report, bool(args.force))
+    rep = check_reproduce_outputs(args.json_out, args.report, bool(args.force))
     options = {k: getattr(args, k) for k in ("runs", "seed", "jobs")
                if getattr(args, k) is not None}
     if args.snr_step1 is not None:
@@ -176,19 +196,17 @@ def run_ravanbod2002(args: argparse.Namespace) -> int:
                              "once")
         options["err_p"] = err_p
     flags = {"runs": "--runs", "seed": "--seed", "jobs": "--jobs", "err_p": "--err-p"}
-    with flag_names(flags):
-        doc = paper.run_ravanbod2002(**options, progress=lambda m: print(m, file=sys.stderr))
+    with flag_names(flags), ProgressBar("ravanbod2002", unit="run",
+                                        quiet=args.quiet) as bar:
+        doc = paper.run_ravanbod2002(**options, progress=bar)
     bars = paper.checks(doc)
     doc["checks"] = [{"bar": b, "value": v, "met": bool(m)} for b, v, m in bars]
     text = paper.format_tables(doc) + "\n\n" + _bar_lines(bars)
-    print(text, file=sys.stderr if json_path == "-" else sys.stdout)
-    body = paper.to_json(doc)
-    if json_path == "-":
-        sys.stdout.write(body)
-    elif json_path is not None:
-        Path(json_path).write_text(body)
+    print(text, file=sys.stderr if args.json else sys.stdout)
+    _write_json(args, paper.to_json(doc))
     if rep is not None:
-        paper.write_report(rep, doc, text=text)
+        index = paper.write_report(rep, doc, text=text)
+        print(f"backlashkit: wrote {index}", file=sys.stderr)
     return 0 if all(m for _, _, m in bars) else 1
 
 
@@ -197,9 +215,8 @@ def run_ravanbod2002(args: argparse.Namespace) -> int:
 
 def _tao1995_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``backlashkit reproduce tao1995``."""
-    _output_arguments(parser, json_help="write the JSON summary to FILE ('-': stdout)",
-                      report_help="write an HTML report (index.html), its figures (PNG, "
-                      "SVG) and the traces (CSV) into DIR")
+    _output_arguments(parser, what="the summary", report_help="write an HTML report "
+                      "(index.html), its figures (PNG, SVG) and the traces (CSV) into DIR")
 
 
 def run_tao1995(args: argparse.Namespace) -> int:
@@ -208,7 +225,7 @@ def run_tao1995(args: argparse.Namespace) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        With ``json``, ``report``, ``force``.
+        With ``json``, ``json_out``, ``report``, ``force``, ``quiet``.
 
     Returns
     -------
@@ -217,18 +234,14 @@ def run_tao1995(args: argparse.Namespace) -> int:
     """
     from ..papers import tao1995 as paper
 
-    json_path = args.json
-    rep = check_reproduce_outputs(json_path, args.report, bool(args.force))
-    runs = paper.run_tao1995()
+    rep = check_reproduce_outputs(args.json_out, args.report, bool(args.force))
+    with ProgressBar("tao1995", unit="controller", quiet=args.quiet) as bar:
+        runs = paper.run_tao1995(progress=bar)
     doc = paper.summary(runs)
     bars = [(c["bar"], c["value"], c["met"]) for c in doc["checks"]]
-    if json_path == "-":
-        json.dump(doc, sys.stdout, indent=2)
-        sys.stdout.write("\n")
-    else:
-        if json_path is not None:
-            Path(json_path).write_text(json.dumps(doc, indent=2) + "\n")
-        print(_bar_lines(bars))
+    print(_bar_lines(bars), file=sys.stderr if args.json else sys.stdout)
+    _write_json(args, json.dumps(doc, indent=2) + "\n")
     if rep is not None:
-        paper.write_report(rep, runs)
+        index = paper.write_report(rep, runs)
+        print(f"backlashkit: wrote {index}", file=sys.stderr)
     return 0 if all(m for _, _, m in bars) else 1

@@ -109,6 +109,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    _add_input(p)
+    _add_output(p)
+    _add_model(p)
+    _add_experiment_options(p)
+    p.set_defaults(func=run)
+    return p
+
+
+def _add_input(p: argparse.ArgumentParser) -> None:
+    """The drive file and the source of the torque (a file or an experiment)."""
     p.add_argument(
         "drive",
         metavar="DRIVE.toml",
@@ -128,6 +138,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         choices=EXPERIMENTS,
         help="generate a synthetic experiment from rest (step-down: paper A's)",
     )
+
+
+def _add_output(p: argparse.ArgumentParser) -> None:
+    """Where the results go."""
     out = p.add_argument_group("output")
     out.add_argument(
         "--out",
@@ -146,6 +160,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     out.add_argument(
         "--json", action="store_true", help="print a JSON summary on stdout (events, samples)"
     )
+
+
+def _add_model(p: argparse.ArgumentParser) -> None:
+    """The contact law and how the speeds are measured."""
     p.add_argument(
         "--law",
         choices=[law.value for law in ShaftLaw],
@@ -169,6 +187,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="with --encoder: first-order filter of the encoder speeds, time constant TAU "
         "in s (the drive's speed observer; default none)",
     )
+
+
+def _add_experiment_options(p: argparse.ArgumentParser) -> None:
+    """The options of the synthetic experiments."""
     exp = p.add_argument_group("experiment options (with --experiment)")
     exp.add_argument("--amplitude", type=float, metavar="A", help="torque level in N m (all)")
     exp.add_argument(
@@ -212,8 +234,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="S",
         help="seed of the noise and the prbs bits (default: a fresh one, reported)",
     )
-    p.set_defaults(func=run)
-    return p
 
 
 def _encoder(args: argparse.Namespace) -> Encoder | None:
@@ -401,36 +421,75 @@ def run(args: argparse.Namespace) -> int:
     out = _check_output(args)
     drive = read_drive_toml(args.drive, require_theta=True)
     actuator = read_actuator_toml(args.drive)
-
-    noisy = args.experiment is not None and (
-        args.snr_motor is not None or args.snr_load is not None
-    )
-    needs_seed = noisy or args.experiment == "prbs"
-    for flag, value in (("--snr-motor", args.snr_motor), ("--snr-load", args.snr_load)):
-        if value is not None:
-            v.finite_scalar(flag, value)
-    seed = args.seed
-    if seed is not None and seed < 0:
-        raise InputError(f"--seed must be >= 0, got {seed}")
-    fresh_seed = needs_seed and seed is None
-    if fresh_seed:
-        seed = secrets.randbits(63)
-    seeds = np.random.SeedSequence(seed).spawn(3) if needs_seed else []
-
+    seed = _Seed.of(args)
     if args.torque is not None:
         t, torque = _read_torque(args)
         source: dict[str, Any] = {"torque_file": str(args.torque)}
     else:
-        t, torque, source = _experiment(args, seeds)
+        t, torque, source = _experiment(args, seed.children)
         source = {"experiment": source}
-    if fresh_seed:  # after the options are checked: a refused run has no seed to repeat
-        _note(f"note: no --seed given; using --seed {seed}")
+    if seed.fresh:  # after the options are checked: a refused run has no seed to repeat
+        _note(f"note: no --seed given; using --seed {seed.value}")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)
         response = drive.simulate(t, torque, law=args.law, actuator=actuator,
                                   positions=encoder is not None)
+    columns, noise = _columns(args, response, seed, encoder)
+    write_csv(out, columns, force=args.force)
+    if args.plot is not None:
+        response.plot().savefig(args.plot)
+        _note(f"wrote {args.plot}")
+    _note_sampling(drive, response)
+    n = int(response.t.size)
+    _note(f"wrote {out} ({n} samples, {len(response.events)} contact events, law {args.law})")
+    if args.json:
+        summary = {
+            "command": "simulate",
+            "drive": str(args.drive),
+            "law": args.law,
+            **source,
+            "output": str(out),
+            "columns": list(columns),
+            **_response_summary(response),
+            "noise": noise,
+        }
+        print(json.dumps(summary, allow_nan=False, default=_json_default))
+    return 0
 
+
+@dataclasses.dataclass(frozen=True)
+class _Seed:
+    """The run's seed: given, or fresh (and then reported) when noise or prbs bits need
+    one; its children seed the prbs bits, the motor noise and the load noise."""
+
+    value: int | None
+    fresh: bool
+    noisy: bool
+    children: list[np.random.SeedSequence]
+
+    @classmethod
+    def of(cls, args: argparse.Namespace) -> _Seed:
+        noisy = args.experiment is not None and (
+            args.snr_motor is not None or args.snr_load is not None
+        )
+        needs_seed = noisy or args.experiment == "prbs"
+        for flag, value in (("--snr-motor", args.snr_motor), ("--snr-load", args.snr_load)):
+            if value is not None:
+                v.finite_scalar(flag, value)
+        seed = args.seed
+        if seed is not None and seed < 0:
+            raise InputError(f"--seed must be >= 0, got {seed}")
+        fresh_seed = needs_seed and seed is None
+        if fresh_seed:
+            seed = secrets.randbits(63)
+        seeds = np.random.SeedSequence(seed).spawn(3) if needs_seed else []
+        return cls(seed, fresh_seed, noisy, seeds)
+
+
+def _columns(args: argparse.Namespace, response, seed: _Seed,
+             encoder: Encoder | None) -> tuple[dict[str, np.ndarray], dict[str, Any] | None]:
+    """The output's columns, and the noise added to the speeds (``None`` without)."""
     noise: dict[str, Any] | None = None
     if args.torque is not None:
         columns = {
@@ -441,27 +500,35 @@ def run(args: argparse.Namespace) -> int:
         }
     else:
         w_motor, w_load = response.w_motor, response.w_load
-        if noisy:
-            noise = {"seed": seed}
-            if args.snr_motor is not None:
-                w_motor, measured = _add_noise(w_motor, args.snr_motor, seeds[1], "--snr-motor",
-                                               "w_motor")
-                noise.update(snr_motor_db=float(args.snr_motor), measured_snr_motor_db=measured)
-            if args.snr_load is not None:
-                w_load, measured = _add_noise(w_load, args.snr_load, seeds[2], "--snr-load",
-                                              "w_load")
-                noise.update(snr_load_db=float(args.snr_load), measured_snr_load_db=measured)
+        if seed.noisy:
+            w_motor, w_load, noise = _noisy_speeds(args, w_motor, w_load, seed)
         columns = {"t": response.t, "torque": response.torque, "w_motor": w_motor,
                    "w_load": w_load}
     if encoder is not None:
         columns = measure_encoders(response, encoder)
         if args.torque is not None:
             del columns["torque"]  # the input file holds it
-    write_csv(out, columns, force=args.force)
-    if args.plot is not None:
-        response.plot().savefig(args.plot)
-        _note(f"wrote {args.plot}")
+    return columns, noise
 
+
+def _noisy_speeds(args: argparse.Namespace, w_motor: np.ndarray, w_load: np.ndarray,
+                  seed: _Seed) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """The speeds with the noise of --snr-motor / --snr-load, and its account."""
+    noise: dict[str, Any] = {"seed": seed.value}
+    if args.snr_motor is not None:
+        w_motor, measured = _add_noise(w_motor, args.snr_motor, seed.children[1], "--snr-motor",
+                                       "w_motor")
+        noise.update(snr_motor_db=float(args.snr_motor), measured_snr_motor_db=measured)
+    if args.snr_load is not None:
+        w_load, measured = _add_noise(w_load, args.snr_load, seed.children[2], "--snr-load",
+                                      "w_load")
+        noise.update(snr_load_db=float(args.snr_load), measured_snr_load_db=measured)
+    return w_motor, w_load, noise
+
+
+def _note_sampling(drive, response) -> None:
+    """Notes on what the samples cannot show: ringing faster than the sample rate and
+    near-grazing contacts."""
     omega = math.sqrt(drive.k_sh * (1.0 / drive.J_M + 1.0 / drive.J_L))
     ts_out = float(response.t[1] - response.t[0])
     if ts_out * omega > math.pi:  # exact at the samples, but no sample shows it
@@ -478,30 +545,24 @@ def run(args: argparse.Namespace) -> int:
             f"(margin {abs(first.margin):.3g}): the trajectory after it is sensitive to tiny "
             "changes of the inputs and parameters"
         )
+
+
+def _response_summary(response) -> dict[str, Any]:
+    """The --json keys that describe the simulated response."""
     n = int(response.t.size)
-    _note(f"wrote {out} ({n} samples, {len(response.events)} contact events, law {args.law})")
-    if args.json:
-        summary = {
-            "command": "simulate",
-            "drive": str(args.drive),
-            "law": args.law,
-            **source,
-            "output": str(out),
-            "columns": list(columns),
-            "n_samples": n,
-            "ts": float((response.t[-1] - response.t[0]) / (n - 1)),
-            "t_start": float(response.t[0]),
-            "t_end": float(response.t[-1]),
-            "n_events": len(response.events),
-            "events": [dataclasses.asdict(e) for e in response.events],
-            "near_grazing": len(grazes),
-            "near_grazing_events": [
-                {"time": g.time, "shaft": g.shaft, "margin": g.margin} for g in grazes
-            ],
-            "noise": noise,
-        }
-        print(json.dumps(summary, allow_nan=False, default=_json_default))
-    return 0
+    grazes = response.near_grazing
+    return {
+        "n_samples": n,
+        "ts": float((response.t[-1] - response.t[0]) / (n - 1)),
+        "t_start": float(response.t[0]),
+        "t_end": float(response.t[-1]),
+        "n_events": len(response.events),
+        "events": [dataclasses.asdict(e) for e in response.events],
+        "near_grazing": len(grazes),
+        "near_grazing_events": [
+            {"time": g.time, "shaft": g.shaft, "margin": g.margin} for g in grazes
+        ],
+    }
 
 
 def _json_default(obj: Any) -> Any:

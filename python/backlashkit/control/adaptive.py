@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import validate as _v
+from .. import validate as v
 from ..errors import InputError
 
 __all__ = ["AdaptiveLaw", "adaptive_rate"]
@@ -60,7 +60,7 @@ class AdaptiveLaw:
     _theta_b0: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        g = np.atleast_1d(_v.finite_array("gamma", np.atleast_1d(np.asarray(self.gamma, float))))
+        g = np.atleast_1d(v.finite_array("gamma", np.atleast_1d(np.asarray(self.gamma, float))))
         if g.size == 1:
             g = np.repeat(g, 3)
         if g.size != 3:
@@ -69,7 +69,7 @@ class AdaptiveLaw:
             )
         if not (g >= 0).all() or not (g > 0).any():
             raise InputError(f"gamma must be > 0, got {list(g)!r}")
-        th = _v.finite_array("theta_b0", self.theta_b0)
+        th = v.finite_array("theta_b0", self.theta_b0)
         if th.size != 3:
             raise InputError(f"theta_b0 must have 3 values (mc_r, m, mc_l), got {th.size}")
         if not th[1] > 0:
@@ -79,16 +79,16 @@ class AdaptiveLaw:
                 "theta_b0 must satisfy A3: mc_r >= 0 and mc_l <= 0, got "
                 f"mc_r={th[0]!r}, mc_l={th[2]!r}"
             )
-        m0 = 0.1 * th[1] if self.m0 is None else _v.positive("m0", self.m0)
+        m0 = 0.1 * th[1] if self.m0 is None else v.positive("m0", self.m0)
         if m0 > th[1]:
             raise InputError(f"m0 must be <= theta_b0[1] = {th[1]!r} (A3), got {m0!r}")
         sb = (
             10.0 * max(1.0, float(np.linalg.norm(th)))
             if self.sigma_bound is None
-            else (_v.positive("sigma_bound", self.sigma_bound))
+            else (v.positive("sigma_bound", self.sigma_bound))
         )
         object.__setattr__(self, "m0", float(m0))
-        object.__setattr__(self, "sigma", _v.nonnegative("sigma", self.sigma))
+        object.__setattr__(self, "sigma", v.nonnegative("sigma", self.sigma))
         object.__setattr__(self, "sigma_bound", float(sb))
         object.__setattr__(self, "_gamma", g)
         object.__setattr__(self, "_theta_b0", th)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import validate as _v
+from .. import validate as v
 from ..errors import InputError
 from ..lti import as_transfer_function
 
@@ -221,7 +221,7 @@ def _hurwitz_poly(name: str, coeffs: Any) -> np.ndarray:
         arr = np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel()
     except (TypeError, ValueError):
         raise InputError(f"{name} must be a list of real coefficients, got {coeffs!r}") from None
-    arr = _v.finite_array(name, arr)
+    arr = v.finite_array(name, arr)
     nz = np.flatnonzero(arr)
     if nz.size == 0:
         raise InputError(f"{name} must not be the zero polynomial, got {arr.tolist()!r}")

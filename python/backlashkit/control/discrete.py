@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import validate as _v
+from .. import validate as v
 from ..errors import InputError
 from ..lti import as_state_space, zoh_discretize
 from ..nonlinearities import (
@@ -36,8 +36,9 @@ from ..nonlinearities import (
     SmoothRampInverse,
 )
 from .adaptive import AdaptiveLaw, adaptive_rate
-from .closed_loop import ClosedLoopResponse
 from .design import MRCDesign, companion, design_mrc
+from .problem import ROUND_SLACK
+from .response import ClosedLoopResponse
 
 __all__ = ["DiscreteAdaptiveController", "simulate_discrete_loop"]
 
@@ -78,7 +79,7 @@ class DiscreteAdaptiveController:
         filter: Any = None,  # noqa: A002 - the paper's name
         design: MRCDesign | None = None,
     ) -> None:
-        self.ts = _v.positive("ts", ts)
+        self.ts = v.positive("ts", ts)
         self.inverse = ExactInverse() if inverse is None else inverse
         if not isinstance(self.inverse, InverseKind):
             raise InputError(f"inverse must be an InverseKind, got {type(self.inverse).__name__}")
@@ -243,7 +244,7 @@ def simulate_discrete_loop(
     """
     controller.reset()
     ts = controller.ts
-    n = int(np.floor(_v.positive("duration", duration) / ts + 1e-9)) + 1
+    n = _n_samples(duration, ts)
     a, b, c, dd = as_state_space(plant)
     if dd != 0.0:
         raise InputError("plant must be strictly proper (no direct feedthrough)")
@@ -278,3 +279,8 @@ def simulate_discrete_loop(
         inverse=controller.inverse,
         step=ts,
     )
+
+
+def _n_samples(duration: float, ts: float) -> int:
+    """Samples of a run of ``duration`` s at ``ts`` s, both ends included."""
+    return int(np.floor(v.positive("duration", duration) / ts + ROUND_SLACK)) + 1

@@ -31,13 +31,11 @@ import numpy as np
 from ..errors import InputError
 from ..nonlinearities import Backlash, InverseKind, inverse_from_name
 from .adaptive import AdaptiveLaw
-from .closed_loop import (
-    ClosedLoopResponse,
-    SumOfSines,
-    TableReference,
-    simulate_closed_loop,
-)
+from .closed_loop import simulate_closed_loop
 from .design import design_mrc
+from .problem import DEFAULT_MAX_STEP
+from .references import SumOfSines, TableReference
+from .response import ClosedLoopResponse
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -57,6 +55,9 @@ _ALLOWED: dict[str, set[str]] = {
     "simulation": {"duration", "ts", "step"},
 }
 _REQUIRED_TABLES = ("plant", "backlash", "reference", "simulation")
+#: Most output rows (duration / ts) a scenario may ask for: 5e6 rows of the trace's
+#: 11 float64 columns take 440 MB, the bound on what a run may allocate.
+_MAX_ROWS = 5e6
 
 
 @dataclass
@@ -237,6 +238,31 @@ def parse_scenario(
     """
     src = source
     base = Path(".") if base is None else base
+    _check_tables(doc, src)
+    plant, rm, flt = _linear_part(doc, src)
+    backlash = _backlash(doc, src)
+    adaptation = _adaptation(doc, src, backlash.m)
+    reference = _reference(doc, src, base)
+    inverse, params = _inverse_table(doc, src)
+    duration, ts, step = _simulation(doc, src, reference)
+    return ControlScenario(
+        plant=plant,
+        reference_model=rm,
+        filter=flt,
+        backlash=backlash,
+        adaptation=adaptation,
+        reference=reference,
+        inverse=inverse,
+        inverse_params=params,
+        duration=duration,
+        ts=ts,
+        step=step,
+        source=src,
+    )
+
+
+def _check_tables(doc: dict, src: str) -> None:
+    """Only known tables and keys, and every required table."""
     for table, val in doc.items():
         if table not in _ALLOWED:
             raise InputError(f"{src}: unknown table [{table}]; expected one of {sorted(_ALLOWED)}")
@@ -252,14 +278,18 @@ def parse_scenario(
         if table not in doc:
             raise InputError(f"{src}: missing table [{table}]")
 
-    def need(table: str, key: str) -> Any:
-        if key not in doc[table]:
-            raise InputError(f"{src}: [{table}] missing key {key}")
-        return doc[table][key]
 
+def _need(doc: dict, src: str, table: str, key: str) -> Any:
+    if key not in doc[table]:
+        raise InputError(f"{src}: [{table}] missing key {key}")
+    return doc[table][key]
+
+
+def _linear_part(doc: dict, src: str) -> tuple[tuple[list[float], list[float]], Any, Any]:
+    """The plant, the reference model and the filter, checked by designing with them."""
     plant = (
-        _list(src, "plant", "num", need("plant", "num")),
-        _list(src, "plant", "den", need("plant", "den"), min_len=2),
+        _list(src, "plant", "num", _need(doc, src, "plant", "num")),
+        _list(src, "plant", "den", _need(doc, src, "plant", "den"), min_len=2),
     )
     rm = doc.get("reference_model", {}).get("den")
     rm = None if rm is None else _list(src, "reference_model", "den", rm, min_len=2)
@@ -269,16 +299,22 @@ def parse_scenario(
         design_mrc(plant, reference_model=rm, filter=flt)
     except InputError as exc:
         raise InputError(f"{src}: [plant]/[reference_model]/[filter]: {exc}") from None
+    return plant, rm, flt
 
-    m = _num(src, "backlash", "m", need("backlash", "m"), cond=">0")
-    c_r = _num(src, "backlash", "c_r", need("backlash", "c_r"), cond=">=0")
-    c_l = _num(src, "backlash", "c_l", need("backlash", "c_l"))
+
+def _backlash(doc: dict, src: str) -> Backlash:
+    m = _num(src, "backlash", "m", _need(doc, src, "backlash", "m"), cond=">0")
+    c_r = _num(src, "backlash", "c_r", _need(doc, src, "backlash", "c_r"), cond=">=0")
+    c_l = _num(src, "backlash", "c_l", _need(doc, src, "backlash", "c_l"))
     if c_l > 0:
         raise InputError(f"{src}: [backlash] c_l must be <= 0 (assumption A3), got {c_l!r}")
     if not c_l < c_r:
         raise InputError(f"{src}: [backlash] c_l must be < c_r, got c_l={c_l!r}, c_r={c_r!r}")
-    backlash = Backlash(m, c_r, c_l)
+    return Backlash(m, c_r, c_l)
 
+
+def _adaptation(doc: dict, src: str, m: float) -> AdaptiveLaw:
+    """The [adaptation] table; ``m0`` may not exceed the true slope ``m`` (A3)."""
     ad = doc.get("adaptation", {})
     kw: dict[str, Any] = {}
     if "gamma" in ad:
@@ -303,33 +339,39 @@ def parse_scenario(
             f"got {kw['m0']!r}"
         )
     try:
-        adaptation = AdaptiveLaw(**kw)
+        return AdaptiveLaw(**kw)
     except InputError as exc:
         raise InputError(f"{src}: [adaptation] {exc}") from None
 
+
+def _reference(doc: dict, src: str, base: Path) -> SumOfSines | TableReference:
+    """The [reference] table: a file, or sines."""
     ref = doc["reference"]
     if "file" in ref:
         if {"amplitude", "frequency", "phase"} & set(ref):
             raise InputError(
                 f"{src}: [reference] give either file or amplitude/frequency, not both"
             )
-        reference: Any = _read_table_file(src, base, ref["file"])
-    else:
-        amp = _list(src, "reference", "amplitude", need("reference", "amplitude"))
-        freq = _list(src, "reference", "frequency", need("reference", "frequency"))
-        if len(amp) != len(freq):
-            raise InputError(
-                f"{src}: [reference] amplitude and frequency must have the same length, got "
-                f"{len(amp)} and {len(freq)}"
-            )
-        phase = ref.get("phase")
-        phase = None if phase is None else _list(src, "reference", "phase", phase)
-        if phase is not None and len(phase) != len(amp):
-            raise InputError(
-                f"{src}: [reference] phase must have {len(amp)} values, got {len(phase)}"
-            )
-        reference = SumOfSines(amp, freq, phase)
+        return _read_table_file(src, base, ref["file"])
+    amp = _list(src, "reference", "amplitude", _need(doc, src, "reference", "amplitude"))
+    freq = _list(src, "reference", "frequency", _need(doc, src, "reference", "frequency"))
+    if len(amp) != len(freq):
+        raise InputError(
+            f"{src}: [reference] amplitude and frequency must have the same length, got "
+            f"{len(amp)} and {len(freq)}"
+        )
+    phase = ref.get("phase")
+    phase = None if phase is None else _list(src, "reference", "phase", phase)
+    if phase is not None and len(phase) != len(amp):
+        raise InputError(
+            f"{src}: [reference] phase must have {len(amp)} values, got {len(phase)}"
+        )
+    return SumOfSines(amp, freq, phase)
 
+
+def _inverse_table(doc: dict, src: str) -> tuple[InverseKind, dict[str, float]]:
+    """The [inverse] table: the inverse, and every parameter given (for the CLI's
+    --inverse)."""
     inv_tab = doc.get("inverse", {})
     params = {}
     for k in ("alpha", "beta_r", "beta_l"):
@@ -338,21 +380,26 @@ def parse_scenario(
     kind = inv_tab.get("kind", "exact")
     if not isinstance(kind, str):
         raise InputError(f"{src}: [inverse] kind must be a string, got {kind!r}")
-    inverse = _inverse(kind, params, src)
+    return _inverse(kind, params, src), params
 
+
+def _simulation(doc: dict, src: str,
+                reference: SumOfSines | TableReference) -> tuple[float, float, float | None]:
+    """Duration, sample time and largest step of the [simulation] table."""
     sim = doc["simulation"]
-    duration = _num(src, "simulation", "duration", need("simulation", "duration"), cond=">0")
-    ts = _num(src, "simulation", "ts", need("simulation", "ts"), cond=">0")
+    duration = _num(src, "simulation", "duration", _need(doc, src, "simulation", "duration"),
+                    cond=">0")
+    ts = _num(src, "simulation", "ts", _need(doc, src, "simulation", "ts"), cond=">0")
     if ts > duration:
         raise InputError(f"{src}: [simulation] ts must be <= duration ({duration!r}), got {ts!r}")
-    if duration / ts > 5e6:
+    if duration / ts > _MAX_ROWS:
         raise InputError(
             f"{src}: [simulation] duration/ts must be <= 5e6 rows, got {duration / ts:.3g}"
         )
     step = sim.get("step")
     step = None if step is None else _num(src, "simulation", "step", step, cond=">0")
     if isinstance(reference, SumOfSines):  # the integrator would alias it silently
-        h = min(ts, 1e-3) if step is None else step  # the integration step of closed_loop
+        h = min(ts, DEFAULT_MAX_STEP) if step is None else step  # the largest step
         fastest = float(max(np.abs(reference.frequency)))
         if fastest * h >= math.pi:
             raise InputError(
@@ -360,20 +407,7 @@ def parse_scenario(
                 f"frequency pi/step = {math.pi / h:.6g} rad/s of the integration step "
                 f"{h:.3g} s: lower the frequency or set a shorter [simulation] step"
             )
-    return ControlScenario(
-        plant=plant,
-        reference_model=rm,
-        filter=flt,
-        backlash=backlash,
-        adaptation=adaptation,
-        reference=reference,
-        inverse=inverse,
-        inverse_params=params,
-        duration=duration,
-        ts=ts,
-        step=step,
-        source=src,
-    )
+    return duration, ts, step
 
 
 def load_scenario(path: str | Path) -> ControlScenario:

@@ -10,11 +10,13 @@ One concept per module:
 * :mod:`~backlashkit.identify.torque` -- a measured torque's noise and its levels;
 * :mod:`~backlashkit.identify.commutation` -- the contact changes after a step-down
   and paper A's pre-estimate;
-* :mod:`~backlashkit.identify.two_step` -- paper A's two-step method and its regression
-  baseline;
+* :mod:`~backlashkit.identify.two_step`, :mod:`~backlashkit.identify.decay` -- paper
+  A's two-step method and its regression baseline, and their free-decay model;
 * :mod:`~backlashkit.identify.joint` -- the joint maximum-likelihood estimator;
 * :mod:`~backlashkit.identify.search`, :mod:`~backlashkit.identify.intervals`,
   :mod:`~backlashkit.identify.noise` -- its search, interval and noise models;
+* :mod:`~backlashkit.identify.terms` -- the Coulomb friction and current loop it adds
+  where the records show them;
 * :mod:`~backlashkit.identify.crb` -- the Cramér-Rao bound;
 * :mod:`~backlashkit.identify.plots`, :mod:`~backlashkit.identify.report` -- its figures
   and the HTML identification report.
@@ -42,6 +44,7 @@ from .step import (
     held_speed_gain,
     is_far,
 )
+from .terms import KEEP_LEVEL, TermChoice
 from .torque import torque_levels
 from .two_step import RegressionIdentifier, TwoStepIdentifier
 
@@ -54,6 +57,7 @@ __all__ = [
     "FisherInterval",
     "JointIdentifier",
     "JointSearch",
+    "KEEP_LEVEL",
     "Restarts",
     "ThetaGrid",
     "FirstHorizon",
@@ -64,6 +68,7 @@ __all__ = [
     "REFUSE_FROM_PRIOR",
     "Record",
     "RegressionIdentifier",
+    "TermChoice",
     "TwoStepIdentifier",
     "WhiteNoise",
     "as_records",

@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .. import validate as v
+from ..actuator import CurrentLoop
 from ..errors import InputError
 from ..plants import TwoMassDrive
 from ..simulate import simulate_packed
@@ -26,8 +27,15 @@ from .step import find_step_down
 LINEAR_PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
 
 #: Order of a two-mass drive's values in a packed kernel parameter row
-#: (:class:`~backlashkit.DriveChain` fields ``J, f, k, d, theta``).
+#: (:class:`~backlashkit.DriveChain` fields ``J, f, k, d, theta``)...
 PACKED = ("J_M", "J_L", "f_M", "f_L", "k_sh", "f_sh", "theta")
+#: ... and of the long row of a model with friction or a current loop (``fc, fs,
+#: tau_i``; :mod:`backlashkit.identify.terms`).
+PACKED_LONG = (*PACKED, "fc_M", "fc_L", "fs_M", "fs_L", "tau_i")
+#: Breakaway torques tied to the Coulomb torques (``fs = fc``) in the long row.
+TIED = {"fs_M": "fc_M", "fs_L": "fc_L"}
+#: Column of ``tau_i`` in the long row.
+TAU_COL = PACKED_LONG.index("tau_i")
 
 #: A record starts at rest when its first speeds are within this many noise standard
 #: deviations of 0 (a Gaussian sample exceeds 4 sigma once in 16 000)...
@@ -41,6 +49,16 @@ REST_WINDOW = 20
 #: Longest coarse step in s of the exact simulation through a held torque: the flow of
 #: a held torque is exact whatever the step, so this only bounds the rounding.
 HOLD_STEP = 0.02
+
+
+def packed_row(drive: TwoMassDrive, tau_i: float = 0.0) -> np.ndarray:
+    """The kernel's parameter row of ``drive`` (``theta`` set) with a current loop of
+    time constant ``tau_i`` (0: none): short without friction or loop, else long."""
+    if drive.fc_M == drive.fc_L == 0 and tau_i == 0:
+        return np.array([getattr(drive, n) for n in PACKED], float)
+    chain = drive.to_chain()
+    return np.array([getattr(drive, n) for n in PACKED] + [*chain.fc, *chain.fs, tau_i],
+                    float)
 
 
 def drive_with(base: TwoMassDrive, names: Sequence[str], values: np.ndarray) -> TwoMassDrive:
@@ -157,19 +175,36 @@ def screen_spans(spans_: list[Span]) -> list[Span]:
     return out
 
 
-def initial_states(p: np.ndarray, level: float | None) -> np.ndarray:
-    """Initial states for packed parameter rows ``p``: rest, or steady under ``level``."""
+def has_loop(p: np.ndarray) -> bool:
+    """Whether packed rows ``p`` (one layout for all) have a current loop (one more
+    state: the motor torque)."""
+    return p.shape[1] == len(PACKED_LONG) and bool(p[0, TAU_COL] > 0)
+
+
+def initial_states(p: np.ndarray, level: float | None, torque0: float = 0.0) -> np.ndarray:
+    """Initial states for packed parameter rows ``p``: rest (under the torque
+    ``torque0``, the current loop's start), or steady under ``level``."""
+    loop = has_loop(p)
     if level is None:
-        return np.zeros((p.shape[0], 3))
+        x0 = np.zeros((p.shape[0], 4 if loop else 3))
+        if loop:
+            x0[:, 3] = torque0
+        return x0
     fs = p[:, 2] + p[:, 3]
     if not np.all(fs > 0):
         raise InputError(
             "start='steady' needs f_M + f_L > 0 (a finite steady state), got "
             f"f_M + f_L = {float(np.min(fs))!r}"
         )
-    w = level / fs
-    twist = p[:, 3] * w / p[:, 4]
-    return np.column_stack([w, w, np.where(w >= 0, p[:, 6], -p[:, 6]) + twist])
+    fc_m, fc_l = (p[:, 7], p[:, 8]) if p.shape[1] == len(PACKED_LONG) else (0.0, 0.0)
+    sign = 1.0 if level >= 0 else -1.0
+    # Coulomb friction eats fc_M + fc_L of the held torque (a drive it holds stuck: 0)
+    w = sign * np.maximum(abs(level) - fc_m - fc_l, 0.0) / fs
+    twist = (p[:, 3] * w + sign * fc_l) / p[:, 4]
+    cols = [w, w, sign * p[:, 6] + twist]
+    if loop:
+        cols.append(np.full(p.shape[0], float(level)))
+    return np.column_stack(cols)
 
 
 def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None
@@ -184,10 +219,11 @@ def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = Non
         if span.hold is not None:  # from rest through the held torque, on a coarse grid
             n = max(2, math.ceil(span.hold / HOLD_STEP))
             held = simulate_packed(2, p, 0.0, span.hold / n, np.full((1, n + 1), span.level),
-                                   np.zeros((p.shape[0], 3)), law=law, workers=workers)
+                                   initial_states(p, None, span.level), law=law,
+                                   workers=workers)
             x0 = held[:, -1, :]
         else:
-            x0 = initial_states(p, span.level)
+            x0 = initial_states(p, span.level, float(span.torque[0]))
         end = span.t.size if end is None else max(end, 2)
         return simulate_packed(2, p, span.t[0], span.record.ts,
                                span.torque[np.newaxis, :end], x0, law=law, workers=workers)
@@ -199,16 +235,17 @@ def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = Non
                          f"{text}") from exc
 
 
-def model_commutation(drive: TwoMassDrive, span: Span, law: str):
+def model_commutation(drive: TwoMassDrive, span: Span, law: str, tau_i: float = 0.0):
     """``(t_s, t_c, t_b)`` of the identified model on a span: the step-down and its first
     contact loss and the next contact made (``None`` for what does not happen)."""
     try:
         _, t_s, _, _ = find_step_down(span.record)
     except InputError:
         return (None, None, None)
-    p = np.array([[getattr(drive, n) for n in PACKED]])
-    x0 = initial_states(p, span.level)[0]
-    res = drive.simulate(span.t, span.torque, law=law, initial_state=x0)
+    p = packed_row(drive, tau_i)[np.newaxis, :]
+    x0 = initial_states(p, span.level, float(span.torque[0]))[0]
+    actuator = CurrentLoop(tau_i) if tau_i > 0 else None
+    res = drive.simulate(span.t, span.torque, law=law, initial_state=x0, actuator=actuator)
     lost = next((e.time for e in res.events if e.time >= t_s and e.kind == "contact_lost"), None)
     made = None
     if lost is not None:

@@ -1,10 +1,10 @@
 """The joint search's stages, as plain functions over explicit state.
 
-:class:`Problem` holds what every stage fits (the spans of the records, the estimated
-parameters, the prior's penalty) and builds :class:`Residual` functions over chosen
-spans and windows; :func:`run` calls the stages in order: :func:`grid_minima`,
-:func:`first_window`, :func:`continue_on`, :func:`whole_record`, :func:`restart`,
-:func:`reestimate_noise`, :func:`whiten_noise`, :func:`uncertainty`. The
+:class:`~backlashkit.identify._problem.Problem` holds what every stage fits and builds
+its weighted residuals (:mod:`backlashkit.identify._problem`); :func:`run` calls the
+stages in order: :func:`grid_minima`, :func:`first_window`, :func:`continue_on`,
+:func:`whole_record`, :func:`restart`, :func:`reestimate_noise`, :func:`select_terms`,
+:func:`whiten_noise`, :func:`uncertainty`. The
 configuration is :mod:`backlashkit.identify.search`'s; ``docs/design/joint-search.md``
 says why each stage exists.
 """
@@ -21,14 +21,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..plants import TwoMassDrive
-from ..signals import highpass_noise_std
-from ._lm import LMState, lm
-from ._model import LINEAR_PARAMS, PACKED, Span, screen_spans, simulate_span
-from ._model import spans as record_spans
+from ._lm import LMState
+from ._model import LINEAR_PARAMS, Span
+from ._problem import Problem, Residual, sample_count, selection
 from .intervals import IntervalInputs, ThetaInterval
-from .noise import sample_noise, whiten
+from .noise import sample_noise
 from .record import Record
 from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
+from .terms import Term, TermChoice
 from .two_step import TwoStepIdentifier
 
 #: First-window solutions costing more than this times the best one's are not
@@ -59,149 +59,16 @@ RESTART_SCREEN_ITER = 5
 #: units, and the refinement can stop on a bump next to a lower point.
 RECENTRE_MARGIN = 0.5
 RECENTRE_MAX = 2
-#: A torque change larger than this, relative to the largest torque, is a jump (a
-#: window starts there); smaller ones are rounding.
-JUMP_RTOL = 1e-9
-#: Noise levels are floored at this fraction of the record's largest speed, so that a
-#: noise-free record still has finite weights.
-NOISE_FLOOR = 1e-9
-
-
-def selection(spans: Sequence[Span], horizon: float | None) -> list:
-    """Samples of each span within ``horizon`` s after its start and every torque jump
-    (a slice of the whole span for None: views, not copies, of the long arrays)."""
-    out: list = []
-    for sp in spans:
-        if horizon is None:
-            out.append(slice(0, sp.t.size))
-            continue
-        u = sp.torque
-        scale = max(float(np.max(np.abs(u))), 1e-300)
-        jumps = np.r_[0, 1 + np.flatnonzero(np.abs(np.diff(u)) > JUMP_RTOL * scale)]
-        keep = np.zeros(sp.t.size, bool)
-        width = max(2, int(round(horizon / sp.record.ts)))
-        for j in jumps:
-            keep[j : j + width] = True
-        out.append(np.flatnonzero(keep))
-    return out
-
-
-def _size(sel) -> int:
-    return sel.stop if isinstance(sel, slice) else sel.size
-
-
-@dataclass
-class Problem:
-    """What every stage fits: spans, estimated parameters (logarithms), the prior."""
-
-    spans: list[Span]
-    screen: list[Span]  # the same model on cheaper spans (holds on a coarse grid)
-    free: list[str]
-    names: tuple[str, ...]
-    base: np.ndarray  # a packed parameter row at the prior, theta 0
-    cols: list[int]  # where the estimated parameters go in it
-    p_prior: np.ndarray
-    pen: np.ndarray  # relative std of the prior per free parameter (inf: no penalty)
-    law: str
-    workers: int | None
-    fd_step: float
-
-    def final_spans(self, final_h: float | None) -> list[Span]:
-        """The spans of the final stages: the whole spans, or the cheaper ones when
-        only windows are fitted (they skip the holds)."""
-        return self.spans if final_h is None else self.screen
-
-    def simulate(self, z_rows: np.ndarray, spans: Sequence[Span],
-                 ends: list[int] | None = None) -> list[np.ndarray]:
-        """States of log-parameter rows over spans (each up to ``ends[k]`` samples)."""
-        p = np.repeat(self.base[np.newaxis, :], len(z_rows), axis=0)
-        p[:, self.cols] = np.exp(z_rows)
-        return [simulate_span(p, sp, self.law, self.workers, None if ends is None else ends[k])
-                for k, sp in enumerate(spans)]
-
-    def residual(self, spans: Sequence[Span], horizon: float | None, sig: np.ndarray,
-                 ar: np.ndarray | None = None) -> Residual:
-        """The weighted residual over ``spans`` within ``horizon`` (:class:`Residual`)."""
-        return Residual(self, spans, horizon, sig, ar)
-
-    def refine(self, res: Residual, z0: np.ndarray, max_iter: int, bounds=None,
-               state: LMState | None = None) -> LMState:
-        """Levenberg-Marquardt on ``res`` from ``z0`` (forward-difference Jacobian)."""
-        return lm(res.at, res.forward_jacobian, z0, max_iter=max_iter, bounds=bounds,
-                  state=state)
-
-    def central_jacobian(self, res: Residual, z: np.ndarray) -> np.ndarray:
-        """Central-difference Jacobian of ``res`` at ``z`` (for the uncertainty)."""
-        n, h = len(self.names), self.fd_step
-        zz = np.repeat(z[np.newaxis, :], 2 * n, axis=0)
-        for i in range(n):
-            zz[2 * i, i] += h
-            zz[2 * i + 1, i] -= h
-        rr = res(zz)
-        return ((rr[0::2] - rr[1::2]) / (2 * h)).T
-
-
-class Residual:
-    """Weighted residual rows of log-parameter rows: every selected sample of ``w_M``
-    then ``w_L`` per span, divided by its noise level, then the prior's rows. With
-    ``ar`` (record, channel, lag) each channel is whitened by ``A(q)`` first and
-    ``sig`` is the innovation's std."""
-
-    def __init__(self, problem: Problem, spans: Sequence[Span], horizon: float | None,
-                 sig: np.ndarray, ar: np.ndarray | None = None) -> None:
-        self.problem, self.spans, self.sig, self.ar = problem, list(spans), sig, ar
-        self.sels = selection(spans, horizon)
-        self.sizes = [_size(s_) for s_ in self.sels]
-        self.ends = [s_.stop if isinstance(s_, slice) else int(s_[-1]) + 1 for s_ in self.sels]
-        self.lag = 0 if ar is None else ar.shape[-1]  # samples without a past, dropped
-        self.n_res = 2 * sum(m - self.lag for m in self.sizes) + len(problem.free)
-        self.ys = [(sp.y_m[s_], sp.y_l[s_]) for sp, s_ in zip(spans, self.sels, strict=True)]
-
-    def __call__(self, z_rows: np.ndarray) -> np.ndarray:
-        pb, lag = self.problem, self.lag
-        sims = pb.simulate(z_rows, self.spans, self.ends)
-        out = np.empty((len(z_rows), self.n_res))
-        pos = 0
-        for sp, y2, s_, x, m in zip(self.spans, self.ys, self.sels, sims, self.sizes,
-                                    strict=True):
-            for c, y in enumerate(y2):  # w_M, then w_L
-                block = out[:, pos : pos + m - lag]
-                if self.ar is None:
-                    np.subtract(y, x[:, s_, c], out=block)
-                else:
-                    block[:] = whiten(y - x[:, s_, c], self.ar[sp.k, c])
-                block /= self.sig[sp.k, c]
-                pos += m - lag
-        p = np.exp(z_rows[:, 1:])
-        out[:, pos:] = (p - pb.p_prior) / (pb.pen * pb.p_prior)  # 0 where no penalty
-        return out
-
-    def at(self, z: np.ndarray) -> np.ndarray:
-        """The residual at one point (inf where the model cannot be simulated)."""
-        try:
-            return self(z[np.newaxis, :])[0]
-        except ValueError:  # e.g. a step to a mode too fast for the sample time
-            return np.full(1, np.inf)
-
-    def forward_jacobian(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """Forward differences (half the simulations of central ones) while iterating."""
-        n, h = z.size, self.problem.fd_step
-        zz = np.repeat(z[np.newaxis, :], n, axis=0) + h * np.eye(n)
-        return ((self(zz) - r) / h).T
-
-    def channels(self, r: np.ndarray):
-        """``(k, c, part)``: the part of ``r`` of record ``k``'s channel ``c``, per span."""
-        pos = 0
-        for sp, m in zip(self.spans, self.sizes, strict=True):
-            for c in (0, 1):
-                yield sp.k, c, r[pos : pos + m - self.lag]
-                pos += m - self.lag
-
-    def prior_rows(self, r: np.ndarray) -> np.ndarray:
-        """The prior's rows of ``r``."""
-        return r[self.n_res - len(self.problem.free):]
-
-
+#: Iterations of the refit that tests a term added after the search (the current
+#: loop): from the search's result a loop the data show lowers the cost by far more
+#: than the test's threshold within the first steps, while refitting one the data do
+#: not show only walks its time constant down to the floor, and each of those
+#: simulations is slower (terms.TAU_FLOOR_SAMPLES).
+TEST_ITER = 4
+#: The added terms (friction, current loop) start from rough guesses
+#: (:mod:`backlashkit.identify.terms`): the first window may move them a factor 100
+#: either way, where the linear parameters stay within ``FirstHorizon.search_factor``.
+EXTRA_BOX = math.log(100.0)
 def resplit(z: np.ndarray, free: Sequence[str], pair: tuple[str, str],
             shift: float) -> np.ndarray | None:
     """Log-parameters ``z`` (theta first) with the ratio of a pair of parameters
@@ -239,14 +106,17 @@ def distinct(states: Sequence[LMState], limit: float, worst: float,
     return out
 
 
-def basins(ends: Sequence[LMState]) -> int:
-    """Distinct end points (:data:`DISTINCT`) within :data:`AMBIGUITY_MARGIN` of the best."""
+def basins(ends: Sequence[LMState], core: Sequence[int]) -> int:
+    """Distinct end points (:data:`DISTINCT` in the ``core`` log-parameters: theta and
+    the linear ones) within :data:`AMBIGUITY_MARGIN` of the best. The added terms are
+    left out: on the short windows Coulomb and viscous friction trade off freely,
+    which moves no backlash."""
     best = min(st.cost for st in ends)
     found: list[np.ndarray] = []
     for st in sorted(ends, key=lambda st_: st_.cost):
         if st.cost <= best + AMBIGUITY_MARGIN and all(
-                np.max(np.abs(st.z - z)) > DISTINCT for z in found):
-            found.append(st.z)
+                np.max(np.abs(st.z[core] - z)) > DISTINCT for z in found):
+            found.append(st.z[core])
     return len(found)
 
 
@@ -360,7 +230,7 @@ def reestimate_noise(pb: Problem, best: LMState, sig: np.ndarray, final_h: float
         r = best.r
         sq, count, pos = np.zeros_like(sig), np.zeros(n_recs), 0
         for sp, s_ in zip(spans, selection(spans, final_h), strict=True):
-            m = _size(s_)
+            m = sample_count(s_)
             sq[sp.k] += (np.sum(r[pos : pos + m] ** 2), np.sum(r[pos + m : pos + 2 * m] ** 2))
             count[sp.k] += m
             pos += 2 * m
@@ -415,8 +285,9 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
             cov_z = np.linalg.inv(info)
         except np.linalg.LinAlgError:
             cov_z = np.linalg.pinv(info)
-        values = np.exp(z)
-        cov = cov_z * np.outer(values, values)  # delta method: dp = p dz
+        values = pb.values(z)
+        dv = np.where(pb.scales > 0, pb.scales, values)  # delta method: dp = p dz
+        cov = cov_z * np.outer(dv, dv)
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         found = interval._interval(IntervalInputs(
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
@@ -468,31 +339,39 @@ def refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
         )
 
 
-def build_problem(prior: TwoMassDrive, recs: list[Record], rel: dict, noise,
-                  search: JointSearch, law: str, workers) -> tuple[Problem, np.ndarray]:
-    """The problem and the starting noise levels ``(n_records, 2)``: ``noise`` for every
-    record, or a high-pass estimate of each record's and channel's."""
-    free = [n for n in LINEAR_PARAMS if n in rel and getattr(prior, n) > 0]
-    names = ("theta", *free)
-    if noise is not None:
-        sig0 = [np.array(noise, float)] * len(recs)
-    else:
-        sig0 = [np.array([highpass_noise_std(r.w_motor), highpass_noise_std(r.w_load)])
-                for r in recs]
-    spans_ = record_spans(recs, search.start, float(search.pre_window), sig0)
-    sigma = np.array(sig0, float).reshape(len(recs), 2)
-    scale = [max(float(np.max(np.abs(r.w_motor))), float(np.max(np.abs(r.w_load))))
-             for r in recs]
-    sigma = np.maximum(sigma, NOISE_FLOOR * np.array(scale)[:, np.newaxis] + 1e-300)
-    pb = Problem(
-        spans=spans_, screen=screen_spans(spans_), free=free, names=names,
-        base=np.array([getattr(prior, n) for n in PACKED[:-1]] + [0.0]),
-        cols=[PACKED.index(n) for n in names],
-        p_prior=np.array([getattr(prior, n) for n in free]),
-        pen=np.array([rel[n] if rel[n] is not None else np.inf for n in free]),
-        law=law, workers=workers, fd_step=search.fd_step,
-    )
-    return pb, sigma
+def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
+                 terms: Sequence[Term], recs: list[Record], max_iter: int
+                 ) -> tuple[Problem, LMState, list[TermChoice]]:
+    """Likelihood-ratio tests of the ``"auto"`` terms, in order. A term in the search
+    is removed and the nested model refitted from ``best``; one outside it is added
+    (from each start of :meth:`Term.start_grid`, the lowest going on) and the larger
+    model refitted. The term is kept only if ``-2 log L`` is lower with it by more
+    than its threshold (:mod:`backlashkit.identify.terms`)."""
+    choices = []
+    for term in terms:
+        if term.mode != "auto":
+            continue
+        if term.searched:
+            other, keep = pb.without(term.params)
+            res = other.residual(other.final_spans(final_h), final_h, sig)
+            st = other.refine(res, best.z[keep], max_iter)
+        else:
+            other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
+            res = other.residual(other.final_spans(final_h), final_h, sig)
+            st = min((other.refine(res, np.r_[best.z, other.z_of(term.params, [
+                start[n] for n in term.params])], TEST_ITER)
+                for start in term.start_grid(recs)), key=lambda s_: s_.cost)
+        with_cost, without_cost = (best.cost, st.cost) if term.searched else (st.cost,
+                                                                            best.cost)
+        rise = without_cost - with_cost
+        kept = bool(rise > term.threshold)
+        if kept and not term.searched and not st.done:  # the added term stays: converge
+            st = other.refine(res, st.z, max_iter, state=st)
+            rise = best.cost - st.cost
+        choices.append(TermChoice(term.name, kept, float(rise), term.threshold))
+        if kept != term.searched:  # the other model wins
+            pb, best = other, st
+    return pb, best, choices
 
 
 @dataclass
@@ -508,14 +387,16 @@ class Outcome:
     starts: list[float]
     two_step: tuple[float, float] | None
     ambiguous: bool
+    choices: list[TermChoice]  # the likelihood-ratio tests of the "auto" terms
 
 
 def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record], *,
         start_drive: TwoMassDrive, z_anchor: np.ndarray, fixed_noise: bool, noise_model,
-        interval, refit: Callable[[list[Record]], float]) -> Outcome:
-    """The whole search from ``z_anchor`` (log linear parameters), then the noise
-    levels, the uncertainty and the interval. ``refit(records)``: ``theta`` of a
-    bootstrap resample's fit."""
+        interval, refit: Callable[[list[Record]], float], terms: Sequence[Term] = ()
+        ) -> Outcome:
+    """The whole search from ``z_anchor`` (log linear parameters, then the added
+    terms'), the noise levels, the choice of the ``"auto"`` terms, the uncertainty and
+    the interval. ``refit(records)``: ``theta`` of a bootstrap resample's fit."""
     short = [search.first.horizon, *search.continuation.horizons]
     rows0 = pb.residual(pb.screen, short[0], sigma)
     zg, minima = grid_minima(pb, rows0, search.grid, z_anchor)
@@ -528,7 +409,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
         if two_step is not None:
             starts.append(two_step[0])
             z_starts.append(np.concatenate([[math.log(two_step[0])], z_anchor]))
-    box = search.first.box(search.grid.theta_max, z_anchor)
+    box = widen_box(pb, search.first.box(search.grid.theta_max, z_anchor))
     states = first_window(pb, rows0, z_starts, search.first, box)
     cont, max_iter = search.continuation, search.max_iter
     cands = distinct(states, cont.candidates, CONTINUE_RATIO * states[0].cost)
@@ -542,7 +423,8 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
                             max_iter)
     # distinct ends of nearly equal cost: the landscape is multimodal here, so continue
     # more first-window solutions (more grid minima among their starts)
-    ambiguous = bool(len(paths[0]) and basins(ends) > 1)
+    core = [i for i, n in enumerate(pb.names) if n == "theta" or n in LINEAR_PARAMS]
+    ambiguous = bool(len(paths[0]) and basins(ends, core) > 1)
     if cont.ambiguity_starts and ambiguous:
         more = minima[n_starts : n_starts + cont.ambiguity_starts]
         states += [pb.refine(rows0, zg[i], search.first.max_iter, box) for i in more]
@@ -556,6 +438,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
                    search.restarts, max_iter)
     best, sig = reestimate_noise(pb, best, sigma, final_h, len(recs),
                                  0 if fixed_noise else search.noise_iter, max_iter)
+    pb, best, choices = select_terms(pb, best, sig, final_h, terms, recs, max_iter)
     best, sig, ar = whiten_noise(pb, best, sig, noise_model, len(recs), search.noise_iter,
                                  max_iter)
     # a model that explains a speed worse than its mean has fitted nothing: say so
@@ -567,7 +450,19 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
                       partial(_refit_resample, pb, sig, ar, refit))
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
         sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
-    return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous)
+    return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices)
+
+
+def widen_box(pb: Problem, box: tuple[np.ndarray, np.ndarray] | None
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The first window's box, :data:`EXTRA_BOX` wider for the added terms."""
+    if box is None:
+        return None
+    extra = [i for i, n in enumerate(pb.names) if n != "theta" and n not in LINEAR_PARAMS]
+    lo, hi = box[0].copy(), box[1].copy()
+    lo[extra] -= EXTRA_BOX
+    hi[extra] += EXTRA_BOX
+    return lo, hi
 
 
 def _refit_resample(pb: Problem, sig: np.ndarray, ar: np.ndarray | None,

@@ -12,10 +12,16 @@ parameter whose prior is 0 stays fixed). The uncertainty is the Gauss-Newton / F
 information at the optimum, ``cov(log p) = (J^T W J + P)^-1``, and ``ci95_`` comes from
 the interval object (:mod:`backlashkit.identify.intervals`). The search is configured
 by :class:`~backlashkit.identify.search.JointSearch`; ``docs/design/joint-search.md``
-says why it has the stages it has. Units are SI: s, N m, rad, rad/s.
+says why it has the stages it has. Where the records show them, the model adds Coulomb
+friction and a current loop, each kept by a likelihood-ratio test
+(:mod:`backlashkit.identify.terms`, ``docs/design/real-drives.md``). Units are SI: s,
+N m, rad, rad/s.
 
 Fitted attributes besides those in the class docstring
 -------------------------------------------------------
+``choices_`` (list of TermChoice)
+    What the likelihood-ratio tests of ``friction`` and ``actuator`` found, and why
+    (:mod:`backlashkit.identify.terms`).
 ``cost_`` (float)
     Weighted sum of squares (whitened with ``ARNoise``) plus the prior penalty at the
     optimum, over ``final_horizon`` if given.
@@ -79,15 +85,18 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .. import validate as v
+from ..actuator import CurrentLoop
 from ..errors import (
     CorrelatedResidualsWarning,
     InputError,
     Option,
+    QuantisedSpeedsWarning,
     SensitivityWarning,
 )
 from ..plants import TwoMassDrive
 from . import _search
-from ._model import LINEAR_PARAMS, drive_with, model_commutation, rel_std
+from ._model import LINEAR_PARAMS, TAU_COL, drive_with, model_commutation, rel_std
+from ._problem import build_problem
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -98,10 +107,12 @@ from .noise import (
     held_noise_lag1,
     lag1,
     noise_coloured,
+    speed_quantum,
 )
 from .record import as_records, check_prior
 from .search import JointSearch
-from .step import check_fit_near_prior, check_step_downs
+from .step import check_fit_near_prior, check_step_downs, held_speed_gain
+from .terms import Term, actuator_term, friction_term
 
 __all__ = ["JointIdentifier", "LINEAR_PARAMS"]
 
@@ -113,6 +124,9 @@ CORRELATED_LAG1 = 0.2
 #: The second search's fit (``Restarts.misfit``) replaces the first only if its -2 log
 #: likelihood is lower by more than this (chi-square units).
 MISFIT_MARGIN = 1.0
+#: A fit this close to 100 % (rms residual over the speed's spread) leaves no noise to
+#: model: a measured speed has noise far above it (a 16-bit encoder: about 1e-5).
+NOISE_FREE = 1e-7
 #: Fewest samples after each torque jump that ``final_horizon`` must span.
 MIN_FINAL_SAMPLES = 10
 
@@ -123,10 +137,7 @@ _AUTO = AutoNoise()
 
 
 class JointIdentifier:
-    """Joint ML / MAP identification of ``theta`` and a drive's linear parameters.
-
-    Fits the backlash half-width ``theta`` (rad) and the uncertain linear parameters to
-    both speeds of every record (SI units; diagnostics: :mod:`backlashkit.identify.joint`).
+    """Joint ML / MAP fit of the backlash half-width ``theta`` (rad) and the drive (SI).
 
     Parameters
     ----------
@@ -143,6 +154,10 @@ class JointIdentifier:
         Where ``ci95_`` comes from (default the profile likelihood).
     noise_model : AutoNoise, WhiteNoise or ARNoise, optional
         The measurement noise (default: AR where the speeds' noise is coloured).
+    friction : {"auto", "viscous", "coulomb"}, optional
+        Coulomb torques fitted where the data call for them (default), never, always.
+    actuator : "auto", None or CurrentLoop, optional
+        Current loop fitted where the data call for it (default), none, or known.
     law : {"paper", "no-pull", "modelica"}, optional
         Contact law of the model (default ``"paper"``).
     allow_far_from_prior : bool, optional
@@ -160,6 +175,8 @@ class JointIdentifier:
         The linear parameters, the identified drive, the names estimated (theta first).
     noise_std_, fit_percent_ : numpy.ndarray
         Noise std in rad/s and NRMSE fit in % per record and channel ``(w_M, w_L)``.
+    friction_, fc_M_, fc_L_, tau_i_ : str, float
+        ``"viscous"`` or ``"coulomb"``, Coulomb torques (N m), loop lag (s; 0: none).
 
     Examples
     --------
@@ -189,6 +206,8 @@ class JointIdentifier:
         search: JointSearch = _SEARCH,
         interval: ProfileLikelihood | FisherInterval | ParametricBootstrap = _PROFILE,
         noise_model: AutoNoise | WhiteNoise | ARNoise = _AUTO,
+        friction: str = "auto",
+        actuator: str | CurrentLoop | None = "auto",
         law: str = "paper",
         allow_far_from_prior: bool = False,
         workers: int | None = None,
@@ -199,6 +218,8 @@ class JointIdentifier:
         self.search = search
         self.interval = interval
         self.noise_model = noise_model
+        self.friction = friction
+        self.actuator = actuator
         self.law = law
         self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
@@ -223,6 +244,7 @@ class JointIdentifier:
                              f"got {type(self.search).__name__}")
         check_interval(self.interval)
         check_noise_model(self.noise_model)
+        self._terms()
         self.noise_model._check_with(self.noise, self.search.final_horizon)
         if self.noise is not None:
             try:
@@ -235,9 +257,7 @@ class JointIdentifier:
             v.positive("noise[1] (s_L)", s_l)
 
     def fit(self, records) -> JointIdentifier:
-        """Identify ``theta`` and the uncertain linear parameters.
-
-        Warns of correlated residuals and of a fit far from the prior where they apply.
+        """Identify ``theta`` and the drive; warn of correlated residuals, of a far prior.
 
         Parameters
         ----------
@@ -270,7 +290,8 @@ class JointIdentifier:
             if self.search.restarts.misfit and _misfits(fitted):
                 restarted = True
                 try:  # the whole search again, from the fitted linear parameters
-                    again = self._fit(records, anchor=fitted["drive_"])
+                    again = self._fit(records, anchor=fitted["drive_"],
+                                      anchor_extra=fitted["params_"])
                 except InputError:  # e.g. a model that explains nothing from there
                     again = None
                 won = again is not None and (
@@ -278,13 +299,16 @@ class JointIdentifier:
                 fitted = again if won else fitted
         # refused (beyond REFUSE_FROM_PRIOR) before the estimator holds the answer
         far = check_fit_near_prior(
-            {n: fitted["params_"][n] for n in fitted["estimated_"][1:]}, self.prior,
-            allow_far_from_prior=self.allow_far_from_prior, stacklevel=2)
+            {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS},
+            self.prior, allow_far_from_prior=self.allow_far_from_prior, stacklevel=2,
+            held_gains=[held_speed_gain(r, prior) for r in records],
+            missing=self._missing_terms())
         self.__dict__.update(fitted, misfit_restarted_=restarted, misfit_restart_won_=won,
                              far_from_prior_=far)
         parts = self._correlation_parts()
         if parts is not None:
             warnings.warn(CorrelatedResidualsWarning(*parts), stacklevel=2)
+        _warn_quantised(records)
         return self
 
     def correlation_message(self) -> str | None:
@@ -294,8 +318,7 @@ class JointIdentifier:
         -------
         str or None
             Where a residual's lag-1 autocorrelation exceeds :data:`CORRELATED_LAG1`
-            (the interval is then too narrow) and whether the noise or the model is to
-            blame; None otherwise. :meth:`fit` warns with it.
+            (a too narrow interval) or is numerical error (:data:`NOISE_FREE`); else None.
         """
         parts = self._correlation_parts()
         return None if parts is None else "".join(map(str, parts))
@@ -303,6 +326,12 @@ class JointIdentifier:
     def _correlation_parts(self) -> tuple[str | Option, ...] | None:
         """:meth:`correlation_message` with its remedy as an :class:`Option` (the
         command line words it as a flag)."""
+        misfit = 1.0 - float(np.min(self.fit_percent_)) / 100.0  # rms residual / spread
+        if misfit < NOISE_FREE:  # a residual this small is no noise, white or coloured
+            return (f"the model reproduces every speed to {max(misfit, 1e-16):.1g} of its "
+                    "spread (noise-free, simulated records?): the residual is numerical "
+                    "error, so std and interval only say that theta is determined to that "
+                    "precision",)
         lag = self.residual_lag1_
         k, c = np.unravel_index(int(np.argmax(np.abs(lag))), lag.shape)
         rho = float(lag[k, c])
@@ -328,9 +357,11 @@ class JointIdentifier:
                 f"autocorrelation {rho:.2f} (white noise: about 0): {what}, so the standard "
                 "error and interval of theta are too narrow; ", *fix)
 
-    def _fit(self, records, anchor: TwoMassDrive | None = None) -> dict[str, Any]:
-        """One search; ``anchor`` replaces the prior as its starting point (grid, box,
-        two-step start), not in the penalty. Returns the fitted attributes."""
+    def _fit(self, records, anchor: TwoMassDrive | None = None,
+             anchor_extra: Mapping[str, float] | None = None) -> dict[str, Any]:
+        """One search; ``anchor`` (and ``anchor_extra``, values of the added terms)
+        replaces the prior as its starting point (grid, box, two-step start), not in
+        the penalty. Returns the fitted attributes."""
         prior = self.prior.with_theta(None)
         recs = list(records)  # checked by fit
         search = self.search
@@ -348,17 +379,36 @@ class JointIdentifier:
                                                 fixed_noise=self.noise is not None,
                                                 final_horizon=search.final_horizon)
         rel = rel_std(self.prior_rel_std, LINEAR_PARAMS)
-        pb, sigma = _search.build_problem(prior, recs, rel, self.noise, search, self.law,
-                                          self.workers)
+        terms = self._terms()
+        pb, sigma = build_problem(prior, recs, rel, self.noise, search, self.law,
+                                  self.workers, terms)
         start = prior if anchor is None else anchor
+        extra = {n: x for term in terms if term.mode in ("fit", "auto")
+                 for n, x in term.starts(recs, prior).items()}
+        if anchor_extra:
+            extra.update({n: x for n, x in anchor_extra.items() if n in extra and x > 0})
+        z_anchor = pb.z_of(pb.free, [getattr(start, n) if n in LINEAR_PARAMS else extra[n]
+                                     for n in pb.free])
         out = _search.run(
-            pb, search, sigma, recs, start_drive=start.with_theta(None),
-            z_anchor=np.log(np.array([getattr(start, n) for n in pb.free])),
+            pb, search, sigma, recs, start_drive=start.with_theta(None), z_anchor=z_anchor,
             fixed_noise=self.noise is not None, noise_model=noise_model,
-            interval=self.interval, refit=self._refit_theta)
+            interval=self.interval, refit=self._refit_theta, terms=terms)
         return {**_published(out, prior, self.law), "held_noise_lag1_": held,
                 "_held_samples": held_samples, "noise_model_": noise_model,
                 "_record_names": [r.name for r in recs]}
+
+    def _missing_terms(self) -> tuple[str | Option, ...]:
+        """How to add the terms the model leaves out, as message parts."""
+        parts: list[str | Option] = []
+        for term in self._terms():
+            if term.mode == "off":
+                parts += [" or ", Option(term.name, "auto")] if parts else [
+                    Option(term.name, "auto")]
+        return tuple(parts)
+
+    def _terms(self) -> tuple[Term, Term]:
+        """The friction and actuator terms of the model (checked)."""
+        return friction_term(self.friction), actuator_term(self.actuator)
 
     def _refit_theta(self, records) -> float:
         """``theta`` of the same search on ``records`` (a bootstrap resample)."""
@@ -378,6 +428,24 @@ def _same(value, default) -> bool:
         return bool(value is default or value == default)
     except (TypeError, ValueError):
         return False
+
+
+def _warn_quantised(records) -> None:
+    """Warn where a record's speeds are an encoder's differenced counts
+    (:class:`~backlashkit.errors.QuantisedSpeedsWarning`)."""
+    for rec in records:
+        for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
+            q = speed_quantum(w)
+            if q > 0:
+                counts = 2 * math.pi / (q * rec.ts)
+                warnings.warn(QuantisedSpeedsWarning(
+                    f"{rec.name}: {name} is quantised to steps of {q:.3g} rad/s (an encoder "
+                    f"of about {counts:.0f} counts per revolution differenced over "
+                    f"Ts = {rec.ts:.3g} s): the model takes it as the speed at each sample "
+                    "with white noise, not the mean over the sample with quantisation "
+                    "noise, so theta may be off by about a percent and its interval too "
+                    "narrow (encoder records are not modelled yet)"), stacklevel=3)
+                break
 
 
 def _misfits(fitted: dict[str, Any]) -> bool:
@@ -410,7 +478,13 @@ def _whiteness(out: _search.Outcome, n_recs: int) -> dict[str, Any]:
 def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str, Any]:
     """The fitted attributes of one search."""
     pb, unc = out.problem, out.unc
-    drive = drive_with(prior, pb.names, unc.values)
+    fitted = dict(zip(pb.names, (float(x) for x in unc.values), strict=True))
+    for n in ("fc_M", "fc_L"):  # estimated in natural units: below 0 the model has 0
+        if n in fitted:
+            fitted[n] = max(fitted[n], 0.0)
+    on_drive = [n for n in pb.names if n != "tau_i"]
+    drive = drive_with(prior, on_drive, np.array([fitted[n] for n in on_drive]))
+    tau_i = fitted.get("tau_i", float(pb.base[TAU_COL]) if pb.base.size > TAU_COL else 0.0)
     residuals, fits = _search.residuals_and_fit(pb.spans, out.sims)
     theta = float(unc.values[0])
     found = unc.interval
@@ -418,14 +492,18 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
     noise_std = innovation
     if out.ar is not None:  # the noise's own std, not its innovation's
         noise_std = np.array([[float(np.std(e)) for e in pair] for pair in residuals])
-    commutations = [model_commutation(drive, sp, law) for sp in pb.spans]
+    commutations = [model_commutation(drive, sp, law, tau_i) for sp in pb.spans]
     return {
         "theta_": theta,
         "std_": float(unc.std[0]) if found.std is None else found.std,
         "ci95_": found.ci95, "ci95_bounded_": found.bounded, "interval_": found.kind,
         "profile_": found.profile, "bootstrap_thetas_": found.bootstrap_thetas,
-        "params_": {n: float(getattr(drive, n)) for n in LINEAR_PARAMS},
+        "params_": {**{n: float(getattr(drive, n)) for n in (*LINEAR_PARAMS, "fc_M", "fc_L")},
+                    "tau_i": tau_i},
         "drive_": drive, "estimated_": pb.names,
+        "friction_": "coulomb" if drive.fc_M > 0 or drive.fc_L > 0 else "viscous",
+        "fc_M_": float(drive.fc_M), "fc_L_": float(drive.fc_L), "tau_i_": tau_i,
+        "choices_": out.choices,
         "param_std_": dict(zip(pb.names, (float(s) for s in unc.std), strict=True)),
         "covariance_": unc.cov,
         "noise_innovation_std_": innovation, "noise_ar_": out.ar, "noise_std_": noise_std,

@@ -4,7 +4,9 @@ The plot helpers take ``ax=`` and return the figure; they use
 :class:`matplotlib.figure.Figure`, never ``pyplot``, and change no global state.
 :func:`backlashkit.identify.report.write_identification_report` puts them on a page.
 
-Every ``theta`` is the backlash **half-width** in rad. Units are SI.
+Every ``theta`` is the backlash **half-width** in rad. Units are SI; the plots show
+``theta`` in degrees (axes and legends alike), the tables beside them in rad. Legends
+sit to the right of the axes, off the data.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError
+from ..report import legend_outside
 from .commutation import fir_lowpass
 from .record import Record
 from .step import find_step_down
@@ -131,7 +134,7 @@ def plot_speed_fit(
     ax.plot(t, simulated, color="C3", lw=1.3, label=f"{label} simulated (fit {fit:.1f} %)")
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"{label} [rad/s]")
-    ax.legend(loc="best", fontsize="small")
+    legend_outside(ax)
     ax.grid(alpha=0.3)
     return fig
 
@@ -149,8 +152,9 @@ def plot_commutation(
     """Zoom on the passage through the backlash after the step-down (paper A, Figs. 4-6).
 
     Raw speeds in grey, FIR-filtered speeds in colour, ``t_s``, ``t_c`` and ``t_b``
-    marked, and the area between the filtered speeds over ``[t_c, t_b]`` shaded: eq. 6
-    gives ``theta_ini = -0.5`` times its signed integral (shown in the title).
+    marked, and the area between the filtered speeds over ``[t_c, t_b]`` shaded: the
+    pre-estimate is ``theta_ini = -0.5`` times its signed integral (shown in the title,
+    in degrees).
 
     Parameters
     ----------
@@ -179,26 +183,29 @@ def plot_commutation(
     margin = 0.5 * (t_b - t_s) if margin is None else margin
     t = record.t
     win = (t >= t_s - margin) & (t <= t_b + margin)
-    ax.plot(t[win], record.w_motor[win], color="C0", alpha=0.25, lw=0.6)
-    ax.plot(t[win], record.w_load[win], color="C1", alpha=0.25, lw=0.6)
+    ax.plot(t[win], record.w_motor[win], color="C0", alpha=0.25, lw=0.6, label="w_M raw")
+    ax.plot(t[win], record.w_load[win], color="C1", alpha=0.25, lw=0.6, label="w_L raw")
     ax.plot(t[win], wmf[win], color="C0", lw=1.4, label="w_M filtered")
     ax.plot(t[win], wlf[win], color="C1", lw=1.4, label="w_L filtered")
     i_c = int(np.argmin(np.abs(t - t_c)))
     i_b = int(np.argmin(np.abs(t - t_b)))
     sl = slice(i_c, i_b + 1)
     ax.fill_between(t[sl], wmf[sl], wlf[sl], color="C2", alpha=0.3,
-                    label="integral of w_M - w_L")
+                    label="area between the filtered speeds")
     d = wmf[sl] - wlf[sl]
     theta_ini = -0.5 * ts * (d.sum() - 0.5 * (d[0] + d[-1]))
-    for x, name, style in ((t_s, "t_s", ":"), (t_c, "t_c", "--"), (t_b, "t_b", "--")):
+    # t_s labelled at the bottom: t_c often follows it within a few samples
+    for x, name, style, y, dy in ((t_s, "t_s", ":", 0.0, 4), (t_c, "t_c", "--", 1.0, -12),
+                                  (t_b, "t_b", "--", 1.0, -12)):
         ax.axvline(x, color="k", ls=style, lw=0.8)
-        ax.annotate(name, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -12),
+        ax.annotate(name, (x, y), xycoords=("data", "axes fraction"), xytext=(2, dy),
                     textcoords="offset points", fontsize="small")
-    ax.set_title(f"{_short(record.name)}: t_c = {t_c:.4f} s, t_b = {t_b:.4f} s, "
-                 f"-0.5 integral = {theta_ini:.4g} rad", fontsize="medium")
+    ax.set_title(f"{_short(record.name, 60)}\ncontact lost at t_c = {t_c:.4f} s, impact at "
+                 f"t_b = {t_b:.4f} s; -1/2 of the area = {math.degrees(theta_ini):.3g} deg",
+                 fontsize="medium")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("speed [rad/s]")
-    ax.legend(loc="best", fontsize="small")
+    legend_outside(ax)
     ax.grid(alpha=0.3)
     return fig
 
@@ -213,6 +220,8 @@ def plot_cost(
     ax: matplotlib.axes.Axes | None = None,
 ) -> matplotlib.figure.Figure:
     """Plot the criterion against ``theta`` with the search window and estimates.
+
+    The ``theta`` axis and the legend are in degrees.
 
     Parameters
     ----------
@@ -240,18 +249,21 @@ def plot_cost(
     ax.plot(th * deg, costs, color="k", lw=1.2, marker=".", ms=3, label="W_1(theta)")
     if bounds is not None:
         ax.axvspan(bounds[0] * deg, bounds[1] * deg, color="C2", alpha=0.2,
-                   label="search window")
+                   label=f"search interval\n[{bounds[0] * deg:.3g}, {bounds[1] * deg:.3g}] deg")
     if theta_ini is not None:
         ax.axvline(theta_ini * deg, color="C2", ls="--", lw=1,
-                   label=f"theta_ini = {theta_ini:.4g} rad")
+                   label=f"pre-estimate theta_ini\n= {theta_ini * deg:.4g} deg")
     if theta is not None:
-        ax.axvline(theta * deg, color="C3", lw=1.3, label=f"theta = {theta:.4g} rad")
+        ax.axvline(theta * deg, color="C3", lw=1.3,
+                   label=f"estimate theta\n= {theta * deg:.4g} deg")
     c = np.asarray(costs, float)
     if c.size and c.min() > 0 and c.max() / c.min() > 20:  # several decades: log scale
         ax.set_yscale("log")
     ax.set_xlabel("theta (half-width) [deg]")
     ax.set_ylabel("W_1 [(rad/s)^2]")
-    ax.legend(loc="best", fontsize="small")
+    ax.set_title("Squared motor-speed error W_1 of the prior with each theta",
+                 fontsize="medium")
+    legend_outside(ax)
     ax.grid(alpha=0.3, which="both")
     return fig
 
@@ -308,7 +320,8 @@ def plot_profile(
                    label="95 % interval")
     ax.set_xlabel("theta (half-width) [deg]")
     ax.set_ylabel("cost rise [chi-square units]")
-    ax.legend(loc="best", fontsize="small")
+    ax.set_title("Profile likelihood of theta", fontsize="medium")
+    legend_outside(ax)
     ax.grid(alpha=0.3)
     return fig
 
@@ -343,21 +356,23 @@ def plot_residual_acf(
         The figure holding the axes.
     """
     fig, ax = _ax(ax)
+    first = not ax.lines  # the band and its legend entry once per axes
     e = np.asarray(residual, float)
     n = e.size
     max_lag = min(n // 4, 200) if max_lag is None else max_lag
     r = autocorrelation(e, max_lag)
     lags = np.arange(max_lag + 1) * ts * 1e3
-    ax.plot(lags, r, lw=1.0, marker=".", ms=2, label=label)
+    ax.plot(lags, r, lw=1.0, marker=".", ms=2, label=label or "w_M - w_M,sim")
     band = 1.96 / math.sqrt(n)
-    ax.axhspan(-band, band, color="0.5", alpha=0.15)
+    ax.axhspan(-band, band, color="0.5", alpha=0.15,
+               label="white noise: 95 % within\n±1.96/sqrt(N)" if first else None)
     ax.axhline(band, color="0.4", ls="--", lw=0.8)
     ax.axhline(-band, color="0.4", ls="--", lw=0.8)
     ax.axhline(0, color="k", lw=0.5)
     ax.set_xlabel("lag [ms]")
     ax.set_ylabel("autocorrelation")
-    ax.set_title(f"residual w_M - w_M,sim (band ±1.96/sqrt(N), N = {n})", fontsize="medium")
-    if label is not None:
-        ax.legend(loc="best", fontsize="small")
+    ax.set_title(f"Autocorrelation of the motor-speed residual (N = {n} samples)",
+                 fontsize="medium")
+    legend_outside(ax)
     ax.grid(alpha=0.3)
     return fig

@@ -4,9 +4,11 @@
 SVG beside each) into a directory: relative links only, inline CSS, no external
 resource, so the directory can be zipped, mailed or opened offline. It shows
 
-* measured and simulated speeds over the criterion's span ``[t_s, t_s + dt_4]`` with
-  the fit ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)`` in %, the model being the
-  prior with the estimated ``theta``, started as in the criterion ``W_1`` of
+* measured and simulated speeds with the fit ``100 (1 - ||y - y_hat|| / ||y -
+  mean(y)||)`` in %: for the joint estimator its own model over the span it fitted
+  (``fit_percent_``, as the command line prints); for the other methods over the
+  criterion's span ``[t_s, t_s + dt_4]``, the model being the prior with the estimated
+  ``theta``, started as in the criterion ``W_1`` of
   :class:`~backlashkit.identify.TwoStepIdentifier`;
 * per record, the zoom on the commutation window: filtered speeds, ``t_s``, ``t_c``,
   ``t_b`` and the integral of ``w_M - w_L`` of eq. 6 shaded (as paper A's
@@ -18,8 +20,9 @@ resource, so the directory can be zipped, mailed or opened offline. It shows
   search evaluated it (``profile_``), with the 95 % level and interval;
 * the autocorrelation of the motor-speed residual with the ``+-1.96 / sqrt(N)`` band
   of white noise;
-* a table of the estimates (``std`` and ``ci95`` shown as "n/a" when the method
-  gives none).
+* a table of the estimates in rad and degrees, with the rows the method gives values
+  for (a method without ``std`` and ``ci95`` gets a sentence saying so, not empty
+  cells).
 
 The plot helpers (:func:`plot_speed_fit`, :func:`plot_commutation`,
 :func:`plot_cost`, :func:`plot_profile`, :func:`plot_residual_acf`) take ``ax=`` and
@@ -41,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, Option
-from ..htmlpage import figure, page, save_figure
+from ..htmlpage import figure, page, save_figure, table
 from ..io import check_writable
 from ..plants import TwoMassDrive
 from .plots import (
@@ -91,6 +94,36 @@ def _simulate_fit(prior: TwoMassDrive, rec: Record, theta: float, dt4: float,
     wm, wl = rec.w_motor[sl], rec.w_load[sl]
     return _Fit(rec, seg.t, wm, wl, r.w_motor, r.w_load,
                 fit_percent(wm, r.w_motor), fit_percent(wl, r.w_load))
+
+
+def _terms_text(result: Any) -> str:
+    """What the joint fit's model has beyond paper A's, as words after "the drive"."""
+    parts = []
+    if getattr(result, "friction_", "viscous") == "coulomb":
+        parts.append(f"Coulomb friction {result.fc_M_:.3g} / {result.fc_L_:.3g} N m")
+    if getattr(result, "tau_i_", 0.0):
+        parts.append(f"a current loop of {1e3 * result.tau_i_:.3g} ms")
+    return f" with {' and '.join(parts)}" if parts else ""
+
+
+def _fitted_model(result: Any, recs: list[Record], finals: list[Record]
+                  ) -> list[_Fit] | None:
+    """The joint estimator's own model over what it fitted (the speeds less its
+    residuals, with its friction and current loop) and its fit % (``fit_percent_``,
+    the figure the command line prints); None for the other methods, whose fits the
+    report simulates from the held speed."""
+    residuals = getattr(result, "residuals_", None)
+    if residuals is None:
+        return None
+    every = recs if finals is recs else recs + finals
+    if len(residuals) != len(every):
+        return None
+    out = []
+    for rec, (em, el), (fm, fl) in zip(every, residuals, result.fit_percent_, strict=True):
+        sl = slice(rec.t.size - em.size, None)  # a span runs to the record's end
+        wm, wl = rec.w_motor[sl], rec.w_load[sl]
+        out.append(_Fit(rec, rec.t[sl], wm, wl, wm - em, wl - el, float(fm), float(fl)))
+    return out
 
 
 # --- the report -----------------------------------------------------------------------
@@ -212,7 +245,7 @@ def write_identification_report(
     recs = as_records(records)
     finals = recs if final_records is None else as_records(final_records, "final_records")
     shown = _Shown.of(result, theta, recs, finals)
-    fits = _draw_fits(out, prior, recs, finals, shown)
+    fits = _draw_fits(out, prior, recs, finals, shown, result)
     _draw_criterion(out, prior, finals, shown, result)
     index.write_text(page(title, _sections(title, prior, recs, fits, shown, result)),
                      encoding="utf-8")
@@ -253,19 +286,22 @@ class _Shown:
 
 
 def _draw_fits(out: Path, prior: TwoMassDrive, recs: list[Record], finals: list[Record],
-               shown: _Shown) -> list[_Fit]:
+               shown: _Shown, result: Any) -> list[_Fit]:
     """The figures of the speeds: measured against simulated, the commutation windows
     and the residuals' autocorrelation."""
     from matplotlib.figure import Figure
 
-    fits = [_simulate_fit(prior, r, shown.theta, shown.dt4, shown.level_window)
-            for r in finals]
-    fig = Figure(figsize=(9, 2.6 * len(fits) + 0.4), layout="constrained")
-    axes = fig.subplots(len(fits), 2, squeeze=False)
-    for k, f in enumerate(fits):
-        plot_speed_fit(f.t, f.w_motor, f.sim_motor, label="w_M", ax=axes[k, 0])
-        plot_speed_fit(f.t, f.w_load, f.sim_load, label="w_L", ax=axes[k, 1])
-        axes[k, 0].set_title(_short(f.record.name), fontsize="medium", loc="left")
+    fits = _fitted_model(result, recs, finals)
+    if fits is None:
+        fits = [_simulate_fit(prior, r, shown.theta, shown.dt4, shown.level_window)
+                for r in finals]
+    fig = Figure(figsize=(9, 4.4 * len(fits) + 0.4), layout="constrained")
+    axes = fig.subplots(2 * len(fits), 1, squeeze=False)[:, 0]
+    for k, f in enumerate(fits):  # one above the other: the legends sit beside them
+        plot_speed_fit(f.t, f.w_motor, f.sim_motor, label="w_M", ax=axes[2 * k])
+        plot_speed_fit(f.t, f.w_load, f.sim_load, label="w_L", ax=axes[2 * k + 1])
+        axes[2 * k].set_title(f"{_short(f.record.name, 60)}: motor and load speeds",
+                              fontsize="medium", loc="left")
     save_figure(fig, out, "fit")
     if shown.has_comm:
         fig = Figure(figsize=(9, 3.2 * len(recs) + 0.3), layout="constrained")
@@ -316,83 +352,135 @@ def _draw_criterion(out: Path, prior: TwoMassDrive, finals: list[Record], shown:
         save_figure(fig, out, "profile")
 
 
+def _estimate_rows(shown: _Shown, result: Any) -> list[tuple[str, str, str]]:
+    """The rows of the estimates' table that have a value: (quantity, rad, deg)."""
+    kind = {"profile": "profile likelihood", "fisher": "Fisher information",
+            "bootstrap": "parametric bootstrap"}.get(getattr(result, "interval_", None))
+    std, ci95 = getattr(result, "std_", None), getattr(result, "ci95_", None)
+    rows = [("theta, the backlash half-width", shown.theta),
+            ("standard error of theta", std),
+            (f"95 % interval of theta ({kind})" if kind else "95 % interval of theta", ci95),
+            ("pre-estimate theta_ini (area between the speeds)", shown.theta_ini),
+            ("search interval of theta", shown.bounds)]
+    return [(name, _fmt(x), _deg(x)) for name, x in rows if _given(x)]
+
+
+def _given(x: Any) -> bool:
+    """Whether a value (number or pair) is there to show."""
+    if x is None:
+        return False
+    values = list(x) if isinstance(x, (tuple, list, np.ndarray)) else [x]
+    try:
+        return bool(values) and all(math.isfinite(float(v)) for v in values)
+    except (TypeError, ValueError):
+        return False
+
+
+def _record_table(recs: list[Record], shown: _Shown, result: Any) -> str:
+    """Per record: the step-down, the contact changes and the pre-estimate, in columns
+    that hold a value for every record."""
+    per_ini = list(getattr(result, "theta_ini_per_record_", None) or [])
+    has_ini = len(per_ini) == len(recs) and all(_given(x) for x in per_ini)
+    header = ["record", "step-down t_s (s)"]
+    if shown.has_comm:
+        header += ["contact lost t_c (s)", "impact t_b (s)"]
+    if has_ini:
+        header += ["theta_ini (rad)"]
+    rows = []
+    for k, rec in enumerate(recs):
+        row = [rec.name, f"{find_step_down(rec)[1]:.4f}"]
+        if shown.has_comm:
+            row += [f"{float(shown.t_c[k]):.4f}", f"{float(shown.t_b[k]):.4f}"]
+        if has_ini:
+            row += [_fmt(per_ini[k])]
+        rows.append(row)
+    return table(header, rows)
+
+
+def _cost_sentence(shown: _Shown, result: Any) -> str:
+    cost = getattr(result, "cost_", None)
+    if not _given(cost):
+        return ""
+    if hasattr(result, "dt4"):  # the two-step and regression criterion
+        return (f'<p class="note">Criterion at the estimate: W_1 = {_fmt(cost)} (rad/s)^2, '
+                f"the squared motor-speed error summed over the {shown.dt4:g} s after the "
+                "step-down t_s.</p>")
+    return (f'<p class="note">Cost at the optimum: {_fmt(cost)}, the sum of squared '
+            "residuals each divided by its noise level (no unit), plus the prior's "
+            "penalty.</p>")
+
+
+def _noise_note(result: Any) -> str:
+    """The joint estimator's noise model and what its residuals say of it."""
+    from .joint import CORRELATED_LAG1
+
+    ar = getattr(result, "noise_ar_", None)
+    model = "white" if ar is None else f"autoregressive of order {ar.shape[-1]}"
+    message = result.correlation_message()
+    if message:
+        said = f"<b>Note:</b> {html.escape(message)}."
+    else:
+        largest = float(np.max(np.abs(result.residual_lag1_)))
+        said = (f"The residuals are as uncorrelated as the likelihood assumes: their "
+                f"largest lag-1 correlation is {largest:.3f} (a note appears above "
+                f"{CORRELATED_LAG1:g}).")
+    return f'<p class="note">Noise model: {model}. {said}</p>'
+
+
 def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_Fit],
               shown: _Shown, result: Any) -> list[str]:
     """The page's HTML sections."""
-    theta, theta_ini, bounds, dt4 = shown.theta, shown.theta_ini, shown.bounds, shown.dt4
-    t_c, t_b, has_comm, method = shown.t_c, shown.t_b, shown.has_comm, shown.method
+    bounds, dt4, method = shown.bounds, shown.dt4, shown.method
     profile = getattr(result, "profile_", None)
-    std = getattr(result, "std_", None)
-    ci95 = getattr(result, "ci95_", None)
-    kind = {"profile": ", profile likelihood", "fisher": ", Fisher",
-            "bootstrap": ", parametric bootstrap"}.get(getattr(result, "interval_", None), "")
-    cost = getattr(result, "cost_", None)
     n_theta = getattr(result, "n_theta", None)
-    rows = [
-        ("theta (half-width)", _fmt(theta), _deg(theta), _fmt(std), _fmt(ci95)),
-        ("theta_ini (eq. 6)", _fmt(theta_ini), _deg(theta_ini), "n/a", "n/a"),
-        ("search interval", _fmt(bounds), _deg(bounds), "", ""),
-    ]
-    est_rows = "\n".join(
-        f'<tr><td class="l">{a}</td><td>{b}</td><td>{c}</td><td>{d}</td><td>{e}</td></tr>'
-        for a, b, c, d, e in rows
-    )
-    per_ini = getattr(result, "theta_ini_per_record_", None) or [None] * len(recs)
-    rec_rows = []
-    for k, rec in enumerate(recs):
-        t_s = find_step_down(rec)[1]
-        rec_rows.append(
-            f'<tr><td class="l">{html.escape(rec.name)}</td><td>{t_s:.4f}</td>'
-            f"<td>{_fmt(t_c[k] if has_comm else None, '.4f')}</td>"
-            f"<td>{_fmt(t_b[k] if has_comm else None, '.4f')}</td>"
-            f"<td>{_fmt(per_ini[k] if k < len(per_ini) else None)}</td></tr>"
-        )
-    fit_rows = "\n".join(
-        f'<tr><td class="l">{html.escape(f.record.name)}</td><td>{f.fit_motor:.2f}</td>'
-        f"<td>{f.fit_load:.2f}</td><td>{f.t.size}</td></tr>"
-        for f in fits
-    )
+    no_spread = ("" if _given(getattr(result, "std_", None))
+                 or _given(getattr(result, "ci95_", None)) else
+                 f'<p class="note">The {html.escape(method)} method gives no standard '
+                 "error or interval of theta.</p>")
+    fit_rows = [(f.record.name, f"{f.fit_motor:.2f}", f"{f.fit_load:.2f}", str(f.t.size))
+                for f in fits]
     p = prior
     prior_txt = ", ".join(
         f"{k} = {getattr(p, k):.4g}" for k in ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
     )
-    window = (
-        f"theta_ini (1 ± n_theta), n_theta = {_fmt(n_theta)}"
-        if n_theta is not None and bounds is not None
-        else "the method's search interval" if bounds is not None else "none"
-    )
+    shaded = (f"; shaded: the search interval theta_ini (1 ± n_theta), n_theta = "
+              f"{_fmt(n_theta)}" if n_theta is not None and bounds is not None
+              else "; shaded: the method's search interval" if bounds is not None else "")
     sections = [
         f"<h1>{html.escape(title)}</h1>",
         f'<p class="note">Method <b>{html.escape(method)}</b>. theta is the backlash '
-        "<b>half-width</b> (dead zone [-theta, theta], total gap 2 theta). SI units. "
+        "<b>half-width</b> (dead zone [-theta, theta], total gap 2 theta). SI units; "
+        "the figures show theta in degrees. "
         f"Prior: {prior_txt}.</p>",
         "<h2>Estimates</h2>",
-        '<table><tr><th class="l">quantity</th><th>rad</th><th>deg</th><th>std (rad)</th>'
-        f"<th>95 % interval (rad{kind})</th></tr>\n{est_rows}</table>",
-        f'<p class="note">Criterion at the estimate W_1 = {_fmt(cost)} (rad/s)^2 '
-        f"over dt_4 = {dt4:g} s after t_s.</p>",
-        '<table><tr><th class="l">record</th><th>t_s (s)</th><th>t_c (s)</th>'
-        "<th>t_b (s)</th><th>theta_ini (rad)</th></tr>\n" + "\n".join(rec_rows) + "</table>",
+        table(("quantity", "rad", "deg"), _estimate_rows(shown, result)),
+        no_spread,
+        _cost_sentence(shown, result),
+        _record_table(recs, shown, result),
         "<h2>Measured and simulated speeds</h2>",
-        '<table><tr><th class="l">record</th><th>fit w_M (%)</th><th>fit w_L (%)</th>'
-        f"<th>samples</th></tr>\n{fit_rows}</table>",
+        table(("record", "fit w_M (%)", "fit w_L (%)", "samples"), fit_rows),
         '<p class="note">fit = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) over '
-        f"[t_s, t_s + {dt4:g} s]; model: prior with the estimated theta, started at the "
-        "measured steady state.</p>",
-        figure("fit", "Measured (grey) and simulated (red) motor and load speeds"),
+        + (f"the fitted span of each record (the figure the command line prints); model: "
+           f"the identified drive{_terms_text(result)}.</p>"
+           if hasattr(result, "residuals_") else
+           f"[t_s, t_s + {dt4:g} s]; model: prior with the estimated theta, started at "
+           "the measured steady state.</p>"),
+        figure("fit", "Measured (grey) and simulated (red) motor and load speeds of each "
+               "record"),
     ]
-    if has_comm:
+    if shown.has_comm:
         sections += [
             "<h2>Commutation window</h2>",
             figure(
                 "commutation",
-                "Filtered speeds around the step-down: contact loss t_c, impact t_b and the "
-                "integral of w_M - w_L (shaded) whose -1/2 is the pre-estimate (eq. 6)",
+                "Filtered speeds around the step-down: contact lost at t_c, impact at t_b, "
+                "and the area between the speeds (shaded), whose -1/2 is the pre-estimate "
+                "theta_ini",
             ),
         ]
     sections += [
         "<h2>Criterion against theta</h2>",
-        figure("cost", f"W_1(theta) on w_M; shaded: {window}"),
+        figure("cost", f"Squared motor-speed error W_1 of the prior with each theta{shaded}"),
     ]
     if profile is not None:
         sections += [
@@ -410,14 +498,5 @@ def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_F
         ),
     ]
     if hasattr(result, "correlation_message"):  # the joint estimator's noise model
-        ar = getattr(result, "noise_ar_", None)
-        model = "white" if ar is None else f"autoregressive of order {ar.shape[-1]}"
-        message = result.correlation_message()
-        sections.append(
-            f'<p class="note">Noise model: {model}. '
-            + (f"<b>Note:</b> {html.escape(message)}." if message else
-               "The residuals the likelihood treats as white are, to lag-1 correlation "
-               f"0.2 (largest: {float(np.max(np.abs(result.residual_lag1_))):.3f}).")
-            + "</p>"
-        )
-    return sections
+        sections.append(_noise_note(result))
+    return [s for s in sections if s]

@@ -99,7 +99,8 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
         mirror = scale > 0.0 and du[j] > 1e-9 * scale and u[j] < 0
         raise InputError(
             f"{record.name}: the torque has no step-down (a drop from a positive level); "
-            "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
+            "the identification needs a torque held at a positive level and then dropped "
+            "to a lower one: record such an experiment"
             + ("; this one rises from a negative level: negate the torque and both speeds "
                "(the mirror experiment)" if mirror else "")
         )
@@ -108,7 +109,8 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
         raise InputError(
             f"{record.name}: the torque has no step-down beyond its noise (largest drop "
             f"{-du[k]:.3g} N m at t = {record.t[k + 1]:.6g} s, noise std about {noise:.3g} N m); "
-            "the identification needs paper A's experiment C_M = a 1(t) - a 1(t - t_s), a > 0"
+            "the identification needs a torque held at a positive level and then dropped "
+            "by more than its noise: record a larger step-down"
         )
     i_s = k + 1
     return i_s, float(record.t[i_s]), float(u[k]), float(u[i_s])
@@ -372,9 +374,16 @@ def ratios_to_prior(params: Mapping[str, float], prior: TwoMassDrive) -> str:
 
 
 def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
-                         allow_far_from_prior: bool = False,
-                         stacklevel: int = 2) -> list[str]:
+                         allow_far_from_prior: bool = False, stacklevel: int = 2,
+                         held_gains: Sequence[float] = (),
+                         missing: Sequence[str | Option] = ()) -> list[str]:
     """Refuse or warn about fitted linear parameters far from the prior.
+
+    The message names the likely cause. Where the speeds held before the step-downs
+    match the prior's (``held_gains`` within :data:`FAR_FROM_PRIOR` of 1), the units
+    and columns are right, so the model lacks what the drive has (``missing``: the
+    terms the caller left out) or the prior is wrong; otherwise a unit or column
+    mistake is likelier.
 
     Parameters
     ----------
@@ -386,6 +395,10 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
         Answer (with the warning) even beyond :data:`REFUSE_FROM_PRIOR` (default False).
     stacklevel : int, optional
         Of the warning (2: the caller's caller).
+    held_gains : sequence of float, optional
+        :func:`held_speed_gain` of every record (NaN: unknown); default none known.
+    missing : sequence of str or Option, optional
+        How to add the terms the model was fitted without, as message parts.
 
     Returns
     -------
@@ -405,13 +418,31 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     """
     ratio = {n: x / getattr(prior, n) for n, x in params.items()}
     very_far = {n: params[n] for n in params if is_far(ratio[n], REFUSE_FROM_PRIOR)}
+    cause = _far_fit_cause(held_gains, missing)
     if very_far and not allow_far_from_prior:
         raise InputError(
-            f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: "
-            f"{CHECK_UNITS}; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
+            f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: ", *cause,
+            "; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
     far = [n for n in params if is_far(ratio[n])]
     if far:
         warnings.warn(PriorMismatchWarning(
             f"the fit moved {ratios_to_prior({n: params[n] for n in far}, prior)} from the "
-            f"prior: {CHECK_UNITS}"), stacklevel=stacklevel + 1)
+            "prior: ", *cause), stacklevel=stacklevel + 1)
     return far
+
+
+def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option]
+                   ) -> tuple[str | Option, ...]:
+    """The likely cause of a fit far from the prior, as message parts."""
+    known = [g for g in held_gains if math.isfinite(g)]
+    if not known or any(is_far(g) for g in known):
+        return (CHECK_UNITS,)
+    spread = max(max(g, 1.0 / g) for g in known)
+    said = (f"the speeds held before the step-downs match the prior's to within x"
+            f"{spread:.2g}, so the units are likely right: check the columns (w_motor and "
+            "w_load swapped?); else ")
+    if missing:
+        return (said, "the model likely lacks what the drive has (try ", *missing,
+                ") or the prior is wrong")
+    return (said, "the prior is likely wrong, or a two-mass drive with backlash does not "
+                  "describe the records")

@@ -66,12 +66,40 @@ Choices the paper leaves open (documented here, configurable where it matters)
   eq. 6; ``W_1`` is the sum of the per-record criteria. Paper A runs step 1 (small
   step ``a_1``, noisy) for the pre-estimate and step 2 (``a_2 = 0.6 a_max``) for
   ``W_1``: pass the step-2 records as ``final_records``.
+
+Coulomb friction (``friction="coulomb"`` or ``"auto"``)
+-------------------------------------------------------
+Paper A's drive has viscous friction only; a real one also has Coulomb torques
+``fc_M``, ``fc_L`` (N m) against the motion. Relation (4), and so eq. 6, is kinematic
+and holds with any friction. Two equations change (:mod:`backlashkit.identify.decay`):
+
+* **Eq. 9.** A freely decaying inertia follows ``J w' = -f w - fc``: after ``t_c``
+  (``F_1``) and before ``t_b`` (``F_2``) the load speed is
+  ``w_L(t_i) exp(-alpha (t - t_i)) - (fc_L / J_L) (1 - exp(-alpha (t - t_i))) / alpha``
+  (a linear fall when ``alpha = 0``), held at 0 once it reaches it (it sticks) instead
+  of decaying exponentially towards 0. The onset ``"unloading"`` joins the decay's
+  slope ``-(alpha w + fc_L / J_L)``. The windows ``dt_1 .. dt_3`` are the viscous fit's.
+* **W_1.** The model is the prior with Coulomb torques ``fc_M, fc_L >= 0``, started
+  at the measured steady state with the shaft carrying the load's friction
+  (``phi_d = theta + (f_L w_0 + fc_L) / k_sh``); ``W_1`` is minimised over theta and
+  both torques (the torques profiled out for every candidate theta,
+  :func:`~backlashkit.identify.decay.coulomb_profile_costs`).
+
+The fit runs in two rounds: the viscous pre-estimate bounds a first Coulomb fit of
+``W_1``; its ``fc_L`` enters eq. 9, whose new pre-estimate bounds the final fit.
+``friction="auto"`` fits both models and keeps the Coulomb one only when the
+likelihood ratio of the final least squares (white Gaussian noise of unknown variance),
+``N ln(W_1 viscous / W_1 Coulomb)`` over the ``N`` samples of ``W_1``, exceeds
+:data:`FRICTION_LR` (the 99.9 % point of chi-square with 2 degrees of freedom, one per
+torque); otherwise every result is the viscous fit's. A prior error also lowers
+``W_1`` when the torques are freed, so on records without Coulomb friction but with a
+wrong prior ``"auto"`` often keeps them (docs/validation/ravanbod2002.md, "Coulomb
+friction"): the default stays ``"viscous"``, paper A's model.
 """
 
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -79,14 +107,26 @@ from typing import Any
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError, Option, SearchEdgeWarning
+from ..errors import InputError, Option
 from ..plants import TwoMassDrive
 from .commutation import commutation_instants, fir_lowpass, pre_estimate
-from .record import Record, as_records, check_prior
+from .decay import (
+    CriterionWindow,
+    coulomb_commutation_instants,
+    coulomb_fit,
+    criterion_costs,
+    criterion_window,
+    likelihood_ratio,
+    search_edges,
+    viscous_fit,
+)
+from .record import as_records, check_prior
 from .step import check_held_speeds, check_step_downs, find_step_down
 
 __all__ = [
     "DEFAULT_DT4",
+    "FRICTIONS",
+    "FRICTION_LR",
     "CriterionWindow",
     "RegressionIdentifier",
     "TwoStepIdentifier",
@@ -100,168 +140,62 @@ ArrayLike = Sequence[float] | np.ndarray
 
 #: Paper A's identification time dt_4 in s.
 DEFAULT_DT4 = 1.0
-#: An estimate within this fraction of the interval's upper end from an end of the
-#: search interval sits on that end (the zoomed grids stop at 1e-6 of it).
-AT_EDGE = 1e-6
-
-
-def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = ()) -> list[str]:
-    """The ends of the search interval ``[lo, hi]`` that ``theta`` sits on, each warned.
-
-    Parameters
-    ----------
-    theta : float
-        The estimate in rad.
-    lo, hi : float
-        The search interval in rad.
-    advice : tuple of str or Option, optional
-        What to do, appended to the warning (e.g. widen ``n_theta``).
-
-    Returns
-    -------
-    list of str
-        ``"lower"``, ``"upper"``, both or none.
-
-    Warns
-    -----
-    SearchEdgeWarning
-        For each end it sits on: the criterion's minimum may lie beyond it.
-    """
-    ends = [end for end, edge in (("lower", lo), ("upper", hi))
-            if abs(theta - edge) <= AT_EDGE * max(hi, 1e-300)]
-    for end in ends:
-        warnings.warn(SearchEdgeWarning(
-            f"theta is at the {end} end of the search interval: the cost's minimum may lie "
-            "beyond it", *advice), stacklevel=3)
-    return ends
-
-
+#: Friction models of the decay after the step-down (module docstring).
+FRICTIONS = ("viscous", "coulomb", "auto")
+#: ``friction="auto"`` keeps the Coulomb torques when the likelihood ratio of ``W_1``
+#: exceeds this: chi-square with 2 degrees of freedom (fc_M, fc_L) at 99.9 %, so
+#: white noise alone calls for them in 1 of 1000 fits with a correct prior.
+FRICTION_LR = 13.8155
 @dataclass
 
-class CriterionWindow:
-    """The part of a record in the criterion ``W_1``: from ``t_s`` over ``dt4``.
+class _Prepared:
+    """What both identifiers check and read before fitting."""
 
-    Parameters
-    ----------
-    t, torque, w_motor : numpy.ndarray
-        Time (s), torque (N m) and measured motor speed (rad/s) on the window.
-    w0 : float
-        The measured speed level that starts the model (rad/s).
-    name : str
-        The record's name.
-    """
-
-    t: np.ndarray
-    torque: np.ndarray
-    w_motor: np.ndarray
-    w0: float
-    name: str = "record"
+    prior: TwoMassDrive
+    recs: list
+    finals: list
+    gains: list[float]
+    segments: list[CriterionWindow]
+    n_grid: int
 
 
-def criterion_window(record: Record, dt4: float, level_window: float) -> CriterionWindow:
-    """The window of ``record`` in the criterion ``W_1``.
-
-    Parameters
-    ----------
-    record : Record
-        A step-down experiment.
-    dt4 : float
-        Span after ``t_s`` in s.
-    level_window : float
-        Span before ``t_s`` in s over which the starting speed is averaged.
-
-    Returns
-    -------
-    CriterionWindow
-        The samples from ``t_s`` to ``t_s + dt4`` and the measured starting speed.
-
-    Raises
-    ------
-    InputError
-        If the record ends before ``t_s + dt4``.
-    """
-    i_s, t_s, _, _ = find_step_down(record)
-    ts = record.ts
-    n4 = int(round(dt4 / ts))
-    if i_s + n4 >= record.t.size:
-        raise InputError(
-            f"{record.name}: the record ends before t_s + dt4 = {t_s + dt4:.6g} s "
-            f"(t_s = {t_s:.6g} s); record longer or lower dt4"
-        )
-    nl = max(1, min(i_s, int(round(level_window / ts))))
-    w0 = float(np.mean(record.w_motor[i_s - nl : i_s]))
-    sl = slice(i_s, i_s + n4 + 1)
-    return CriterionWindow(record.t[sl], record.torque[sl], record.w_motor[sl], w0, record.name)
+def _prepare(est: Any, records: Any, final_records: Any = None) -> _Prepared:
+    """The shared preamble of the fits: hyperparameters checked, records read, refused
+    or warned (step-downs, held speeds), and the windows of ``W_1`` cut."""
+    prior = check_prior(est.prior)
+    dt4 = v.positive("dt4", est.dt4)
+    level_window = v.positive("level_window", est.level_window)
+    n_grid = v.integer("n_grid", est.n_grid, 2)
+    if est.friction not in FRICTIONS:
+        raise InputError(f"friction must be one of {', '.join(map(repr, FRICTIONS))}, got "
+                         f"{est.friction!r}")
+    recs = as_records(records, prior=prior)
+    finals = recs if final_records is None else as_records(final_records, "final_records",
+                                                            prior=prior)
+    every = recs + [f for f in finals if all(f is not r for r in recs)]
+    check_step_downs(every, prior, stacklevel=3)
+    gains = check_held_speeds(every, prior, allow_far_from_prior=est.allow_far_from_prior,
+                              stacklevel=3)
+    segments = [criterion_window(r, dt4, level_window) for r in finals]
+    return _Prepared(prior, recs, finals, gains, segments, n_grid)
 
 
-def criterion_costs(prior: TwoMassDrive, segments: list[CriterionWindow], thetas: np.ndarray,
-                    workers: int | None = None) -> np.ndarray:
-    """Sum over windows of ``W_1(theta)`` for every theta (simulated in parallel).
-
-    Parameters
-    ----------
-    prior : TwoMassDrive
-        Prior linear parameters.
-    segments : list of CriterionWindow
-        The windows (:func:`criterion_window`).
-    thetas : numpy.ndarray
-        Backlash half-widths in rad.
-    workers : int, optional
-        Threads for the simulations (default all cores).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``W_1`` in (rad/s)^2 per theta.
-    """
-    from ..simulate import simulate_batch
-
-    total = np.zeros(thetas.size)
-    for seg in segments:
-        drives = [prior.with_theta(float(th)) for th in thetas]
-        x0 = np.array([[seg.w0, seg.w0, th + prior.f_L * seg.w0 / prior.k_sh] for th in thetas])
-        try:
-            responses = simulate_batch(drives, seg.t, seg.torque, initial_state=x0,
-                                       workers=workers)
-        except InputError:
-            raise
-        except ValueError as exc:  # what the compiled core refuses, with the record named
-            text = " ".join(str(exc).split())
-            raise InputError(f"{seg.name}: cannot simulate the prior on this record: "
-                             f"{text}") from exc
-        for j, r in enumerate(responses):
-            e = seg.w_motor - r.w_motor
-            total[j] += float(e @ e)
-    return total
+def _keeps_coulomb(friction: str, lr: float) -> bool:
+    return friction == "coulomb" or (friction == "auto" and lr > FRICTION_LR)
 
 
-def _search(prior, segments, lo: float, hi: float, n_grid: int, workers) -> tuple[float, float]:
-    """Grid search of ``W_1`` over ``[lo, hi]``, then zoomed grids around the best point.
-
-    Each zoom simulates :data:`ZOOM_POINTS` candidates in one batch over the two grid
-    cells around the current best (a factor 10 narrower each time) until the cell is
-    below ``1e-6 max(hi, 1e-3)`` rad: no serial scalar minimiser, whose import
-    (``scipy.optimize``, about 0.6 s) would cost more than the whole search.
-    """
-    grid = np.linspace(lo, hi, n_grid)
-    costs = criterion_costs(prior, segments, grid, workers)
-    j = int(np.argmin(costs))
-    best_theta, best_cost = float(grid[j]), float(costs[j])
-    step = float(grid[1] - grid[0]) if n_grid > 1 else 0.0
-    tol = 1e-6 * max(hi, 1e-3)
-    while step > tol:
-        a, b = max(lo, best_theta - step), min(hi, best_theta + step)
-        zoom = np.linspace(a, b, ZOOM_POINTS)
-        z_costs = criterion_costs(prior, segments, zoom, workers)
-        k = int(np.argmin(z_costs))
-        if z_costs[k] < best_cost:
-            best_theta, best_cost = float(zoom[k]), float(z_costs[k])
-        step = float(zoom[1] - zoom[0])
-    return best_theta, best_cost
+def _viscous_fit(prep: _Prepared, lo: float, hi: float, workers) -> tuple[float, float]:
+    return viscous_fit(prep.prior, prep.segments, lo, hi, prep.n_grid, workers)
 
 
-#: Candidates per zoomed grid of :func:`_search` (21: each zoom narrows the cell tenfold).
-ZOOM_POINTS = 21
+def _coulomb_fit(prep: _Prepared, lo: float, hi: float, workers,
+                 fc: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, tuple]:
+    return coulomb_fit(prep.prior, prep.segments, lo, hi, prep.n_grid, workers, fc)
+
+
+def _likelihood_ratio(prep: _Prepared, viscous_cost: float, coulomb_cost: float) -> float:
+    return likelihood_ratio(prep.segments, viscous_cost, coulomb_cost)
+
 
 
 class TwoStepIdentifier:
@@ -292,6 +226,11 @@ class TwoStepIdentifier:
         averaged (default 1).
     n_grid : int, optional
         Grid points of the final search before refinement (default 21).
+    friction : {"viscous", "coulomb", "auto"}, optional
+        Friction model of the decay after the step-down (module docstring, "Coulomb
+        friction"): paper A's viscous one (default), with Coulomb torques ``fc_M``,
+        ``fc_L`` fitted, or the Coulomb one only where the likelihood-ratio test
+        (:data:`FRICTION_LR`) calls for it.
     allow_far_from_prior : bool, optional
         Answer even when a record's held speeds are more than
         :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the prior's (default
@@ -318,6 +257,14 @@ class TwoStepIdentifier:
     search_edges_ : list of str
         The ends of ``bounds_`` that ``theta_`` sits on (:func:`search_edges`; each
         warned with a :class:`~backlashkit.errors.SearchEdgeWarning`).
+    friction_ : str
+        The friction model of the results, ``"viscous"`` or ``"coulomb"``.
+    fc_M_, fc_L_ : float
+        Motor and load Coulomb torques in N m of that model (the prior's own, 0
+        unless it gives them, for ``"viscous"``).
+    friction_lr_ : float
+        The likelihood ratio ``N ln(W_1 viscous / W_1 Coulomb)`` that ``"auto"``
+        compared with :data:`FRICTION_LR` (NaN for a forced model).
     held_speed_gains_ : list of float
         :func:`held_speed_gain` per record (``records``, then the ``final_records``
         not among them): the held speeds over the prior's; one more than
@@ -343,6 +290,7 @@ class TwoStepIdentifier:
         onset: str = "constant",
         level_window: float = 1.0,
         n_grid: int = 21,
+        friction: str = "viscous",
         allow_far_from_prior: bool = False,
         workers: int | None = None,
     ) -> None:
@@ -356,6 +304,7 @@ class TwoStepIdentifier:
         self.onset = onset
         self.level_window = level_window
         self.n_grid = n_grid
+        self.friction = friction
         self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
 
@@ -397,29 +346,58 @@ class TwoStepIdentifier:
         SearchEdgeWarning
             If ``theta_`` sits at an end of the search interval.
         """
-        prior = check_prior(self.prior)
         n_theta = v.positive("n_theta", self.n_theta)
         if not n_theta < 1:
             raise InputError(f"n_theta must be < 1, got {self.n_theta!r}")
-        dt4 = v.positive("dt4", self.dt4)
-        level_window = v.positive("level_window", self.level_window)
-        n_grid = v.integer("n_grid", self.n_grid, 2)
         # named here: the filter would only say "cutoff", not which one
         v.positive("cutoff_motor", self.cutoff_motor)
         v.positive("cutoff_load", self.cutoff_load)
-        recs = as_records(records, prior=prior)
-        finals = recs if final_records is None else as_records(final_records, "final_records",
-                                                                prior=prior)
-        every = recs + [f for f in finals if all(f is not r for r in recs)]
-        check_step_downs(every, prior)
-        gains = check_held_speeds(every, prior, allow_far_from_prior=self.allow_far_from_prior)
-        alpha = prior.f_L / prior.J_L
+        prep = _prepare(self, records, final_records)
+        prior = prep.prior
+        comms, inis = self._pre_estimates(prep, 0.0)
+        lo, hi = _interval(inis, n_theta)
+        fc = (prior.fc_M, prior.fc_L)
+        lr = math.nan
+        if self.friction != "coulomb":
+            theta, cost = _viscous_fit(prep, lo, hi, self.workers)
+        if self.friction != "viscous":
+            # round 1 within the viscous pre-estimate's interval gives fc_L for eq. 9
+            _, _, fc_c = _coulomb_fit(prep, lo, hi, self.workers)
+            comms_c, inis_c = self._pre_estimates(prep, fc_c[1] / prior.J_L)
+            lo_c, hi_c = _interval(inis_c, n_theta)
+            theta_c, cost_c, fc_c = _coulomb_fit(prep, lo_c, hi_c, self.workers, fc_c)
+            if self.friction == "auto":
+                lr = _likelihood_ratio(prep, cost, cost_c)
+            if _keeps_coulomb(self.friction, lr):
+                comms, inis, lo, hi = comms_c, inis_c, lo_c, hi_c
+                theta, cost, fc = theta_c, cost_c, fc_c
+        self.theta_, self.cost_ = theta, cost
+        self.friction_ = "coulomb" if _keeps_coulomb(self.friction, lr) else "viscous"
+        self.fc_M_, self.fc_L_ = float(fc[0]), float(fc[1])
+        self.friction_lr_ = lr
+        self.search_edges_ = search_edges(self.theta_, lo, hi,
+                                          advice=(" (widen ", Option("n_theta", None), ")"))
+        self.theta_ini_ = float(np.mean(inis))
+        self.theta_ini_per_record_ = inis
+        self.commutations_ = comms
+        self.t_c_ = [c.t_c for c in comms]
+        self.t_b_ = [c.t_b for c in comms]
+        self.bounds_ = (lo, hi)
+        self.held_speed_gains_ = prep.gains
+        return self
+
+    def _pre_estimates(self, prep: _Prepared, decel: float) -> tuple[list, list[float]]:
+        """Eq. 9 and eq. 6 per record, the load's Coulomb deceleration ``decel``
+        (rad/s^2) in eq. 9's decay."""
+        alpha = prep.prior.f_L / prep.prior.J_L
         comms, inis = [], []
-        for rec in recs:
+        for rec in prep.recs:
             com = commutation_instants(
                 rec, alpha, dt1=self.dt1, dt2=self.dt2, dt3=self.dt3, anchor=self.anchor,
                 onset=self.onset,
             )
+            com = coulomb_commutation_instants(rec, com, alpha, decel, anchor=self.anchor,
+                                               onset=self.onset)
             for name, cut in (("cutoff_motor", self.cutoff_motor),
                               ("cutoff_load", self.cutoff_load)):
                 if not cut < math.pi / rec.ts:
@@ -432,26 +410,22 @@ class TwoStepIdentifier:
             ini = pre_estimate(wmf, wlf, rec.ts, com.i_c, com.i_b)
             if not ini > 0:
                 raise InputError(
-                    f"{rec.name}: the pre-estimate (eq. 6) between t_c = {com.t_c:.6g} s and "
-                    f"t_b = {com.t_b:.6g} s is {ini:.3g} rad, not positive: no usable passage "
-                    "through the backlash"
-                )
+                    f"{rec.name}: the backlash pre-estimate, half the integral of the "
+                    f"load speed minus the motor speed from the contact loss at "
+                    f"t = {com.t_c:.6g} s to the impact at t = {com.t_b:.6g} s, is "
+                    f"{ini:.3g} rad; it must be positive: the speeds show no usable passage "
+                    "through the backlash there (record a step-down to 0 with less noise "
+                    "on the load speed, or give the contact instants as ", Option("dt1", None),
+                    ", ", Option("dt2", None), ", ", Option("dt3", None), ")")
             comms.append(com)
             inis.append(ini)
-        theta_ini = float(np.mean(inis))
-        segments = [criterion_window(r, dt4, level_window) for r in finals]
-        lo, hi = theta_ini * (1 - n_theta), theta_ini * (1 + n_theta)
-        self.theta_, self.cost_ = _search(prior, segments, lo, hi, n_grid, self.workers)
-        self.search_edges_ = search_edges(self.theta_, lo, hi,
-                                          advice=(" (widen ", Option("n_theta", None), ")"))
-        self.theta_ini_ = theta_ini
-        self.theta_ini_per_record_ = inis
-        self.commutations_ = comms
-        self.t_c_ = [c.t_c for c in comms]
-        self.t_b_ = [c.t_b for c in comms]
-        self.bounds_ = (lo, hi)
-        self.held_speed_gains_ = gains
-        return self
+        return comms, inis
+
+
+def _interval(inis: list[float], n_theta: float) -> tuple[float, float]:
+    """The final search interval ``theta_ini (1 -+ n_theta)``."""
+    theta_ini = float(np.mean(inis))
+    return theta_ini * (1 - n_theta), theta_ini * (1 + n_theta)
 
 
 class RegressionIdentifier:
@@ -474,6 +448,11 @@ class RegressionIdentifier:
         Span in s before ``t_s`` for the speed level that starts the model (default 1).
     n_grid : int, optional
         Grid points (default 61, a step of 0.25 deg over 15 deg).
+    friction : {"viscous", "coulomb", "auto"}, optional
+        Friction model of the decay after the step-down (module docstring, "Coulomb
+        friction"): paper A's viscous one (default), with Coulomb torques ``fc_M``,
+        ``fc_L`` fitted, or the Coulomb one only where the likelihood-ratio test
+        (:data:`FRICTION_LR`) calls for it.
     allow_far_from_prior : bool, optional
         Answer even when a record's held speeds are more than
         :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the prior's (default
@@ -492,6 +471,14 @@ class RegressionIdentifier:
     search_edges_ : list of str
         The ends of ``[0, theta_max]`` that ``theta_`` sits on (:func:`search_edges`;
         each warned with a :class:`~backlashkit.errors.SearchEdgeWarning`).
+    friction_ : str
+        The friction model of the results, ``"viscous"`` or ``"coulomb"``.
+    fc_M_, fc_L_ : float
+        Motor and load Coulomb torques in N m of that model (the prior's own, 0
+        unless it gives them, for ``"viscous"``).
+    friction_lr_ : float
+        The likelihood ratio ``N ln(W_1 viscous / W_1 Coulomb)`` that ``"auto"``
+        compared with :data:`FRICTION_LR` (NaN for a forced model).
     held_speed_gains_ : list of float
         :func:`held_speed_gain` per record: the held speeds over the prior's; one more
         than :data:`FAR_FROM_PRIOR` times off 1 raises a
@@ -508,6 +495,7 @@ class RegressionIdentifier:
         dt4: float = DEFAULT_DT4,
         level_window: float = 1.0,
         n_grid: int = 61,
+        friction: str = "viscous",
         allow_far_from_prior: bool = False,
         workers: int | None = None,
     ) -> None:
@@ -516,6 +504,7 @@ class RegressionIdentifier:
         self.dt4 = dt4
         self.level_window = level_window
         self.n_grid = n_grid
+        self.friction = friction
         self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
 
@@ -550,19 +539,25 @@ class RegressionIdentifier:
         SearchEdgeWarning
             If ``theta_`` sits at an end of the search interval.
         """
-        prior = check_prior(self.prior)
         theta_max = v.positive("theta_max", self.theta_max)
-        dt4 = v.positive("dt4", self.dt4)
-        level_window = v.positive("level_window", self.level_window)
-        n_grid = v.integer("n_grid", self.n_grid, 2)
-        recs = as_records(records, prior=prior)
-        check_step_downs(recs, prior)
-        self.held_speed_gains_ = check_held_speeds(
-            recs, prior, allow_far_from_prior=self.allow_far_from_prior)
-        segments = [criterion_window(r, dt4, level_window) for r in recs]
-        self.theta_, self.cost_ = _search(prior, segments, 0.0, theta_max, n_grid, self.workers)
+        prep = _prepare(self, records)
+        fc = (prep.prior.fc_M, prep.prior.fc_L)
+        lr = math.nan
+        if self.friction != "coulomb":
+            theta, cost = _viscous_fit(prep, 0.0, theta_max, self.workers)
+        if self.friction != "viscous":
+            theta_c, cost_c, fc_c = _coulomb_fit(prep, 0.0, theta_max, self.workers)
+            if self.friction == "auto":
+                lr = _likelihood_ratio(prep, cost, cost_c)
+            if _keeps_coulomb(self.friction, lr):
+                theta, cost, fc = theta_c, cost_c, fc_c
+        self.theta_, self.cost_ = theta, cost
+        self.friction_ = "coulomb" if _keeps_coulomb(self.friction, lr) else "viscous"
+        self.fc_M_, self.fc_L_ = float(fc[0]), float(fc[1])
+        self.friction_lr_ = lr
+        self.held_speed_gains_ = prep.gains
         self.search_edges_ = search_edges(self.theta_, 0.0, theta_max)
-        self.t_s_ = [find_step_down(r)[1] for r in recs]
+        self.t_s_ = [find_step_down(r)[1] for r in prep.recs]
         return self
 
 

@@ -1,6 +1,7 @@
 //! The block-wise fast path of the engine (sample time = internal step).
 
-use super::{flow, Engine, HybridModel, ModeData, GRAZE_RTOL};
+use super::mode::ModeData;
+use super::{flow, Engine, HybridModel, GRAZE_RTOL};
 use crate::linalg::Vector;
 
 /// Samples per block of the optimistic fast path.

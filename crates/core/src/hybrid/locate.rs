@@ -1,8 +1,19 @@
 //! Locating guard crossings inside one internal step: the Taylor expansion of the
 //! flow, a scan for the earliest crossing, and root finding.
 
-use super::{FuncData, Graze, ModeData, EVENT_RTOL, GRAZE_RTOL, SCAN_POINTS, TAYLOR_TERMS};
+use super::mode::{FuncData, ModeData};
+use super::{Graze, GRAZE_RTOL};
 use crate::linalg::{dot, matvec, Vector};
+
+/// Terms of the Taylor expansion of the flow used to locate events: with
+/// `rho(A) h <= 1/2` the remainder is below `0.5^19 / 19! ~ 1.6e-23` of the state scale.
+pub(crate) const TAYLOR_TERMS: usize = 18;
+/// Sub-intervals scanned for a crossing or an extremum when locating events. With
+/// `rho(A) h <= 1/2` every mode turns by at most 1/16 rad over one of them, too little
+/// for a guard function to have two extrema there.
+pub(crate) const SCAN_POINTS: usize = 8;
+/// A guard counts as crossed when its normalised functions exceed this.
+pub(crate) const EVENT_RTOL: f64 = 1e-12;
 
 /// Normalised time within which an extremum at the very start of a step counts as the
 /// start itself (see `find_crossing`).

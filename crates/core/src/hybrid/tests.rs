@@ -1,6 +1,8 @@
 //! Tests of the event engine on small models with closed-form answers.
 
 use super::*;
+use crate::linalg::{Mat, Vector};
+use crate::Error;
 
 /// A one-switch model of state `[x, v]` with `dx/dt = v`: `v` obeys
 /// `dv/dt = -omega^2 x + b u` (`omega = 0` for free flight). Mode 0 leaves when

@@ -1,0 +1,241 @@
+"""A closed-loop problem packed for the kernels, and the run of it on a backend.
+
+:func:`build_problem` turns the plant, the backlash, the controller and the signals
+into the flat dict of arrays and scalars that both the NumPy reference
+(:mod:`backlashkit._numpy_control`) and the compiled ``simulate_adaptive`` read;
+:func:`run_problem` runs it on either.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from .. import validate as v
+from ..errors import InputError
+from ..lti import as_state_space
+from ..nonlinearities import Backlash, GainOnlyInverse, InverseKind
+from .adaptive import AdaptiveLaw
+from .design import MRCDesign, companion
+
+__all__ = ["DEFAULT_MAX_STEP", "ROUND_SLACK", "build_problem", "run_problem"]
+
+#: Largest integration step in s when none is given: fine enough for paper B's
+#: references and plants, whatever the output sample time.
+DEFAULT_MAX_STEP = 1e-3
+#: A ratio of times within this of a whole number counts as that number (``ts`` a
+#: multiple of the step, ``duration`` a multiple of ``ts``, up to rounding).
+ROUND_SLACK = 1e-9
+#: Parameters of the kernels' compiled entry point that are integers, and matrices.
+_KERNEL_INTS = {"kind", "n_steps", "n_sub"}
+_KERNEL_MATRICES = {"ap", "al", "am", "ah"}
+
+
+def _steps(duration: float, ts: float, step: float | None) -> tuple[float, int, int]:
+    """Integration step ``h`` (a divisor of ``ts``), sub-steps per sample, total steps."""
+    duration = v.positive("duration", duration)
+    ts = v.positive("ts", ts)
+    if ts > duration:
+        raise InputError(f"ts must be <= duration ({duration!r} s), got {ts!r}")
+    h_max = min(ts, DEFAULT_MAX_STEP) if step is None else v.positive("step", step)
+    n_sub = max(1, int(np.ceil(ts / h_max - ROUND_SLACK)))
+    h = ts / n_sub
+    n_out = int(np.floor(duration / ts + ROUND_SLACK))
+    return h, n_sub, n_out * n_sub
+
+
+def _plant(plant: Any, initial_state: np.ndarray | None) -> dict[str, Any]:
+    """The plant's realisation and initial state."""
+    ap, bp, cp, dp = as_state_space(plant)
+    if dp != 0.0:
+        raise InputError("plant must be strictly proper (no direct feedthrough)")
+    xp0 = (
+        np.zeros(ap.shape[0])
+        if initial_state is None
+        else v.finite_array("initial_state", initial_state)
+    )
+    if xp0.size != ap.shape[0]:
+        raise InputError(f"initial_state must have {ap.shape[0]} entries, got {xp0.size}")
+    return {"ap": ap, "bp": bp, "cp": cp, "xp0": xp0}
+
+
+def _controller(design: MRCDesign) -> dict[str, Any]:
+    """The filter, reference model and ``h`` of the linear controller in companion form."""
+    al, bl, _ = companion(np.array([1.0]), design.filter)
+    am, bm, cm = companion(np.array([1.0]), design.reference_model)
+    ah, bh, ch = companion(design.h_num, design.h_den)
+    return {
+        "al": al,
+        "bl": bl,
+        "th1": design.theta_1.copy(),
+        "th2": design.theta_2.copy(),
+        "th3": design.theta_3,
+        "am": am,
+        "bm": bm,
+        "cm": cm,
+        "ah": ah,
+        "bh": bh,
+        "ch": ch,
+    }
+
+
+def _adaptation(adaptation: AdaptiveLaw, inverse: InverseKind) -> dict[str, Any]:
+    """Gains and initial estimate of the adaptive law (only ``m`` adapts under a
+    gain-only inverse)."""
+    gamma = adaptation.gamma_diag
+    thb0 = adaptation.theta_b0_array
+    if isinstance(inverse, GainOnlyInverse):
+        gamma = gamma * np.array([0.0, 1.0, 0.0])
+        thb0 = np.array([0.0, thb0[1], 0.0])
+    return {
+        "gamma": gamma,
+        "sigma": adaptation.sigma,
+        "sigma_bound": adaptation.sigma_bound,
+        "m0": adaptation.m0,
+        "thb0": thb0,
+    }
+
+
+def _sampled(name: str, signal: Callable[[np.ndarray], np.ndarray] | None,
+             t_grid: np.ndarray) -> np.ndarray:
+    """``signal`` on the integration grid (empty without one)."""
+    if signal is None:
+        return np.zeros(0)
+    return v.finite_array(f"{name}(t)", np.broadcast_to(signal(t_grid), t_grid.shape))
+
+
+def _reference(reference: Any) -> dict[str, np.ndarray]:
+    kernel_arrays = getattr(reference, "kernel_arrays", None)
+    if kernel_arrays is None:
+        raise InputError(
+            f"reference must be a SumOfSines or a TableReference, got {type(reference).__name__}"
+        )
+    return kernel_arrays()
+
+
+def build_problem(
+    plant: Any,
+    backlash: Backlash,
+    *,
+    inverse: InverseKind,
+    adaptation: AdaptiveLaw,
+    reference: Any,
+    duration: float,
+    ts: float,
+    step: float | None,
+    design: MRCDesign,
+    output_noise: Callable[[np.ndarray], np.ndarray] | None = None,
+    input_disturbance: Callable[[np.ndarray], np.ndarray] | None = None,
+    initial_state: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """Pack a closed-loop problem for the kernels.
+
+    The arguments are those of :func:`~backlashkit.control.simulate_closed_loop`, with
+    the defaults resolved.
+
+    Parameters
+    ----------
+    plant : tuple or python-control or scipy.signal LTI object
+        Known linear part ``G(s)``, strictly proper.
+    backlash : Backlash
+        The true backlash at the plant input.
+    inverse : InverseKind
+        The backlash inverse of the controller.
+    adaptation : AdaptiveLaw
+        Gains and initial estimate of the adaptive law.
+    reference : SumOfSines or TableReference
+        Reference ``r(t)``.
+    duration : float
+        Length of the run in s.
+    ts : float
+        Sample time of the output in s.
+    step : float or None
+        Largest integration step in s (``None``: ``min(ts, DEFAULT_MAX_STEP)``).
+    design : MRCDesign
+        The linear controller.
+    output_noise, input_disturbance : callable, optional
+        ``n(t)`` and ``d(t)`` on the integration grid; default none.
+    initial_state : array_like, optional
+        Plant state at ``t = 0``; default zeros.
+
+    Returns
+    -------
+    dict
+        Arrays and scalars read by ``_numpy_control.simulate_adaptive`` and the
+        compiled ``simulate_adaptive``.
+    """
+    h, n_sub, n_steps = _steps(duration, ts, step)
+    plant_arrays = _plant(plant, initial_state)
+    controller = _controller(design)
+    adaptive = _adaptation(adaptation, inverse)
+    t_grid = np.arange(n_steps + 1) * h
+    noise = _sampled("output_noise", output_noise, t_grid)
+    dist = _sampled("input_disturbance", input_disturbance, t_grid)
+    p1, p2 = inverse.params()
+    prob = {
+        **plant_arrays,
+        "m": backlash.m,
+        "c_r": backlash.c_r,
+        "c_l": backlash.c_l,
+        "u0": 0.0,
+        **controller,
+        **adaptive,
+        "kind": inverse.code,
+        "p1": p1,
+        "p2": p2,
+        "h": h,
+        "n_steps": n_steps,
+        "n_sub": n_sub,
+        "noise": noise,
+        "dist": dist,
+    }
+    prob.update(_reference(reference))
+    return {
+        k: (np.ascontiguousarray(val, dtype=float) if isinstance(val, np.ndarray) else val)
+        for k, val in prob.items()
+    }
+
+
+def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.ndarray]:
+    """Run a packed problem on a backend.
+
+    Parameters
+    ----------
+    prob : dict
+        From :func:`build_problem`.
+    backend : {"rust", "numpy"}
+        Compiled kernel or NumPy reference.
+
+    Returns
+    -------
+    dict
+        Raw output arrays (``t, r, y, ym, ud, v, u, thb, n_switches``).
+    """
+    if backend == "numpy":
+        from .._numpy_control import simulate_adaptive
+
+        return simulate_adaptive(prob)
+    if backend != "rust":
+        raise InputError(f"backend must be 'rust' or 'numpy', got {backend!r}")
+    from .. import _core
+
+    args = {}
+    for k, value in prob.items():
+        if k in _KERNEL_INTS:
+            args[k] = int(value)
+        elif k in _KERNEL_MATRICES:
+            args[k] = np.ascontiguousarray(value, dtype=float)
+        elif isinstance(value, np.ndarray):
+            args[k] = np.ascontiguousarray(value, dtype=float).ravel()
+        else:
+            args[k] = float(value)
+    try:
+        raw = _core.simulate_adaptive(args)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    out = {k: np.asarray(val) for k, val in raw.items()}
+    out["thb"] = out["thb"].reshape(-1, 3)
+    out["xp"] = out["xp"].reshape(out["thb"].shape[0], -1)
+    return out

@@ -1,0 +1,287 @@
+"""What the joint estimator fits: the problem, its weighted residual, how it is built.
+
+:class:`Problem` holds the spans of the records, the estimated parameters (logarithms,
+or natural units for the Coulomb torques), the prior's penalty and the added terms'
+floors; :class:`Residual` is the weighted residual of rows of estimated values over
+chosen spans and windows; :func:`build_problem` makes the problem of a prior and
+records. The stages that fit it are :mod:`backlashkit.identify._search`'s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..plants import TwoMassDrive
+from ..signals import highpass_noise_std
+from ._lm import LMState, lm
+from ._model import (
+    LINEAR_PARAMS,
+    PACKED,
+    PACKED_LONG,
+    TIED,
+    Span,
+    screen_spans,
+    simulate_span,
+)
+from ._model import spans as record_spans
+from .noise import whiten
+from .record import Record
+from .search import JointSearch
+from .terms import Term
+
+#: A torque change larger than this, relative to the largest torque, is a jump (a
+#: window starts there); smaller ones are rounding.
+JUMP_RTOL = 1e-9
+#: Noise levels are floored at this fraction of the record's largest speed, so that a
+#: noise-free record still has finite weights.
+NOISE_FLOOR = 1e-9
+
+
+def selection(spans: Sequence[Span], horizon: float | None) -> list:
+    """Samples of each span within ``horizon`` s after its start and every torque jump
+    (a slice of the whole span for None: views, not copies, of the long arrays)."""
+    out: list = []
+    for sp in spans:
+        if horizon is None:
+            out.append(slice(0, sp.t.size))
+            continue
+        u = sp.torque
+        scale = max(float(np.max(np.abs(u))), 1e-300)
+        jumps = np.r_[0, 1 + np.flatnonzero(np.abs(np.diff(u)) > JUMP_RTOL * scale)]
+        keep = np.zeros(sp.t.size, bool)
+        width = max(2, int(round(horizon / sp.record.ts)))
+        for j in jumps:
+            keep[j : j + width] = True
+        out.append(np.flatnonzero(keep))
+    return out
+
+
+def sample_count(sel) -> int:
+    return sel.stop if isinstance(sel, slice) else sel.size
+
+
+@dataclass
+class Problem:
+    """What every stage fits: spans, estimated parameters (logarithms), the prior."""
+
+    spans: list[Span]
+    screen: list[Span]  # the same model on cheaper spans (holds on a coarse grid)
+    free: list[str]
+    names: tuple[str, ...]
+    base: np.ndarray  # a packed parameter row at the prior, theta 0
+    cols: list[int]  # where the estimated parameters go in it
+    p_prior: np.ndarray
+    pen: np.ndarray  # relative std of the prior per free parameter (inf: no penalty)
+    law: str
+    workers: int | None
+    fd_step: float
+    floors: dict[int, float]  # column -> smallest value simulated (terms.py)
+    # per estimated parameter: 0 for a log-parameter, else the scale of a parameter
+    # estimated in natural units (value = scale * z: the Coulomb torques, whose 0 a
+    # logarithm would only approach)
+    scales: np.ndarray
+
+    def values(self, z: np.ndarray) -> np.ndarray:
+        """The parameters of (rows of) estimated values ``z``, in natural units."""
+        natural = self.scales > 0
+        return np.where(natural, z * self.scales, np.exp(np.where(natural, 0.0, z)))
+
+    def z_of(self, names: Sequence[str], values: Sequence[float]) -> np.ndarray:
+        """The estimated values of parameters ``names`` at ``values`` (their starts)."""
+        scale = [self.scales[self.names.index(n)] for n in names]
+        return np.array([x / s_ if s_ > 0 else math.log(x)
+                         for x, s_ in zip(values, scale, strict=True)])
+
+    @property
+    def ties(self) -> list[tuple[int, int]]:
+        """``(dst, src)`` columns: breakaway torques equal to fitted Coulomb torques."""
+        if self.base.size != len(PACKED_LONG):
+            return []
+        return [(PACKED_LONG.index(fs), PACKED_LONG.index(fc)) for fs, fc in TIED.items()
+                if fc in self.names]
+
+    def without(self, drop: Sequence[str]) -> tuple[Problem, list[int]]:
+        """The nested problem without the parameters ``drop`` (set to 0: no friction, no
+        current loop) and the indices of the kept estimated values."""
+        keep = [i for i, n in enumerate(self.names) if n not in drop]
+        names = tuple(self.names[i] for i in keep)
+        base = self.base.copy()
+        for n in drop:
+            base[PACKED_LONG.index(n)] = 0.0
+            for fs, fc in TIED.items():
+                if fc == n:
+                    base[PACKED_LONG.index(fs)] = 0.0
+        if (base.size == len(PACKED_LONG) and not np.any(base[len(PACKED):])
+                and all(n in PACKED for n in names)):
+            base = base[: len(PACKED)]  # paper A's model: the kernel's historical path
+        lin = [i - 1 for i in keep[1:]]
+        nested = replace(self, free=list(names[1:]), names=names, base=base,
+                         cols=[PACKED_LONG.index(n) for n in names],
+                         p_prior=self.p_prior[lin], pen=self.pen[lin],
+                         scales=self.scales[keep],
+                         floors={c: x for c, x in self.floors.items()
+                                 if PACKED_LONG[c] in names})
+        return nested, keep
+
+    def with_params(self, add: Sequence[str], floors: dict[str, float],
+                    scales: dict[str, float]) -> Problem:
+        """The larger problem with the parameters ``add`` estimated too (no prior on
+        them; ``floors``: their smallest values simulated; ``scales``: those
+        estimated in natural units)."""
+        base = self.base
+        if base.size == len(PACKED):
+            base = np.r_[base, np.zeros(len(PACKED_LONG) - len(PACKED))]
+        names = (*self.names, *add)
+        return replace(self, free=list(names[1:]), names=names, base=base,
+                       cols=[PACKED_LONG.index(n) for n in names],
+                       p_prior=np.r_[self.p_prior, np.ones(len(add))],
+                       pen=np.r_[self.pen, np.full(len(add), np.inf)],
+                       scales=np.r_[self.scales, [scales.get(n, 0.0) for n in add]],
+                       floors={**self.floors,
+                               **{PACKED_LONG.index(n): x for n, x in floors.items()}})
+
+    def final_spans(self, final_h: float | None) -> list[Span]:
+        """The spans of the final stages: the whole spans, or the cheaper ones when
+        only windows are fitted (they skip the holds)."""
+        return self.spans if final_h is None else self.screen
+
+    def simulate(self, z_rows: np.ndarray, spans: Sequence[Span],
+                 ends: list[int] | None = None) -> list[np.ndarray]:
+        """States of log-parameter rows over spans (each up to ``ends[k]`` samples)."""
+        p = np.repeat(self.base[np.newaxis, :], len(z_rows), axis=0)
+        p[:, self.cols] = self.values(z_rows)
+        for col, floor in self.floors.items():
+            np.maximum(p[:, col], floor, out=p[:, col])
+        for dst, src in self.ties:
+            p[:, dst] = p[:, src]
+        return [simulate_span(p, sp, self.law, self.workers, None if ends is None else ends[k])
+                for k, sp in enumerate(spans)]
+
+    def residual(self, spans: Sequence[Span], horizon: float | None, sig: np.ndarray,
+                 ar: np.ndarray | None = None) -> Residual:
+        """The weighted residual over ``spans`` within ``horizon`` (:class:`Residual`)."""
+        return Residual(self, spans, horizon, sig, ar)
+
+    def refine(self, res: Residual, z0: np.ndarray, max_iter: int, bounds=None,
+               state: LMState | None = None) -> LMState:
+        """Levenberg-Marquardt on ``res`` from ``z0`` (forward-difference Jacobian)."""
+        return lm(res.at, res.forward_jacobian, z0, max_iter=max_iter, bounds=bounds,
+                  state=state)
+
+    def central_jacobian(self, res: Residual, z: np.ndarray) -> np.ndarray:
+        """Central-difference Jacobian of ``res`` at ``z`` (for the uncertainty)."""
+        n, h = len(self.names), self.fd_step
+        zz = np.repeat(z[np.newaxis, :], 2 * n, axis=0)
+        for i in range(n):
+            zz[2 * i, i] += h
+            zz[2 * i + 1, i] -= h
+        rr = res(zz)
+        return ((rr[0::2] - rr[1::2]) / (2 * h)).T
+
+
+class Residual:
+    """Weighted residual rows of log-parameter rows: every selected sample of ``w_M``
+    then ``w_L`` per span, divided by its noise level, then the prior's rows. With
+    ``ar`` (record, channel, lag) each channel is whitened by ``A(q)`` first and
+    ``sig`` is the innovation's std."""
+
+    def __init__(self, problem: Problem, spans: Sequence[Span], horizon: float | None,
+                 sig: np.ndarray, ar: np.ndarray | None = None) -> None:
+        self.problem, self.spans, self.sig, self.ar = problem, list(spans), sig, ar
+        self.sels = selection(spans, horizon)
+        self.sizes = [sample_count(s_) for s_ in self.sels]
+        self.ends = [s_.stop if isinstance(s_, slice) else int(s_[-1]) + 1 for s_ in self.sels]
+        self.lag = 0 if ar is None else ar.shape[-1]  # samples without a past, dropped
+        self.n_res = 2 * sum(m - self.lag for m in self.sizes) + len(problem.free)
+        self.ys = [(sp.y_m[s_], sp.y_l[s_]) for sp, s_ in zip(spans, self.sels, strict=True)]
+
+    def __call__(self, z_rows: np.ndarray) -> np.ndarray:
+        pb, lag = self.problem, self.lag
+        sims = pb.simulate(z_rows, self.spans, self.ends)
+        out = np.empty((len(z_rows), self.n_res))
+        pos = 0
+        for sp, y2, s_, x, m in zip(self.spans, self.ys, self.sels, sims, self.sizes,
+                                    strict=True):
+            for c, y in enumerate(y2):  # w_M, then w_L
+                block = out[:, pos : pos + m - lag]
+                if self.ar is None:
+                    np.subtract(y, x[:, s_, c], out=block)
+                else:
+                    block[:] = whiten(y - x[:, s_, c], self.ar[sp.k, c])
+                block /= self.sig[sp.k, c]
+                pos += m - lag
+        p = pb.values(z_rows)[:, 1:]
+        with np.errstate(invalid="ignore"):  # inf / inf: no penalty on an overflow
+            out[:, pos:] = np.nan_to_num((p - pb.p_prior) / (pb.pen * pb.p_prior))
+        return out
+
+    def at(self, z: np.ndarray) -> np.ndarray:
+        """The residual at one point (inf where the model cannot be simulated)."""
+        try:
+            return self(z[np.newaxis, :])[0]
+        except ValueError:  # e.g. a step to a mode too fast for the sample time
+            return np.full(1, np.inf)
+
+    def forward_jacobian(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Forward differences (half the simulations of central ones) while iterating."""
+        n, h = z.size, self.problem.fd_step
+        zz = np.repeat(z[np.newaxis, :], n, axis=0) + h * np.eye(n)
+        return ((self(zz) - r) / h).T
+
+    def channels(self, r: np.ndarray):
+        """``(k, c, part)``: the part of ``r`` of record ``k``'s channel ``c``, per span."""
+        pos = 0
+        for sp, m in zip(self.spans, self.sizes, strict=True):
+            for c in (0, 1):
+                yield sp.k, c, r[pos : pos + m - self.lag]
+                pos += m - self.lag
+
+    def prior_rows(self, r: np.ndarray) -> np.ndarray:
+        """The prior's rows of ``r``."""
+        return r[self.n_res - len(self.problem.free):]
+
+
+def build_problem(prior: TwoMassDrive, recs: list[Record], rel: dict, noise,
+                  search: JointSearch, law: str, workers, terms: Sequence[Term] = ()
+                  ) -> tuple[Problem, np.ndarray]:
+    """The problem and the starting noise levels ``(n_records, 2)``: ``noise`` for every
+    record, or a high-pass estimate of each record's and channel's. ``terms`` add the
+    fitted or fixed parameters of friction and current loop (a long packed row)."""
+    free = [n for n in LINEAR_PARAMS if n in rel and getattr(prior, n) > 0]
+    extra = [n for term in terms if term.fitted for n in term.params]
+    scales = {n: x for term in terms if term.fitted for n, x in term.scales(recs).items()}
+    names = ("theta", *free, *extra)
+    if noise is not None:
+        sig0 = [np.array(noise, float)] * len(recs)
+    else:
+        sig0 = [np.array([highpass_noise_std(r.w_motor), highpass_noise_std(r.w_load)])
+                for r in recs]
+    spans_ = record_spans(recs, search.start, float(search.pre_window), sig0)
+    sigma = np.array(sig0, float).reshape(len(recs), 2)
+    scale = [max(float(np.max(np.abs(r.w_motor))), float(np.max(np.abs(r.w_load))))
+             for r in recs]
+    sigma = np.maximum(sigma, NOISE_FLOOR * np.array(scale)[:, np.newaxis] + 1e-300)
+    base = np.array([getattr(prior, n) for n in PACKED[:-1]] + [0.0])
+    if any(term.present for term in terms):
+        base = np.r_[base, np.zeros(len(PACKED_LONG) - len(PACKED))]
+        for term in terms:
+            for n, x in zip(term.params, term.fixed, strict=False):
+                base[PACKED_LONG.index(n)] = x
+    pb = Problem(
+        spans=spans_, screen=screen_spans(spans_), free=[*free, *extra], names=names,
+        base=base, cols=[PACKED_LONG.index(n) for n in names],
+        # the added terms have no prior: rows of 0 (p_prior 1, infinite std)
+        p_prior=np.array([getattr(prior, n) for n in free] + [1.0] * len(extra)),
+        pen=np.array([rel[n] if rel[n] is not None else np.inf for n in free]
+                     + [np.inf] * len(extra)),
+        law=law, workers=workers, fd_step=search.fd_step,
+        floors={PACKED_LONG.index(n): x for term in terms if term.fitted
+                for n, x in term.floors(recs).items()},
+        scales=np.array([0.0] * (1 + len(free))
+                        + [scales.get(n, 0.0) for n in extra]),
+    )
+    return pb, sigma

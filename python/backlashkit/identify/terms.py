@@ -1,0 +1,329 @@
+"""The terms a real drive adds to paper A's model: Coulomb friction and a current loop.
+
+Paper A's drive has viscous friction only and applies its torque exactly. A real drive
+has Coulomb friction on motor and load (``fc_M``, ``fc_L`` in N m: a slipping inertia
+feels ``-fc sign(w)`` and sticks where its speed reaches 0 under a smaller torque) and
+a current loop between the torque set-point and the motor torque (first order, time
+constant ``tau_i`` in s). The joint estimator can fit both beside ``theta`` and the
+linear parameters. Each is chosen by a :class:`Term` setting:
+
+* ``friction``: ``"viscous"`` (none), ``"coulomb"`` (``fc_M``, ``fc_L`` fitted) or
+  ``"auto"`` (fitted, then kept only where the data call for it);
+* ``actuator``: ``None`` (the set-point applied exactly), a
+  :class:`~backlashkit.CurrentLoop` (its ``tau_i`` fixed), or ``"auto"`` (``tau_i``
+  fitted, then kept only where the data call for it).
+
+"Where the data call for it" is a likelihood-ratio test: the term is kept if it lowers
+``-2 log L`` by more than the chi-square quantile :data:`KEEP_LEVEL` for its number
+of parameters. Friction is in the whole search and the model without it is refitted
+from the result (a viscous model fitted to a drive with Coulomb friction can wander
+far from the prior, so it cannot be the search's model). The current loop is tested
+the other way round: the model with ``tau_i`` is refitted from the search's result
+(its lag biases a search without it by about one percent of ``theta``, which a local
+refit removes, while fitting it through the search costs ten times more: its stiff
+mode slows every simulation).
+The breakaway torque is tied to the Coulomb torque (``fs = fc``): step-down records
+hold no information on it, since the motor torque jumps far beyond any breakaway
+torque and a load stuck at the end of a decay is never pushed again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from ..actuator import CurrentLoop
+from ..errors import InputError
+from ..plants import TwoMassDrive
+from .record import Record
+from .step import find_step_down
+
+__all__ = [
+    "FRICTION_CHOICES", "KEEP_LEVEL", "Term", "TermChoice", "actuator_term", "friction_term",
+]
+
+#: Confidence of the likelihood-ratio test that keeps a term: at 0.99 a term the data
+#: do not need is kept in at most 1 % of records (fewer at the boundary fc = 0, where
+#: the statistic is a mixture of chi-squares with fewer degrees of freedom), so paper A's
+#: ideal records keep the viscous model in at least 99 % of fits.
+KEEP_LEVEL = 0.99
+#: Values of ``friction``.
+FRICTION_CHOICES = ("auto", "viscous", "coulomb")
+#: Start of each fitted Coulomb torque when the held levels show none, as a fraction
+#: of the largest held torque: small enough to be a negligible model change, large
+#: enough for the log-parameter to move to a real value in a few steps.
+FC_START_FLOOR = 1e-3
+#: Starts of a fitted current-loop time constant, in sample times. The loop is added to
+#: the model after the search, from its result: where the drive also has Coulomb
+#: friction, that result has traded the loop's lag for friction and backlash, and a
+#: refit from one start can walk the lag down to the floor, a local minimum (on
+#: near noise-free records with a 1 ms loop: theta 1.4 % off). The refit therefore
+#: starts from each of these, and the lowest goes on.
+TAU_START_SAMPLES = (0.5, 1.0, 2.0, 4.0)
+#: Smallest current-loop time constant simulated, in sample times. A loop's lag
+#: withholds about ``T tau_i`` of impulse at each torque jump, so its effect on the
+#: likelihood grows as ``tau_i^2``: on 8 s records of paper A's drive at 40 dB a
+#: one-sample loop lowers ``-2 log L`` by about 20 to 50 (``benchmarks/real_drive.py``
+#: prints the tests' rises), so one of a quarter sample by about 1 to 3, below the
+#: test's threshold. Faster loops are stiff modes that make
+#: every simulation several times slower; the fit sees a
+#: flat cost below this floor, and the likelihood-ratio test then drops the loop.
+TAU_FLOOR_SAMPLES = 0.25
+#: Smallest Coulomb torque simulated, relative to the largest torque: the fit moves a
+#: Coulomb torque in natural units down to 0, yet the kernel needs every simulated row
+#: of a batch to have the same friction switches (a breakaway torque > 0), and one of
+#: 1e-12 of the torque changes no speed at working precision.
+FC_FLOOR = 1e-12
+
+
+@dataclass(frozen=True)
+class Term:
+    """A group of parameters the model adds, and whether to fit or test it.
+
+    Parameters
+    ----------
+    name : str
+        ``"friction"`` or ``"actuator"`` (the hyperparameter that set it).
+    params : tuple of str
+        The packed names of the parameters it adds.
+    mode : {"off", "fixed", "fit", "auto"}
+        Absent, present with fixed values, fitted, or fitted and tested.
+    fixed : tuple of float
+        The values when ``mode == "fixed"``.
+    searched : bool
+        Whether an ``"auto"`` term is in the whole search (then tested by removing
+        it) or only added after it (then tested by adding it).
+    """
+
+    name: str
+    params: tuple[str, ...]
+    mode: str
+    fixed: tuple[float, ...] = ()
+    searched: bool = True
+
+    @property
+    def fitted(self) -> bool:
+        """Whether the whole search fits the term's parameters."""
+        return self.mode == "fit" or (self.mode == "auto" and self.searched)
+
+    @property
+    def present(self) -> bool:
+        """Whether the model has the term at all (fitted or fixed)."""
+        return self.mode != "off"
+
+    @property
+    def threshold(self) -> float:
+        """Rise of ``-2 log L`` (chi-square units) without the term that keeps it."""
+        return float(chi2.ppf(KEEP_LEVEL, len(self.params)))
+
+    def starts(self, recs: Sequence[Record], prior: TwoMassDrive) -> dict[str, float]:
+        """Starting values of the fitted parameters.
+
+        Parameters
+        ----------
+        recs : sequence of Record
+            The records fitted.
+        prior : TwoMassDrive
+            The prior; its Coulomb torques, where it gives them, start the fit.
+
+        Returns
+        -------
+        dict
+            Parameter name -> starting value (N m or s).
+        """
+        if self.name == "friction":
+            given = (prior.fc_M, prior.fc_L)
+            if any(given):
+                return dict(zip(self.params, given, strict=True))
+            return dict.fromkeys(self.params, coulomb_start(recs, prior))
+        return dict.fromkeys(self.params, TAU_START_SAMPLES[0] * min(r.ts for r in recs))
+
+    def start_grid(self, recs: Sequence[Record]) -> list[dict[str, float]]:
+        """Starting values of a term added after the search, one dict per start.
+
+        Parameters
+        ----------
+        recs : sequence of Record
+            The records fitted.
+
+        Returns
+        -------
+        list of dict
+            Parameter name -> starting value in s (:data:`TAU_START_SAMPLES`).
+        """
+        ts = min(r.ts for r in recs)
+        return [dict.fromkeys(self.params, x * ts) for x in TAU_START_SAMPLES]
+
+    def floors(self, recs: Sequence[Record]) -> dict[str, float]:
+        """Smallest values simulated of the fitted parameters.
+
+        Parameters
+        ----------
+        recs : sequence of Record
+            The records fitted (their torques and sample times set the floors).
+
+        Returns
+        -------
+        dict
+            Parameter name -> floor (:data:`FC_FLOOR`, :data:`TAU_FLOOR_SAMPLES`).
+        """
+        if self.name == "friction":
+            return dict.fromkeys(self.params, FC_FLOOR * torque_scale(recs))
+        return dict.fromkeys(self.params, TAU_FLOOR_SAMPLES * min(r.ts for r in recs))
+
+    def scales(self, recs: Sequence[Record]) -> dict[str, float]:
+        """The fitted parameters estimated in natural units, and their scales.
+
+        Parameters
+        ----------
+        recs : sequence of Record
+            The records fitted.
+
+        Returns
+        -------
+        dict
+            The Coulomb torques -> the largest torque in N m (they are estimated in
+            its units); empty for the current loop, whose time constant is estimated
+            as a logarithm.
+        """
+        if self.name != "friction":
+            return {}
+        return dict.fromkeys(self.params, torque_scale(recs))
+
+
+@dataclass(frozen=True)
+class TermChoice:
+    """What the likelihood-ratio test of one term found.
+
+    Parameters
+    ----------
+    term : str
+        ``"friction"`` or ``"actuator"``.
+    kept : bool
+        Whether the model keeps it.
+    rise : float
+        Rise of ``-2 log L`` when it is removed (chi-square units).
+    threshold : float
+        The rise above which it is kept (:data:`KEEP_LEVEL`).
+    """
+
+    term: str
+    kept: bool
+    rise: float
+    threshold: float
+
+    def reason(self) -> str:
+        """Say what was chosen and why.
+
+        Returns
+        -------
+        str
+            One sentence.
+        """
+        verb = "kept" if self.kept else "dropped"
+        cmp = ">" if self.kept else "<="
+        return (f"{self.term} {verb}: without it -2 log L rises by {self.rise:.3g} {cmp} "
+                f"{self.threshold:.3g} (chi-square, {KEEP_LEVEL:.0%})")
+
+
+def friction_term(friction: str) -> Term:
+    """The :class:`Term` of the ``friction`` hyperparameter.
+
+    Parameters
+    ----------
+    friction : {"auto", "viscous", "coulomb"}
+        The joint estimator's ``friction``.
+
+    Returns
+    -------
+    Term
+        Its term (checked).
+    """
+    if friction not in FRICTION_CHOICES:
+        raise InputError(
+            f"friction must be one of {', '.join(map(repr, FRICTION_CHOICES))}, got "
+            f"{friction!r}"
+        )
+    mode = {"auto": "auto", "viscous": "off", "coulomb": "fit"}[friction]
+    return Term("friction", ("fc_M", "fc_L"), mode)
+
+
+def actuator_term(actuator) -> Term:
+    """The :class:`Term` of the ``actuator`` hyperparameter.
+
+    Parameters
+    ----------
+    actuator : "auto", None or CurrentLoop
+        The joint estimator's ``actuator``.
+
+    Returns
+    -------
+    Term
+        Its term (checked).
+    """
+    if isinstance(actuator, str):
+        if actuator != "auto":
+            raise InputError(f"actuator must be 'auto', None or a CurrentLoop, got {actuator!r}")
+        return Term("actuator", ("tau_i",), "auto", searched=False)
+    if actuator is None:
+        return Term("actuator", ("tau_i",), "off")
+    if not isinstance(actuator, CurrentLoop):
+        raise InputError("actuator must be 'auto', None or a CurrentLoop, got "
+                         f"{type(actuator).__name__}")
+    if actuator.exact:
+        return Term("actuator", ("tau_i",), "off")
+    return Term("actuator", ("tau_i",), "fixed", (actuator.tau_i,))
+
+
+def torque_scale(recs: Sequence[Record]) -> float:
+    """The largest torque magnitude of the records.
+
+    Parameters
+    ----------
+    recs : sequence of Record
+        The records.
+
+    Returns
+    -------
+    float
+        In N m; 1 where every torque is 0.
+    """
+    return max((float(np.max(np.abs(r.torque))) for r in recs), default=0.0) or 1.0
+
+
+def coulomb_start(recs: Sequence[Record], prior: TwoMassDrive) -> float:
+    """Half the Coulomb torque the held levels show beside the prior's viscous friction.
+
+    Before each step-down the drive turns steadily: ``T = (f_M + f_L) w + fc_M + fc_L``.
+    The median over records of ``T - (f_M + f_L) w``, halved, floored at
+    :data:`FC_START_FLOOR` of the held torque, starts both Coulomb torques.
+
+    Parameters
+    ----------
+    recs : sequence of Record
+        Step-down records (others are skipped).
+    prior : TwoMassDrive
+        The prior (its viscous frictions).
+
+    Returns
+    -------
+    float
+        The start of each Coulomb torque in N m.
+    """
+    f_sum = prior.f_M + prior.f_L
+    excess, levels = [], []
+    for rec in recs:
+        try:
+            i_s, _, level, _ = find_step_down(rec)
+        except InputError:
+            continue
+        n = max(1, min(i_s // 4, int(round(0.1 / rec.ts))))  # the last 0.1 s of the hold
+        w = float(np.mean(rec.w_motor[i_s - n : i_s]))
+        excess.append(abs(level) - f_sum * abs(w))
+        levels.append(abs(level))
+    scale = max(levels) if levels else 1.0
+    fc = 0.5 * float(np.median(excess)) if excess else 0.0
+    return max(fc, FC_START_FLOOR * scale)

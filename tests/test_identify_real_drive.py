@@ -1,0 +1,219 @@
+"""The joint estimator on drives as they are: Coulomb friction and a current loop.
+
+Every record here is made by the independent scipy reference
+(:func:`backlashkit.verify.reference_simulate`, adaptive integration with located
+contact and friction changes), not by the compiled kernel the estimator fits with.
+The drives start at their steady state under the held torque, as paper A's 40 s holds
+do, and are stepped down to 0 (issue 20's records, shortened to 8 s).
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+import backlashkit as bk
+from backlashkit.cli.main import main as cli_main
+from backlashkit.errors import InputError, PriorMismatchWarning
+from backlashkit.io import write_csv
+from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA
+from backlashkit.verify import reference_simulate
+
+#: Issue 20's bar on theta for friction and current loop (not quantised).
+THETA_RTOL = 0.03
+T_END, T_STEP, TS, SNR = 8.0, 2.0, 1e-3, 40.0
+#: An estimate this many standard errors off the truth happens once in 370 fits: one
+#: record pair cannot test the interval's 95 % (benchmarks/real_drive_coverage.py
+#: does, over hundreds), but it can catch a biased or overconfident one.
+OUTLIER_STDS = 3.0
+#: A second drive: stiffer, a lighter load, a smaller backlash.
+OTHER = {"J_M": 2.0e-3, "J_L": 2.5e-2, "k_sh": 150.0, "f_M": 3e-3, "f_L": 4e-3,
+         "f_sh": 1.0e-2}
+
+
+def _records(linear, theta, *, fc=(0.0, 0.0), tau_i=0.0, seed=0):
+    """Two noisy step-down records (paper A's two torque levels) by the scipy reference."""
+    drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
+    loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
+    t = bk.signals.time_grid(T_END, TS)
+    out = []
+    for a, ss in zip((A1, A2), np.random.SeedSequence(seed).spawn(2), strict=True):
+        u = bk.signals.step_down(t, a, t_s=T_STEP)
+        ref = reference_simulate(drive, t, u, actuator=loop, initial_state=drive.steady_state(a))
+        s_m, s_l = ss.spawn(2)
+        out.append(bk.Record(t, u, bk.signals.add_noise(ref.w_motor, SNR, rng=s_m),
+                             bk.signals.add_noise(ref.w_load, SNR, rng=s_l), name=f"a={a:.3g}"))
+    return out
+
+
+def _fit(recs, linear, **kw):
+    return bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1, **kw).fit(recs)
+
+
+@pytest.fixture(scope="module")
+def coulomb():
+    return _records(P_TRUE, THETA, fc=(0.01, 0.02))
+
+
+def test_coulomb_friction_found_and_theta_within_3_percent(coulomb):
+    """Issue 20's first row: 1-2 % Coulomb friction, 40 dB. Today's viscous model moved
+    J_M x0.007 and blamed the units; the default now fits the Coulomb torques."""
+    fit = _fit(coulomb, P_TRUE)
+    assert fit.friction_ == "coulomb" and fit.tau_i_ == 0.0
+    assert fit.theta_ == pytest.approx(THETA, rel=THETA_RTOL)
+    assert abs(fit.theta_ - THETA) < OUTLIER_STDS * fit.std_
+    assert fit.fc_M_ == pytest.approx(0.01, rel=0.15)
+    assert fit.fc_L_ == pytest.approx(0.02, rel=0.15)
+    kept = {c.term: c.kept for c in fit.choices_}
+    assert kept == {"friction": True, "actuator": False}
+    for name in ("J_M", "J_L", "k_sh"):
+        assert fit.params_[name] == pytest.approx(P_TRUE[name], rel=0.05), name
+
+
+def test_viscous_model_on_friction_names_friction_not_units(coulomb):
+    """Forced to the viscous model, the fit wanders off the prior; the refusal says the
+    held speeds rule out a unit mistake and names the option that adds friction."""
+    with pytest.raises(InputError) as err, warnings.catch_warnings():
+        warnings.simplefilter("ignore", PriorMismatchWarning)
+        _fit(coulomb, P_TRUE, friction="viscous", actuator=None)
+    text = str(err.value)
+    assert "units are likely right" in text and "friction='auto'" in text
+    assert "w_motor and w_load swapped?" in text  # the held speeds cannot tell that
+    assert "rpm" not in text
+
+
+def test_current_loop_found_and_theta_within_3_percent():
+    """Issue 20's second row: a 1 ms current loop, 40 dB (today: +1.4 %, and an
+    interval excluding the truth)."""
+    recs = _records(P_TRUE, THETA, tau_i=1e-3, seed=1)
+    fit = _fit(recs, P_TRUE)
+    assert fit.tau_i_ == pytest.approx(1e-3, rel=0.5)
+    assert fit.friction_ == "viscous"
+    assert fit.theta_ == pytest.approx(THETA, rel=THETA_RTOL)
+    assert abs(fit.theta_ - THETA) < OUTLIER_STDS * fit.std_
+
+
+def test_friction_and_loop_together_on_another_drive():
+    theta = 0.02
+    recs = _records(OTHER, theta, fc=(0.005, 0.01), tau_i=1.5e-3, seed=2)
+    fit = _fit(recs, OTHER)
+    assert fit.friction_ == "coulomb" and fit.tau_i_ > 0
+    assert fit.theta_ == pytest.approx(theta, rel=THETA_RTOL)
+    assert abs(fit.theta_ - theta) < OUTLIER_STDS * fit.std_
+
+
+def test_friction_and_loop_nearly_noise_free():
+    """Coulomb friction and a 1 ms loop together, speeds exact but for a 1e-4 rad/s
+    ripple (a noise level is needed): the loop is added after the search from several
+    starts (terms.TAU_START_SAMPLES), since from one (half a sample) the refit walks
+    the lag to its floor and theta ends 1.4 % off."""
+    recs = [bk.Record(r.t, r.torque, w_m, w_l) for r, (w_m, w_l) in zip(
+        _records(P_TRUE, THETA, fc=(0.01, 0.02), tau_i=1e-3, seed=5), _exact_speeds(),
+        strict=True)]
+    fit = _fit(recs, P_TRUE, interval=bk.FisherInterval())
+    assert fit.friction_ == "coulomb"
+    assert fit.tau_i_ == pytest.approx(1e-3, rel=1e-4)
+    assert fit.theta_ == pytest.approx(THETA, rel=1e-6)
+
+
+def _exact_speeds():
+    """The speeds of ``_records(..., fc=(0.01, 0.02), tau_i=1e-3)`` without noise, plus a
+    1e-4 rad/s ripple."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    t = bk.signals.time_grid(T_END, TS)
+    out = []
+    for a in (A1, A2):
+        ref = reference_simulate(drive, t, bk.signals.step_down(t, a, t_s=T_STEP),
+                                 actuator=bk.CurrentLoop(tau_i=1e-3),
+                                 initial_state=drive.steady_state(a))
+        out.append((ref.w_motor + 1e-4 * np.sin(977 * t), ref.w_load + 1e-4 * np.cos(911 * t)))
+    return out
+
+
+def test_ideal_records_keep_paper_a_model_unchanged():
+    """On an ideal drive ``auto`` keeps the viscous model without a loop, and the
+    estimate is that model's own fit."""
+    recs = _records(P_TRUE, THETA, seed=3)
+    auto = _fit(recs, P_TRUE)
+    plain = _fit(recs, P_TRUE, friction="viscous", actuator=None)
+    assert (auto.friction_, auto.tau_i_) == ("viscous", 0.0)
+    assert not any(c.kept for c in auto.choices_)
+    # the same model, refitted from the larger one's optimum: the same point to a
+    # small fraction of a standard error
+    assert abs(auto.theta_ - plain.theta_) < 0.05 * plain.std_
+    assert auto.estimated_ == plain.estimated_
+
+
+def test_known_current_loop_is_not_fitted():
+    recs = _records(P_TRUE, THETA, tau_i=1e-3, seed=4)
+    fit = _fit(recs, P_TRUE, friction="viscous", actuator=bk.CurrentLoop(tau_i=1e-3))
+    assert fit.tau_i_ == 1e-3 and "tau_i" not in fit.estimated_ and fit.choices_ == []
+    assert fit.theta_ == pytest.approx(THETA, rel=THETA_RTOL)
+
+
+@pytest.mark.parametrize(("kw", "match"), [
+    ({"friction": "dry"}, "friction must be one of 'auto', 'viscous', 'coulomb', got 'dry'"),
+    ({"actuator": "on"}, "actuator must be 'auto', None or a CurrentLoop, got 'on'"),
+    ({"actuator": 1e-3}, "actuator must be 'auto', None or a CurrentLoop, got float"),
+])
+def test_bad_terms_refused(coulomb, kw, match):
+    with pytest.raises(InputError, match=match):
+        _fit(coulomb, P_TRUE, **kw)
+
+
+def _files(recs, tmp_path):
+    """The records as CSV files and a prior TOML with only the linear parameters."""
+    paths = []
+    for k, rec in enumerate(recs):
+        paths.append(str(tmp_path / f"exp{k + 1}.csv"))
+        write_csv(paths[-1], {"t": rec.t, "torque": rec.torque, "w_motor": rec.w_motor,
+                              "w_load": rec.w_load})
+    prior = tmp_path / "prior.toml"
+    prior.write_text("[drive]\n" + "".join(f"{k} = {v!r}\n" for k, v in P_TRUE.items()))
+    return paths, str(prior)
+
+
+def test_cli_json_says_what_the_model_chose(coulomb, tmp_path, capsys):
+    """Issue 20's command: only the linear parameters in the prior, no other option."""
+    paths, prior = _files(coulomb, tmp_path)
+    assert cli_main(["identify", *paths, "--drive", prior, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["friction"] == "coulomb"
+    assert doc["theta"] == pytest.approx(THETA, rel=THETA_RTOL)
+    assert abs(doc["theta"] - THETA) < OUTLIER_STDS * doc["std"]
+    assert doc["fc_M_std"] > 0 and doc["fc_L_std"] > 0
+    assert doc["tau_i"] == 0.0 and doc["tau_i_std"] is None
+    assert len(doc["model_choices"]) == 2
+
+
+def test_cli_current_loop_flag_refuses_nonsense(coulomb, tmp_path, capsys):
+    (path,), prior = _files(coulomb[1:], tmp_path)
+    code = cli_main(["identify", path, "--drive", prior, "--current-loop", "fast"])
+    assert code != 0
+    assert "--current-loop must be auto, none or a time constant in s, got 'fast'" in \
+        capsys.readouterr().err
+
+
+def test_encoder_speeds_are_recognised_and_noted(coulomb):
+    """Speeds that are differenced encoder counts are named as such (issue 20's third
+    row: the model lacks their measurement, so the fit says so)."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from backlashkit.identify.noise import speed_quantum
+
+    enc = bk.Encoder(16384)
+    quantised = []
+    for rec in coulomb:
+        w_m, w_l = (enc.measure(rec.t, cumulative_trapezoid(w, rec.t, initial=0.0)).speed
+                    for w in (rec.w_motor, rec.w_load))
+        quantised.append(bk.Record(rec.t, rec.torque, w_m, w_l, name=rec.name))
+    q = enc.resolution / TS
+    assert speed_quantum(quantised[1].w_motor) == pytest.approx(q, rel=1e-9)
+    assert speed_quantum(coulomb[1].w_motor) == 0.0  # analogue noise: every value distinct
+    with pytest.warns(bk.errors.QuantisedSpeedsWarning,
+                      match=r"a=0.942: w_motor is quantised to steps of 0.383 rad/s \(an "
+                            r"encoder of about 16384 counts per revolution"):
+        _fit(quantised, P_TRUE)
