@@ -108,8 +108,8 @@ def test_friction_and_loop_together_on_another_drive():
 def test_friction_and_loop_nearly_noise_free():
     """Coulomb friction and a 1 ms loop together, speeds exact but for a 1e-4 rad/s
     ripple (a noise level is needed): the loop is added after the search from several
-    starts (terms.TAU_START_SAMPLES), since from one (half a sample) the refit walks
-    the lag to its floor and theta ends 1.4 % off."""
+    starts (terms.TAU_START_SAMPLES), since from one (half a sample) the refit can walk
+    the lag to its floor, a local minimum with theta well off."""
     recs = [bk.Record(r.t, r.torque, w_m, w_l) for r, (w_m, w_l) in zip(
         _records(P_TRUE, THETA, fc=(0.01, 0.02), tau_i=1e-3, seed=5), _exact_speeds(),
         strict=True)]

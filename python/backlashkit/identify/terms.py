@@ -18,10 +18,10 @@ linear parameters. Each is chosen by a :class:`Term` setting:
 of parameters. Friction is in the whole search and the model without it is refitted
 from the result (a viscous model fitted to a drive with Coulomb friction can wander
 far from the prior, so it cannot be the search's model). The current loop is tested
-the other way round: the model with ``tau_i`` is refitted from the search's result
-(its lag biases a search without it by about one percent of ``theta``, which a local
-refit removes, while fitting it through the search costs ten times more: its stiff
-mode slows every simulation).
+the other way round: the model with ``tau_i`` is refitted from the search's result,
+from several starts (fitting it through the search costs many times more: its stiff
+mode slows every simulation). Without friction this finds the loop and removes its
+bias; with friction as well it often does not (``docs/validation/real-drives.md``).
 The breakaway torque is tied to the Coulomb torque (``fs = fc``): step-down records
 hold no information on it, since the motor torque jumps far beyond any breakaway
 torque and a load stuck at the end of a decay is never pushed again.
@@ -53,24 +53,23 @@ KEEP_LEVEL = 0.99
 #: Values of ``friction``.
 FRICTION_CHOICES = ("auto", "viscous", "coulomb")
 #: Start of each fitted Coulomb torque when the held levels show none, as a fraction
-#: of the largest held torque: small enough to be a negligible model change, large
-#: enough for the log-parameter to move to a real value in a few steps.
+#: of the largest held torque: a negligible model change, which the fit (in natural
+#: units, ``Problem.scales``) moves to 0 within a step where the data show no friction.
 FC_START_FLOOR = 1e-3
 #: Starts of a fitted current-loop time constant, in sample times. The loop is added to
 #: the model after the search, from its result: where the drive also has Coulomb
 #: friction, that result has traded the loop's lag for friction and backlash, and a
-#: refit from one start can walk the lag down to the floor, a local minimum (on
-#: near noise-free records with a 1 ms loop: theta 1.4 % off). The refit therefore
+#: refit from one start can walk the lag down to the floor, a local minimum with
+#: theta well off the truth even on near noise-free records. The refit therefore
 #: starts from each of these, and the lowest goes on.
 TAU_START_SAMPLES = (0.5, 1.0, 2.0, 4.0)
 #: Smallest current-loop time constant simulated, in sample times. A loop's lag
 #: withholds about ``T tau_i`` of impulse at each torque jump, so its effect on the
 #: likelihood grows as ``tau_i^2``: on 8 s records of paper A's drive at 40 dB a
-#: one-sample loop lowers ``-2 log L`` by about 20 to 50 (``benchmarks/real_drive.py``
-#: prints the tests' rises), so one of a quarter sample by about 1 to 3, below the
-#: test's threshold. Faster loops are stiff modes that make
-#: every simulation several times slower; the fit sees a
-#: flat cost below this floor, and the likelihood-ratio test then drops the loop.
+#: one-sample loop lowers ``-2 log L`` by a median of 29.5 (``benchmarks/real_drive.py``,
+#: the 1 ms loop), so one of a quarter sample by about 2, below the test's threshold.
+#: Faster loops are stiff modes that make every simulation several times slower; the
+#: fit sees a flat cost below this floor, and the likelihood-ratio test then drops it.
 TAU_FLOOR_SAMPLES = 0.25
 #: Smallest Coulomb torque simulated, relative to the largest torque: the fit moves a
 #: Coulomb torque in natural units down to 0, yet the kernel needs every simulated row
