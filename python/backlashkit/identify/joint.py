@@ -383,7 +383,7 @@ class JointIdentifier:
         pb, sigma = build_problem(prior, recs, rel, self.noise, search, self.law,
                                   self.workers, terms)
         start = prior if anchor is None else anchor
-        extra = {n: x for term in terms if term.mode in ("fit", "auto")
+        extra = {n: x for term in terms if term.fitted
                  for n, x in term.starts(recs, prior).items()}
         if anchor_extra:
             extra.update({n: x for n, x in anchor_extra.items() if n in extra and x > 0})

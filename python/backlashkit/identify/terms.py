@@ -119,7 +119,8 @@ class Term:
         return float(chi2.ppf(KEEP_LEVEL, len(self.params)))
 
     def starts(self, recs: Sequence[Record], prior: TwoMassDrive) -> dict[str, float]:
-        """Starting values of the fitted parameters.
+        """Starting values of the parameters of a term in the whole search (friction;
+        the current loop starts from :meth:`start_grid` after the search).
 
         Parameters
         ----------
@@ -131,14 +132,12 @@ class Term:
         Returns
         -------
         dict
-            Parameter name -> starting value (N m or s).
+            Parameter name -> starting value in N m.
         """
-        if self.name == "friction":
-            given = (prior.fc_M, prior.fc_L)
-            if any(given):
-                return dict(zip(self.params, given, strict=True))
-            return dict.fromkeys(self.params, coulomb_start(recs, prior))
-        return dict.fromkeys(self.params, TAU_START_SAMPLES[0] * min(r.ts for r in recs))
+        given = (prior.fc_M, prior.fc_L)
+        if any(given):
+            return dict(zip(self.params, given, strict=True))
+        return dict.fromkeys(self.params, coulomb_start(recs, prior))
 
     def start_grid(self, recs: Sequence[Record]) -> list[dict[str, float]]:
         """Starting values of a term added after the search, one dict per start.
