@@ -2,21 +2,26 @@
 
 1. Coverage study (default): records made by the independent scipy reference
    (:func:`backlashkit.verify.reference_simulate`), 8 s at 1 ms, paper A's two torque
-   levels held from the steady state and stepped down to 0 at 2 s, 40 dB white noise
-   on both speeds, the true linear parameters as prior. Per scenario (drive x what it
-   has: nothing, Coulomb friction, a current loop, both) the noise-free reference is
-   simulated once and every trial adds its own noise (a ``SeedSequence`` child per
-   trial, so results do not depend on ``--jobs``). Printed per scenario: fits answered,
-   median and largest |theta error| in %, how often the 95 % interval covers the truth
-   with its 2-binomial-standard-deviation band, how often ``friction="auto"`` and
-   ``actuator="auto"`` kept each term, and the median rise of ``-2 log L`` without the
-   current loop (its likelihood-ratio statistic).
+   levels held from the steady state and stepped down to 0 at 2 s, the true linear
+   parameters as prior. The speeds get 40 dB of white noise, or, in the encoder
+   scenarios, are the differenced counts of 16 384-count encoders reading the
+   reference's exact angles (:func:`backlashkit.verify.reference_angles`) from a
+   random start within a count. Per scenario (drive x what it has: nothing, Coulomb
+   friction, a current loop, both, encoders, all three) the clean reference is
+   simulated once and every trial adds its own noise or encoder offsets (a
+   ``SeedSequence`` child per trial, so results do not depend on ``--jobs``). Printed
+   per scenario: fits answered, median and largest |theta error| in %, how often the
+   95 % interval covers the truth with its 2-binomial-standard-deviation band, how
+   often ``friction="auto"`` and ``actuator="auto"`` kept each term, and the median
+   rise of ``-2 log L`` and shift of ``theta`` (in its standard errors) without the
+   current loop (``TermChoice``).
 2. ``--speed``: paper A's two 80 s records (its protocol at Err_p 0.3, one seed) fitted
    with ``friction="viscous"``, ``"coulomb"`` and the default ``"auto"`` (the last two
    against the first, as ratios of medians), one worker thread, in one process.
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
-[--effects "ideal,coulomb,loop 1 ms,coulomb + loop"] [--speed --repeats 3]``.
+[--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three"]
+[--speed --repeats 3]``.
 """
 
 from __future__ import annotations
@@ -33,40 +38,52 @@ import numpy as np
 import backlashkit as bk
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA, protocol_records
 from backlashkit.parallel import ProgressBar, map_tasks
-from backlashkit.verify import reference_simulate
+from backlashkit.verify import reference_angles, reference_simulate
 
 T_END, T_STEP, TS, SNR = 8.0, 2.0, 1e-3, 40.0
 #: A second drive: stiffer, a lighter load, a smaller backlash.
 OTHER = ({"J_M": 2.0e-3, "J_L": 2.5e-2, "k_sh": 150.0, "f_M": 3e-3, "f_L": 4e-3,
           "f_sh": 1.0e-2}, 0.02)
-#: What the drives have: Coulomb torques (N m, about 1 and 2 % of the larger torque)
-#: and the current loop's time constant (s).
-EFFECTS = {"ideal": ((0.0, 0.0), 0.0), "coulomb": ((0.01, 0.02), 0.0),
-           "loop 1 ms": ((0.0, 0.0), 1e-3), "coulomb + loop": ((0.01, 0.02), 1e-3)}
-
-
-def clean_records(linear, theta, fc, tau_i):
-    """The noise-free reference records of one scenario."""
+#: What the drives have: Coulomb torques (N m, about 1 and 2 % of the larger torque),
+#: the current loop's time constant (s), and the encoders' counts per revolution
+#: (0: analogue speeds with 40 dB of white noise).
+EFFECTS = {"ideal": ((0.0, 0.0), 0.0, 0), "coulomb": ((0.01, 0.02), 0.0, 0),
+           "loop 1 ms": ((0.0, 0.0), 1e-3, 0), "coulomb + loop": ((0.01, 0.02), 1e-3, 0),
+           "encoder": ((0.0, 0.0), 0.0, 16384),
+           "all three": ((0.01, 0.02), 1e-3, 16384)}
+def clean_records(linear, theta, fc, tau_i, counts=0):
+    """The noise-free reference records of one scenario: ``(t, u, w_M, w_L)``, or with
+    encoders ``(t, u, phi_M, phi_L)``, the exact angles."""
     drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
     loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
     t = bk.signals.time_grid(T_END, TS)
     out = []
     for a in (A1, A2):
         u = bk.signals.step_down(t, a, t_s=T_STEP)
-        ref = reference_simulate(drive, t, u, actuator=loop,
-                                 initial_state=drive.steady_state(a))
-        out.append((t, u, ref.w_motor, ref.w_load))
+        kw = {"actuator": loop, "initial_state": drive.steady_state(a)}
+        if counts:
+            out.append((t, u, *reference_angles(drive, t, u, **kw)))
+        else:
+            ref = reference_simulate(drive, t, u, **kw)
+            out.append((t, u, ref.w_motor, ref.w_load))
     return out
 
 
 def one_trial(task, seed):
-    """One noisy trial of a scenario: the fit's theta, interval and choices."""
-    linear, theta, clean = task
+    """One trial of a scenario: the fit's theta, interval and choices. Analogue speeds
+    get their noise; encoders start at a uniformly random angle within a count."""
+    linear, theta, clean, counts = task
     recs = []
-    for (t, u, w_m, w_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
+    for (t, u, y_m, y_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
         s_m, s_l = ss.spawn(2)
-        recs.append(bk.Record(t, u, bk.signals.add_noise(w_m, SNR, rng=s_m),
-                              bk.signals.add_noise(w_l, SNR, rng=s_l)))
+        if counts:  # the drives log differenced counts as speeds, as issue 20's did
+            enc = bk.Encoder(counts)
+            w_m, w_l = (enc.measure(t, y + enc.resolution * np.random.default_rng(s_).uniform())
+                        .speed for y, s_ in ((y_m, s_m), (y_l, s_l)))
+        else:
+            w_m, w_l = (bk.signals.add_noise(y_m, SNR, rng=s_m),
+                        bk.signals.add_noise(y_l, SNR, rng=s_l))
+        recs.append(bk.Record(t, u, w_m, w_l))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
@@ -75,26 +92,27 @@ def one_trial(task, seed):
             return {"error": str(exc)}
     return {"theta": fit.theta_, "ci95": fit.ci95_,
             "kept": {c.term: c.kept for c in fit.choices_},
-            "rise": {c.term: c.rise for c in fit.choices_}}
+            "rise": {c.term: c.rise for c in fit.choices_},
+            "shift": {c.term: c.shift for c in fit.choices_}}
 
 
 def coverage(args) -> None:
     print(f"{'drive':<7} {'has':<15} {'answered':>8} {'|err| med %':>11} {'max %':>7} "
           f"{'cover':>6} {'2-sigma band':>14} {'fc kept':>8} {'loop kept':>9} "
-          f"{'loop rise':>9} {'s':>6}")
+          f"{'loop rise':>9} {'shift':>6} {'s':>6}")
     root = np.random.SeedSequence(args.seed)
     drives = {"paper": (P_TRUE, THETA), "other": OTHER}
     for (dname, (linear, theta)), ss in zip(drives.items(), root.spawn(2), strict=True):
         if dname not in args.drives:
             continue
-        for (ename, (fc, tau)), ss2 in zip(EFFECTS.items(), ss.spawn(len(EFFECTS)),
-                                           strict=True):
+        for (ename, (fc, tau, counts)), ss2 in zip(EFFECTS.items(), ss.spawn(len(EFFECTS)),
+                                                   strict=True):
             if ename not in args.effects:
                 continue
             t0 = time.perf_counter()
-            clean = clean_records(linear, theta, fc, tau)
+            clean = clean_records(linear, theta, fc, tau, counts)
             bar = ProgressBar(f"{dname}, {ename}", quiet=False)
-            res = map_tasks(one_trial, [(linear, theta, clean)] * args.trials,
+            res = map_tasks(one_trial, [(linear, theta, clean, counts)] * args.trials,
                             jobs=args.jobs, seed=ss2, progress=bar)
             bar.close()
             _print_row(dname, ename, theta, res, time.perf_counter() - t0)
@@ -110,11 +128,13 @@ def _print_row(dname, ename, theta, res, seconds) -> None:
             for term in ("friction", "actuator")}
     rises = [r["rise"]["actuator"] for r in ok if "actuator" in r["rise"]]
     rise = statistics.median(rises) if rises else math.nan
+    shifts = [r["shift"]["actuator"] for r in ok if "actuator" in r["shift"]]
+    shift = statistics.median(shifts) if shifts else math.nan
     print(f"{dname:<7} {ename:<15} {n:>4}/{len(res):<3} "
           f"{statistics.median(err) if err else math.nan:>11.2f} "
           f"{max(err) if err else math.nan:>7.2f} {cover:>6.1%} "
           f"{f'{0.95 - band:.1%}-{0.95 + band:.1%}':>14} {kept['friction']:>8.1%} "
-          f"{kept['actuator']:>9.1%} {rise:>9.3g} {seconds:>6.0f}", flush=True)
+          f"{kept['actuator']:>9.1%} {rise:>9.3g} {shift:>6.2f} {seconds:>6.0f}", flush=True)
     for r in res:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)

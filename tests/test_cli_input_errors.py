@@ -330,6 +330,24 @@ def test_two_step_at_the_edge_of_its_search_is_noted(exp_csv, capsys):
                      r"cost's minimum may lie beyond it \(widen --n-theta\)", out), out
 
 
+def test_a_regression_at_zero_says_so(exp, exp_csv, capsys):
+    """On the same record the regression's criterion is smallest at theta = 0: the
+    library says so (not that a minimum may lie below 0), and the command line prints
+    the library's words as its note."""
+    from backlashkit.errors import SearchEdgeWarning
+    from backlashkit.identify.two_step import RegressionIdentifier
+
+    said = ("theta is 0, the lower end of the search interval: the criterion is smallest "
+            "without backlash on these records")
+    with pytest.warns(SearchEdgeWarning, match=said):
+        fit = RegressionIdentifier(read_drive_toml(DRIVE_TOML, require_theta=False)).fit(exp)
+    assert fit.theta_ == 0.0 and fit.search_edges_ == ["lower"]
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method",
+                 "regression"]) == 0
+    out, _ = capsys.readouterr()
+    assert f"note: {said}" in out and "beyond it" not in out, out
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
@@ -679,3 +697,57 @@ def test_the_library_holds_the_contract(exp):
     error = InputError("final_horizon must be > 0, got -1")  # a validation message
     assert word(error, {"final_horizon": "--final-horizon"}).startswith("--final-horizon must")
     assert str(InputError("a ", Option("resample", "linear"))) == "a resample='linear'"
+
+
+# --- messages in the user's words (issue 21) --------------------------------------------
+
+#: Paper notation that no message or help text may show (equation numbers, the
+#: criterion's and the windows' symbols, the torque's formula).
+PAPER_NOTATION = re.compile(r"\beq\. ?\d|W_1|\bdt4\b|\bdt_4\b|C_M = a 1\(t\)|\ba_[12]\b|"
+                            r"paper A's experiment")
+
+
+def test_the_two_step_methods_refusals_name_the_quantity(exp, exp_csv, tmp_path, capsys):
+    """Each refusal of the two-step method's windows says what was expected in words,
+    not with the paper's equation numbers or symbols, and what to do."""
+    from backlashkit.identify.commutation import commutation_instants
+
+    alpha = 0.5e-2 / 6.8e-2  # the prior's f_L / J_L
+    cases = [
+        ({"dt1": 0.001, "dt2": 0.01, "dt3": 0.05},
+         "the windows searched for the contact loss and the impact after the step-down "
+         "must each span at least 2 samples, got 0.001 s and 0.04 s at a sample time of "
+         "0.001 s (lengthen dt1 and the span from dt2 to dt3, or record at a higher "
+         "sample rate)"),
+        ({"dt1": 0.05, "dt2": 0.01, "dt3": 2.5},
+         "the record ends at t = 4 s, before the end of the window searched for the "
+         "impact, t = 4.5 s (2.5 s after the step-down at t = 2 s): record longer after "
+         "the step-down"),
+        ({"dt1": 0.1, "dt2": 0.001, "dt3": 0.005},
+         "comes before the contact loss, located at t = "),
+    ]
+    for windows, message in cases:
+        with pytest.raises(InputError) as info:
+            commutation_instants(exp, alpha, **windows)
+        assert message in str(info.value) and not PAPER_NOTATION.search(str(info.value))
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    keep = t <= 2.5  # the step-down is at 2 s
+    path = tmp_path / "half.csv"
+    write_csv(path, {"t": t[keep], "torque": u[keep], "w_motor": w_m[keep],
+                     "w_load": w_l[keep]})
+    err = _one_line_error(capsys, ["identify", str(path), "--drive", DRIVE_TOML,
+                                   "--method", "two-step"])
+    assert ("half.csv: the final least squares fits the motor speed over the 1 s after the "
+            "step-down at t = 2 s, but the record ends at t = 2.5 s (record at least 1 s "
+            "after the step-down") in err
+
+
+@pytest.mark.parametrize("command", [["identify"], ["simulate"], ["control"],
+                                     ["reproduce", "ravanbod2002"], ["fleet"]])
+def test_help_has_no_paper_notation(command, capsys):
+    """--help names quantities, not the paper's equation numbers or symbols; the
+    separators are listed readably (not as ``{,,;,tab}``)."""
+    assert main([*command, "--help"]) == 0
+    out = capsys.readouterr().out
+    assert not PAPER_NOTATION.search(out), PAPER_NOTATION.search(out)
+    assert "{,,;,tab}" not in out and "{.,,}" not in out

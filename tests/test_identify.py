@@ -355,6 +355,17 @@ def test_cli_regression_and_table(experiment_csv, capsys):
     code, out, err = cli(["identify", str(experiment_csv), "--drive", DRIVE_TOML], capsys)
     assert code == 0
     assert "theta_ini" in out and "theta     =" in out and "exp.csv" in out
+    # the per-file table holds the columns with a value: the joint method's one
+    # pre-estimate for all files is the line under it, not a "-" in every row
+    header, row = out.splitlines()[1:3]
+    assert header.split() == ["file", "t_s", "(s)", "t_c", "(s)", "t_b", "(s)"], out
+    assert len(row.split()) == 4 and "-" not in row.split()[1:], out
+    assert out.splitlines()[3].startswith("theta_ini = "), out
+    code, out, err = cli(["identify", str(experiment_csv), "--drive", DRIVE_TOML,
+                          "--method", "regression"], capsys)
+    assert code == 0
+    header, row = out.splitlines()[1:3]  # no contact instants, no pre-estimate
+    assert header.split() == ["file", "t_s", "(s)"] and len(row.split()) == 2, out
 
 
 def _write(path, text):

@@ -20,7 +20,7 @@ from backlashkit.cli.main import main as cli_main
 from backlashkit.errors import InputError, PriorMismatchWarning
 from backlashkit.io import write_csv
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA
-from backlashkit.verify import reference_simulate
+from backlashkit.verify import reference_angles, reference_simulate
 
 #: Issue 20's bar on theta for friction and current loop (not quantised).
 THETA_RTOL = 0.03
@@ -197,23 +197,160 @@ def test_cli_current_loop_flag_refuses_nonsense(coulomb, tmp_path, capsys):
         capsys.readouterr().err
 
 
-def test_encoder_speeds_are_recognised_and_noted(coulomb):
-    """Speeds that are differenced encoder counts are named as such (issue 20's third
-    row: the model lacks their measurement, so the fit says so)."""
-    from scipy.integrate import cumulative_trapezoid
+#: Issue 20's bar on theta where quantisation and friction come together.
+THETA_RTOL_ENCODER = 0.05
+#: Counts per revolution of the encoders of issue 20's records.
+COUNTS = 16384
 
+
+def _encoder_records(linear, theta, *, fc=(0.0, 0.0), tau_i=0.0, seed=0):
+    """Two step-down records as a drive logs them from 16 384-count encoders: the
+    differenced counts of the reference's exact angles, each encoder starting at a
+    random angle within a count."""
+    drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
+    loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
+    t = bk.signals.time_grid(T_END, TS)
+    enc = bk.Encoder(COUNTS)
+    out = []
+    for a, ss in zip((A1, A2), np.random.SeedSequence(seed).spawn(2), strict=True):
+        u = bk.signals.step_down(t, a, t_s=T_STEP)
+        phi = reference_angles(drive, t, u, actuator=loop, initial_state=drive.steady_state(a))
+        offsets = np.random.default_rng(ss).uniform(size=2) * enc.resolution
+        w_m, w_l = (enc.measure(t, p + o).speed for p, o in zip(phi, offsets, strict=True))
+        out.append(bk.Record(t, u, w_m, w_l, name=f"a={a:.3g}"))
+    return out
+
+
+def test_reference_angles():
+    """The reference's angles (its speed integrated on a finer grid) agree with the
+    compiled kernel's exact angle state, and hardly move from 16 to 32 substeps."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    loop = bk.CurrentLoop(tau_i=1e-3)
+    t = bk.signals.time_grid(T_END, TS)
+    u = bk.signals.step_down(t, A2, t_s=T_STEP)
+    kw = {"actuator": loop, "initial_state": drive.steady_state(A2)}
+    fine = reference_angles(drive, t, u, **kw)
+    coarse = reference_angles(drive, t, u, substeps=16, **kw)
+    q = bk.Encoder(COUNTS).resolution
+    assert max(np.max(np.abs(f - c)) for f, c in zip(fine, coarse, strict=True)) < 3e-4 * q
+    kernel = drive.simulate(t, u, actuator=loop, positions=True,
+                            initial_state=drive.steady_state(A2))
+    for ref, ker in zip(fine, (kernel.phi_motor, kernel.phi_load), strict=True):
+        assert np.max(np.abs(ref - (ker - ker[0]))) < 1e-3 * q
+
+
+def test_record_from_positions_and_back():
+    """Counts become angles in rad; the speeds are their differences per sample; the
+    running sum of differenced counts gives the angles back exactly."""
+    t = np.arange(6) * 1e-3
+    counts = np.array([0, 3, 7, 7, 6, 10])
+    rec = bk.Record.from_positions(t, np.ones(6), counts, 2 * counts, counts_per_rev=4096)
+    q = 2 * np.pi / 4096
+    assert rec.quantum == pytest.approx(q) and rec.has_positions
+    np.testing.assert_allclose(rec.phi_motor, counts * q)
+    np.testing.assert_allclose(rec.w_motor[1:], np.diff(counts) * q / 1e-3)
+    assert rec.w_motor[0] == rec.w_motor[1]
+    back = bk.Record(t, np.ones(6), rec.w_motor, rec.w_load).with_positions(q)
+    np.testing.assert_allclose(back.phi_load, 2 * counts * q, rtol=1e-12, atol=1e-15)
+    with pytest.raises(InputError, match="give both phi_motor and phi_load"):
+        bk.Record(t, np.ones(6), rec.w_motor, rec.w_load, "r", rec.phi_motor)
+    with pytest.raises(InputError, match="counts_per_rev must be"):
+        bk.Record.from_positions(t, np.ones(6), counts, counts, counts_per_rev=0)
+
+
+@pytest.fixture(scope="module")
+def encoder():
+    return _encoder_records(P_TRUE, THETA)
+
+
+def test_encoder_speeds_are_fitted_as_angles(encoder):
+    """Speeds that are differenced encoder counts (issue 20's third row: +0.7 %, the
+    truth 6 std outside the interval) are fitted as the encoders' angles: theta within
+    3 %, and the interval no narrower than its error calls for."""
     from backlashkit.identify.noise import speed_quantum
 
-    enc = bk.Encoder(16384)
-    quantised = []
-    for rec in coulomb:
-        w_m, w_l = (enc.measure(rec.t, cumulative_trapezoid(w, rec.t, initial=0.0)).speed
-                    for w in (rec.w_motor, rec.w_load))
-        quantised.append(bk.Record(rec.t, rec.torque, w_m, w_l, name=rec.name))
-    q = enc.resolution / TS
-    assert speed_quantum(quantised[1].w_motor) == pytest.approx(q, rel=1e-9)
-    assert speed_quantum(coulomb[1].w_motor) == 0.0  # analogue noise: every value distinct
+    q = bk.Encoder(COUNTS).resolution / TS
+    assert speed_quantum(encoder[1].w_motor) == pytest.approx(q, rel=1e-9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", bk.errors.QuantisedSpeedsWarning)
+        fit = _fit(encoder, P_TRUE)
+    assert fit.measured_ == ["angles", "angles"]
+    assert abs(fit.theta_ / THETA - 1) < THETA_RTOL
+    assert abs(fit.theta_ - THETA) < OUTLIER_STDS * fit.std_
+    # the angles' noise is the quantisation's, q / sqrt(12)
+    np.testing.assert_allclose(fit.noise_std_, bk.Encoder(COUNTS).resolution / np.sqrt(12),
+                               rtol=0.05)
+
+
+def test_encoder_with_friction_and_loop_within_5_percent():
+    """Issue 20's fourth row (all three: -99 % by the two-step method, refused by the
+    joint one): theta within 5 % and no refusal."""
+    recs = _encoder_records(P_TRUE, THETA, fc=(0.01, 0.02), tau_i=1e-3, seed=3)
+    fit = _fit(recs, P_TRUE)
+    assert fit.measured_ == ["angles", "angles"]
+    assert fit.friction_ == "coulomb"
+    assert abs(fit.theta_ / THETA - 1) < THETA_RTOL_ENCODER
+    assert abs(fit.theta_ - THETA) < OUTLIER_STDS * fit.std_
+
+
+def test_one_quantised_speed_is_noted(encoder, coulomb):
+    """A record with one encoder speed and one analogue speed is not fitted as
+    angles; the warning says so and what to give instead."""
+    mixed = [bk.Record(e.t, e.torque, e.w_motor, c.w_load, name=e.name)
+             for e, c in zip(encoder, coulomb, strict=True)]
     with pytest.warns(bk.errors.QuantisedSpeedsWarning,
                       match=r"a=0.942: w_motor is quantised to steps of 0.383 rad/s \(an "
-                            r"encoder of about 16384 counts per revolution"):
-        _fit(quantised, P_TRUE)
+                            r"encoder of about 16384 counts per revolution.*but the other "
+                            r"speed is not.*Record.from_positions"):
+        fit = _fit(mixed, P_TRUE)
+    assert fit.measured_ == ["speeds", "speeds"]
+
+
+def test_cli_reads_encoder_counts(tmp_path, capsys):
+    """``identify --counts-per-rev N`` reads the angles phi_motor, phi_load as counts
+    and fits them."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+    t = bk.signals.time_grid(T_END, TS)
+    enc = bk.Encoder(COUNTS)
+    paths = []
+    for a in (A1, A2):
+        u = bk.signals.step_down(t, a, t_s=T_STEP)
+        phi = reference_angles(drive, t, u, initial_state=drive.steady_state(a))
+        path = tmp_path / f"enc_{a:.3g}.csv"
+        counts = [enc.counts(p + off * enc.resolution) for p, off in zip(phi, (0.3, 0.7),
+                                                                          strict=True)]
+        write_csv(path, {"t": t, "torque": u, "phi_motor": counts[0], "phi_load": counts[1]})
+        paths.append(str(path))
+    prior = tmp_path / "prior.toml"
+    prior.write_text("[drive]\n" + "".join(f"{k} = {x!r}\n" for k, x in P_TRUE.items()))
+    assert cli_main(["identify", *paths, "--drive", str(prior), "--counts-per-rev",
+                     str(COUNTS), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert abs(out["theta"] / THETA - 1) < THETA_RTOL
+    assert cli_main(["identify", *paths, "--drive", str(prior), "--json"]) == 2
+    assert "no column 'w_motor'" in capsys.readouterr().err
+
+
+def test_term_kept_by_the_test_or_by_the_shift_of_theta():
+    """A term is kept where the likelihood-ratio test calls for it, or where it lowers
+    -2 log L at all and dropping it moves theta by more than KEEP_SHIFT standard
+    errors; the reason says which."""
+    from backlashkit.identify.terms import KEEP_SHIFT, TermChoice
+
+    by_test = TermChoice.decide("actuator", 29.5, 6.63, 0.1)
+    by_shift = TermChoice.decide("actuator", 5.0, 6.63, KEEP_SHIFT + 2)
+    no_gain = TermChoice.decide("actuator", -0.5, 6.63, KEEP_SHIFT + 2)
+    small = TermChoice.decide("actuator", 5.0, 6.63, KEEP_SHIFT / 2)
+    assert [c.kept for c in (by_test, by_shift, no_gain, small)] == [True, True, False, False]
+    assert "rises by 29.5 > 6.63" in by_test.reason()
+    assert "theta moves by 3 of its standard errors (> 1.0), although" in by_shift.reason()
+    assert "dropped" in small.reason() and "theta moves by 0.5" in small.reason()
+    # estimated but not called for: the interval spans the model not chosen too
+    cis = ((0.034, 0.036), (0.035, 0.037))
+    assert TermChoice.decide("actuator", 5.0, 6.63, 3.0, True, cis).other_ci95 == cis[1]
+    assert TermChoice.decide("actuator", 5.0, 6.63, 0.5, True, cis).other_ci95 == cis[0]
+    assert TermChoice.decide("actuator", 9.0, 6.63, 3.0, True, cis).other_ci95 is None
+    floor = TermChoice.decide("actuator", 5.0, 6.63, 3.0, False, cis)
+    assert not floor.kept and floor.other_ci95 is None
+    assert "spans the other model's too" in TermChoice.decide(
+        "actuator", 5.0, 6.63, 3.0, True, cis).reason()

@@ -60,3 +60,57 @@ def test_reproduce_json_is_stdout_and_json_out_a_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"--json-out {target} already exists; pass --force" in err
     assert main(["reproduce", "tao1995", "--json-out", "/dev/null"]) == 0  # no user's file
+
+
+def _interval_inputs():
+    """What a fit hands its interval object, with refits that return 0.9, 1.1, 1.0."""
+    import numpy as np
+
+    from backlashkit.identify.intervals import IntervalInputs
+
+    draws = iter([0.9, 1.1, 1.0])
+    return IntervalInputs(theta=1.0, std=0.6, z=np.zeros(1), cov_z=np.eye(1), cost=0.0,
+                          residual=None, fd_step=1e-6, refit=lambda rng: next(draws))
+
+
+def test_bootstrap_refits_report_their_progress(monkeypatch):
+    """``ParametricBootstrap(progress=...)``: a callable hears every refit; True draws a
+    bar on a terminal stderr and nothing elsewhere; the option is no part of the
+    configuration's equality and is checked."""
+    import backlashkit as bk
+    from backlashkit.errors import InputError
+
+    heard = []
+    bk.ParametricBootstrap(3, progress=lambda done, total: heard.append((done, total))
+                           )._interval(_interval_inputs())
+    assert heard == [(0, 3), (1, 3), (2, 3), (3, 3)]
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    boot = bk.ParametricBootstrap(3, progress=True)._interval(_interval_inputs())
+    assert boot.bootstrap_thetas.tolist() == [0.9, 1.1, 1.0]
+    assert "bootstrap" in term.getvalue() and "3/3" in term.getvalue()
+    assert "refit" in term.getvalue()
+    pipe = io.StringIO()
+    monkeypatch.setattr("sys.stderr", pipe)
+    bk.ParametricBootstrap(3, progress=True)._interval(_interval_inputs())
+    assert pipe.getvalue() == ""
+    assert bk.ParametricBootstrap(3, progress=True) == bk.ParametricBootstrap(3)
+    with pytest.raises(InputError, match="progress must be True, False or a callable"):
+        bk.ParametricBootstrap(3, progress="yes")
+
+
+@pytest.mark.parametrize("quiet", [False, True], ids=["terminal", "quiet"])
+def test_identify_bootstrap_draws_its_bar_on_stderr(short_csv, monkeypatch, capsys, quiet):
+    """``identify --bootstrap N`` on a terminal stderr: the refits' bar there, unless
+    ``--quiet``; stdout holds the JSON document alone either way."""
+    from pathlib import Path
+
+    drive = str(Path(__file__).resolve().parents[1] / "examples" / "paper_drive.toml")
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    argv = ["identify", str(short_csv), "--drive", drive, "--bootstrap", "2", "--json"]
+    assert main(argv + (["--quiet"] if quiet else [])) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["interval"] == "bootstrap"
+    drawn = term.getvalue()
+    assert ("bootstrap" in drawn and "2/2" in drawn) is not quiet, drawn

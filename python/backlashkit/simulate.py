@@ -320,8 +320,9 @@ def simulate_packed(
     *,
     law: ShaftLaw | str,
     workers: int | None,
+    track_angle: bool = False,
 ) -> np.ndarray:
-    """States of a batch, shape ``(len(params), n, 2N - 1)``: the kernel without wrappers.
+    """States of a batch, shape ``(len(params), n, S)``: the kernel without wrappers.
 
     For the estimators' inner loops, which simulate thousands of parameter vectors.
     Nothing is validated here but by the kernel (``ValueError``).
@@ -340,23 +341,27 @@ def simulate_packed(
     torque : numpy.ndarray
         Motor torque in N m, shape ``(1, n)`` (shared) or ``(b, n)``.
     x0 : numpy.ndarray
-        Initial states, shape ``(b, 2N - 1)``.
+        Initial states, shape ``(b, S)``.
     law : ShaftLaw or str
         Contact law.
     workers : int or None
         Number of threads; None uses all cores.
+    track_angle : bool, optional
+        Whether the state ends with the motor's angle in rad, integrated exactly (its
+        initial value is the last column of ``x0``).
 
     Returns
     -------
     numpy.ndarray
-        States of every run, shape ``(b, n, 2N - 1)``.
+        States of every run, shape ``(b, n, S)``: ``S = 2N - 1``, one more with a
+        current loop (the motor torque), one more with ``track_angle``.
     """
     from . import _core
 
     states, _, _ = _core.simulate_chain_batch(
         n_inertias, np.ascontiguousarray(params, float), ShaftLaw.parse(law).code,
         float(t0), float(ts), np.ascontiguousarray(torque, float),
-        np.ascontiguousarray(x0, float), workers or 0,
+        np.ascontiguousarray(x0, float), workers or 0, track_angle,
     )
     return states
 

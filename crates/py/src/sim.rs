@@ -129,9 +129,11 @@ type BatchOutput<'py> = (
 /// `(B, n, S)` and one modes array `(B, n, M)` (as for `simulate_chain`). `params` has
 /// one packed row `[J.., f.., k.., d.., theta..]` per chain, optionally followed by
 /// `[fc.., fs.., tau_i]`; `u` one row shared by all chains or one
-/// row per chain; `x0` one row per chain. Returns the two arrays and, per chain, its
-/// events `(E, 4)` and grazes `(G, 3)`.
+/// row per chain; `x0` one row per chain (ending with the motor angle with
+/// `track_angle`). Returns the two arrays and, per chain, its events `(E, 4)` and
+/// grazes `(G, 3)`.
 #[pyfunction]
+#[pyo3(signature = (n_inertias, params, law, t0, ts, u, x0, workers, track_angle=false))]
 #[allow(clippy::too_many_arguments)]
 fn simulate_chain_batch<'py>(
     py: Python<'py>,
@@ -143,21 +145,26 @@ fn simulate_chain_batch<'py>(
     u: PyReadonlyArray2<'py, f64>,
     x0: PyReadonlyArray2<'py, f64>,
     workers: usize,
+    track_angle: bool,
 ) -> PyResult<BatchOutput<'py>> {
     let law = Law::from_code(law).map_err(value_error)?;
     let rows: Vec<ChainParams> = params
         .as_array()
         .rows()
         .into_iter()
-        .map(|r| ChainParams::from_packed(n_inertias, &r.to_vec()))
+        .map(|r| {
+            ChainParams::from_packed(n_inertias, &r.to_vec()).map(|mut p| {
+                p.track_angle = track_angle;
+                p
+            })
+        })
         .collect::<Result<_, _>>()
         .map_err(value_error)?;
     let (b, n) = (rows.len(), u.as_array().ncols());
-    let (s, m) = rows
-        .first()
-        .map_or((2 * n_inertias - 1, n_inertias - 1), |p| {
-            (p.n_states(), p.n_switches())
-        });
+    let (s, m) = rows.first().map_or(
+        (2 * n_inertias - 1 + track_angle as usize, n_inertias - 1),
+        |p| (p.n_states(), p.n_switches()),
+    );
     let states = PyArray3::<f64>::zeros(py, [b, n, s], false);
     let modes = PyArray3::<i8>::zeros(py, [b, n, m], false);
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);

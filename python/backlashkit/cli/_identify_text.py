@@ -24,6 +24,25 @@ def _to_prior(est: Any, name: str) -> str:
     return f"x{est.params_[name] / prior:.3g} the prior"
 
 
+#: Columns of the per-file table: key, heading, width, format.
+COLUMNS = (("t_s", "t_s (s)", 10, ".4f"), ("t_c", "t_c (s)", 10, ".4f"),
+           ("t_b", "t_b (s)", 10, ".4f"), ("theta_ini", "theta_ini (rad)", 16, ".5g"))
+
+
+def _record_table(per_record: list[dict[str, Any]]) -> list[str]:
+    """The per-file table's lines, with the columns that hold a value for some file (the
+    regression has no t_c, t_b; the joint method's one theta_ini, for all files
+    together, is printed under the table). A "-" is a file without that value (the
+    joint model's shaft leaves its flank after no step-down)."""
+    shown = [c for c in COLUMNS if any(row[c[0]] is not None for row in per_record)]
+    lines = [" ".join([f"{'file':<30}", *(f"{head:>{w}}" for _, head, w, _ in shown)])]
+    for row in per_record:
+        cells = [f"{row[k]:{w}{f}}" if row[k] is not None else f"{'-':>{w}}"
+                 for k, _, w, f in shown]
+        lines.append(" ".join([f"{row['file'][-30:]:<30}", *cells]))
+    return lines
+
+
 def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes: list[str],
                   everything: list[Record]) -> None:
     """Print the result as text on stdout.
@@ -45,12 +64,8 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
     theta_ini, std, ci95, bounds = out["theta_ini"], out.get("std"), out.get("ci95"), \
         out["bounds"]
     print(f"method {args.method}; theta is the backlash HALF-width")
-    print(f"{'file':<30} {'t_s (s)':>10} {'t_c (s)':>10} {'t_b (s)':>10} {'theta_ini (rad)':>16}")
-    for row in out["per_record"]:
-        cells = [f"{row[k]:10.4f}" if row[k] is not None else f"{'-':>10}"
-                 for k in ("t_s", "t_c", "t_b")]
-        ini = f"{row['theta_ini']:16.5g}" if row["theta_ini"] is not None else f"{'-':>16}"
-        print(f"{row['file'][-30:]:<30} {' '.join(cells)} {ini}")
+    for line in _record_table(out["per_record"]):
+        print(line)
     if theta_ini is not None:
         print(f"theta_ini = {theta_ini:.5g} rad ({math.degrees(theta_ini):.4g} deg)")
     if std is None:
@@ -74,7 +89,8 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
               f"{est.param_std_[name]:.3g}; {_to_prior(est, name)})")
     for choice in est.choices_:
         print(f"model: {choice.reason()}")
-    for rec, (a, b), (sm, sl) in zip(everything, est.fit_percent_, est.noise_std_,
-                                      strict=True):
+    for rec, (a, b), (sm, sl), what in zip(everything, est.fit_percent_, est.noise_std_,
+                                            est.measured_, strict=True):
+        unit = "rad (of the encoder angles fitted)" if what == "angles" else "rad/s"
         print(f"{rec.name[-30:]:<30} fit % (w_M, w_L) = ({a:.1f}, {b:.1f}); noise std = "
-              f"({sm:.3g}, {sl:.3g}) rad/s")
+              f"({sm:.3g}, {sl:.3g}) {unit}")

@@ -32,10 +32,12 @@ def add_file_options(g: Any, *, columns_help: str) -> None:
     g.add_argument("--columns", metavar="OURS=THEIRS,...", default=None, help=columns_help)
     g.add_argument("--sample-time", type=float, default=None, metavar="TS",
                    help="sample time in s when the file has no time column (t = 0 first)")
-    g.add_argument("--delimiter", choices=(",", ";", "tab"), default=None,
-                   help="CSV separator (default: detected from the header)")
-    g.add_argument("--decimal", choices=(".", ","), default=None,
-                   help="CSV decimal mark (default: detected)")
+    # metavars: the choices, commas among them, would print as {,,;,tab}
+    g.add_argument("--delimiter", choices=(",", ";", "tab"), default=None, metavar="SEP",
+                   help="CSV separator: ',' (comma), ';' (semicolon) or tab (default: "
+                   "detected from the header)")
+    g.add_argument("--decimal", choices=(".", ","), default=None, metavar="MARK",
+                   help="CSV decimal mark: '.' (point) or ',' (comma) (default: detected)")
     g.add_argument("--resample", choices=("linear",), default=None,
                    help="resample non-uniform time onto a uniform grid (the torque as a "
                    "zero-order hold) and bridge missing samples (default: they are errors)")

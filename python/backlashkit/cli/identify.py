@@ -43,7 +43,7 @@ from ..identify.report import check_report_directory
 from ..identify.step import REFUSE_FROM_PRIOR
 from ..identify.terms import FRICTION_CHOICES
 from ..identify.torque import torque_levels
-from ..identify.two_step import RegressionIdentifier, TwoStepIdentifier
+from ..identify.two_step import DEFAULT_DT4, RegressionIdentifier, TwoStepIdentifier
 from ..io import read_drive_toml, read_uncertainty_toml
 from ._identify_text import print_result
 from .files import add_file_options, file_options, reader_errors
@@ -57,31 +57,35 @@ METHODS = ("two-step", "regression", "joint")
 #: with an uncertainty.
 DEFAULT_METHOD = "joint"
 
-_DESCRIPTION = """\
+_DESCRIPTION = f"""\
 Identify the backlash half-width theta (rad) of a two-mass drive from torque
 step-down experiments (paper A, Ravanbod-Shirazi & Besancon-Voda 2002).
 
-two-step: commutation instants t_c, t_b by eq. 9, pre-estimate eq. 6 from
-FIR-filtered speeds, then least squares on w_motor over [t_s, t_s + dt4] with theta
-in theta_ini (1 +- n_theta). regression: the same least squares over [0, 15 deg]
-without the pre-estimate (paper A's Table 2 baseline). joint (default): maximum likelihood over
-theta AND the linear parameters, on every record and both speeds (each weighted by its
-own noise level, estimated from the data), the prior entering as a Gaussian penalty
-with the relative std of the [uncertainty] table of PRIOR.toml (or --prior-rel-std);
-without either, the linear parameters are refined from the data alone. It reports the
-standard error std (Fisher information) and a 95% interval ci95 of theta (profile
-likelihood; --interval fisher: theta +- 1.96 std), and says when the residuals are
-correlated from sample to sample (filtered speeds: --noise ar models the noise as
-autoregressive instead of white); its t_c, t_b are the contact changes of the
-identified model (located between samples), theta_ini is the eq. 6 pre-estimate it
-also starts from.
+two-step (paper A's method): locates the contact loss t_c and the impact on the other
+flank t_b after each step-down on the load speed, pre-estimates theta_ini as half the
+area between the low-pass filtered load and motor speeds from t_c to t_b, then fits
+the motor speed over the {DEFAULT_DT4:g} s after the step-down by least squares, theta
+searched in theta_ini (1 +- n_theta). regression (paper A's baseline): the same least squares
+with theta searched over [0, 15 deg] and no pre-estimate. joint (default): maximum
+likelihood over theta AND the linear parameters, on every record and both speeds
+(each weighted by its own noise level, estimated from the data), the prior entering
+as a Gaussian penalty with the relative std of the [uncertainty] table of the --drive
+file (or --prior-rel-std); without either, the linear parameters are refined from the
+data alone. It reports the standard error std (Fisher information) and a 95% interval
+ci95 of theta (profile likelihood; --interval fisher: theta +- 1.96 std), and says
+when the residuals are correlated from sample to sample (filtered speeds: --noise ar
+models the noise as autoregressive instead of white); its t_c, t_b are the contact
+changes of the identified model (located between samples), theta_ini is the area
+pre-estimate it also starts from.
 
 Each EXP.csv holds columns t,torque,w_motor,w_load (SI) with one step-down of the
 torque from a positive level (other names, separators, decimal commas, rpm, a sample
-time instead of a time column, .mat and .npz files: see the reading options).
-Paper A's protocol uses a small step (a_1) for the pre-estimate and a larger one
-(a_2) for the least squares: give the latter with --final (the positional files are
-then used for the pre-estimate only; the joint method fits all files together).
+time instead of a time column, encoder angles phi_motor,phi_load instead of speeds,
+.mat and .npz files: see the reading options).
+Paper A's protocol uses a small step (about 0.1 of the largest torque) for the
+pre-estimate and a larger one (about 0.6) for the least squares: give the latter with
+--final (the positional files are then used for the pre-estimate only; the joint
+method fits all files together).
 """
 
 _EPILOG = """\
@@ -136,9 +140,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--final",
         metavar="EXP.csv",
         action="append",
-        help="two-step: experiment(s) for the final least squares (paper A's step 2, "
-        "a_2 = 0.6 a_max); default the positional files; joint: fitted with the positional "
-        "files. May be repeated",
+        help="two-step: experiment(s) for the final least squares (a larger step, about "
+        "0.6 of the largest torque); default the positional files; joint: fitted with the "
+        "positional files. May be repeated",
     )
     p.add_argument(
         "--n-theta", type=float, default=None, help="two-step: relative search half-width "
@@ -154,8 +158,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument(
         "--onset", choices=("constant", "unloading"), default=None,
-        help="two-step: load speed before t_c in eq. 9: constant (paper) or the "
-        "unloading shaft's cubic fall (exact t_c on noise-free data; no better with noise) "
+        help="two-step: the load speed's course before the contact loss t_c, when "
+        "locating it: constant (paper A's) or the unloading shaft's cubic fall (exact t_c "
+        "on noise-free data; no better with noise) "
         f"(default {_default(TwoStepIdentifier, 'onset')})"
     )
     p.add_argument(
@@ -173,11 +178,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument("--speed-unit", choices=("rad/s", "rpm"), default=None,
                    help="unit of the speeds in the files; rpm are converted (default "
                    f"{_default(read_records, 'speed_unit')})")
+    g.add_argument("--angles", action="store_true",
+                   help="the files hold the encoders' angles phi_motor, phi_load in rad "
+                   "instead of the speeds (fitted as angles)")
+    g.add_argument("--counts-per-rev", type=float, default=None, metavar="N",
+                   help="the files hold the angles phi_motor, phi_load as encoder counts, N "
+                   "per revolution (implies --angles)")
     g.add_argument("--torque-levels", action="store_true",
                    help="replace a noisy measured torque by its piecewise-constant levels "
                    "(the model takes the torque as its exact input; default: a noisy torque "
                    "is an error)")
     p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar of the --bootstrap refits on stderr (there is none "
+                   "when stderr is not a terminal either)")
     add_report_option(p)
     p.set_defaults(func=run)
     return p
@@ -250,6 +264,7 @@ def read_experiments(args: argparse.Namespace, paths: list[str]) -> list[Record]
     options = file_options(args)
     if args.speed_unit is not None:
         options["speed_unit"] = args.speed_unit
+    options.update(angles=args.angles, counts_per_rev=args.counts_per_rev)
     out: list[Record] = []
     for path in paths:
         if path == "-":
@@ -427,7 +442,8 @@ def _joint_identifier(args: argparse.Namespace, prior: Any) -> Any:
     interval: Any = FisherInterval() if args.interval == "fisher" else ProfileLikelihood()
     if args.bootstrap is not None:
         seed = {} if args.seed is None else {"seed": args.seed}
-        interval = ParametricBootstrap(args.bootstrap, **seed)
+        # a bar on stderr unless --quiet; the library draws it only on a terminal
+        interval = ParametricBootstrap(args.bootstrap, **seed, progress=not args.quiet)
     order = {} if args.noise_order is None else {"order": args.noise_order}
     noise_model: Any = WhiteNoise()
     if args.noise == "ar":
@@ -510,6 +526,7 @@ def _terms_json(est: Any) -> dict[str, Any]:
         out[name] = est.params_[name]
         out[f"{name}_std"] = _num(est.param_std_.get(name))
     out["model_choices"] = [c.reason() for c in est.choices_]
+    out["measured"] = list(est.measured_)
     return out
 
 

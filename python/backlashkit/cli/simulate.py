@@ -69,7 +69,8 @@ _REQUIRED = {
 DEFAULT_TS = 1e-3
 
 _DESCRIPTION = """\
-Simulate a two-mass drive with backlash (paper A, eq. 2), from rest.
+Simulate a two-mass drive with backlash, from rest: motor and load joined by an elastic
+shaft with a dead zone (the model of paper A, Ravanbod-Shirazi & Besancon-Voda 2002).
 
 With --torque, simulate under a recorded motor torque (columns t,torque) and write
 t,w_motor,w_load,phi_d on the same grid. With --experiment, generate a synthetic
@@ -80,7 +81,7 @@ variance) over the whole record. Units are SI (s, N m, rad, rad/s).
 
 _EPILOG = """\
 examples:
-  # paper A's experiment (0.157 N m for 40 s from rest, then 0), noisy speeds
+  # paper A's step-down (0.157 N m for 40 s from rest, then 0), noisy speeds
   backlashkit simulate examples/paper_drive.toml --experiment step-down \\
       --amplitude 0.157 --hold 40 --snr-motor 30 --snr-load 30 --seed 1 --out exp.csv
   # a recorded torque
@@ -136,7 +137,8 @@ def _add_input(p: argparse.ArgumentParser) -> None:
     src.add_argument(
         "--experiment",
         choices=EXPERIMENTS,
-        help="generate a synthetic experiment from rest (step-down: paper A's)",
+        help="generate a synthetic experiment from rest (step-down: a torque held, then "
+        "dropped, what identify reads)",
     )
 
 
@@ -168,7 +170,8 @@ def _add_model(p: argparse.ArgumentParser) -> None:
         "--law",
         choices=[law.value for law in ShaftLaw],
         default=ShaftLaw.PAPER.value,
-        help="shaft contact law: paper (eq. 2 of paper A, default), no-pull (the damper "
+        help="shaft contact law: paper (spring plus damper in contact, tau_c + tau_d: the "
+        "damper may pull just before contact is lost; default), no-pull (the damper "
         "never pulls: max(tau_c + tau_d, 0), Modelica's ElastoBacklash2) or modelica "
         "(Modelica's ElastoBacklash: tau_c + min(tau_c, tau_d), 0 where tau_c + tau_d <= 0)",
     )
@@ -198,7 +201,7 @@ def _add_experiment_options(p: argparse.ArgumentParser) -> None:
         type=float,
         metavar="T_S",
         help="step-down: time in s the level A is held before stepping down "
-        "(paper A: --amplitude 0.157 --hold 40)",
+        "(paper A's small step: --amplitude 0.157 --hold 40)",
     )
     exp.add_argument(
         "--level-after",

@@ -19,6 +19,8 @@ PathLike = str | os.PathLike[str]
 
 #: Our names of a record's channels, in order.
 FIELDS = ("t", "torque", "w_motor", "w_load")
+#: The same for a record of encoder angles (``read_records(angles=True)``).
+ANGLE_FIELDS = ("t", "torque", "phi_motor", "phi_load")
 
 DELIMITERS = (",", ";", "\t")
 
@@ -110,7 +112,7 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
         raise InputError(
             f"{name}: no column {', '.join(map(repr, missing))} in the header (line "
             f"{header_no}, separator {sep}: {header!r}); map the file's names with ",
-            map_columns([f for f in FIELDS if f in need or f == "t"]),
+            map_columns([f for f in mapping if f in need or f == "t"]),
             *((" or pass ", PASS_SAMPLE_TIME, " if there is no time column") if "t" in need
               else ())
         )

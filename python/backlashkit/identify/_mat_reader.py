@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ._csv_reader import FIELDS, MAP_COLUMNS, PASS_SAMPLE_TIME, _precision, _Raw
+from ._csv_reader import MAP_COLUMNS, PASS_SAMPLE_TIME, _precision, _Raw
 
 _SUFFIX = re.compile(r"^(.*)_(\d+)$")
 
@@ -44,7 +44,7 @@ def _sample_label(var: str) -> Callable[[int], str]:
 def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, str],
                     need: list[str], what: str) -> list[_Raw]:
     """Records from a flat set of named arrays (plain or suffixed names)."""
-    want = {mapping[f]: f for f in FIELDS}
+    want = {mapping[f]: f for f in mapping}
     # numbered channels (a shared plain time is allowed beside them)
     suffixed = sorted(v for v in variables if (m := _SUFFIX.match(v))
                       and m.group(1) in want and m.group(1) != mapping["t"])
@@ -55,7 +55,7 @@ def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, 
                 f"and numbered ones ({', '.join(map(repr, suffixed[:4]))}"
                 f"{', ...' if len(suffixed) > 4 else ''}); keep one naming scheme"
             )
-        present = [f for f in FIELDS if mapping[f] in variables]
+        present = [f for f in mapping if mapping[f] in variables]
         cols = {f: _vector(name, mapping[f], variables[mapping[f]]) for f in present}
         prec = _precision(cols["t"]) if "t" in cols else 0.0
         var_t = mapping["t"]

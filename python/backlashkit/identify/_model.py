@@ -100,6 +100,22 @@ class Span:
     y_l: np.ndarray
     level: float | None  # torque held before the step-down (steady start) or None (rest)
     hold: float | None = None  # start: from rest after `level` held this long (s)
+    # measured angles from the span's first sample (rad), fitted instead of the speeds
+    p_m: np.ndarray | None = None
+    p_l: np.ndarray | None = None
+
+    @property
+    def positions(self) -> bool:
+        """Whether the model is fitted to the angles (the record's encoders)."""
+        return self.p_m is not None
+
+    def cut(self, i: int, j: int | None = None, **kw) -> Span:
+        """The samples ``i`` to ``j`` of the span (angles again from the first)."""
+        sl = slice(i, j)
+        pos = {} if self.p_m is None else {"p_m": self.p_m[sl] - self.p_m[i],
+                                           "p_l": self.p_l[sl] - self.p_l[i]}
+        return replace(self, i0=self.i0 + i, t=self.t[sl], torque=self.torque[sl],
+                       y_m=self.y_m[sl], y_l=self.y_l[sl], **pos, **kw)
 
 
 def starts_at_rest(rec: Record, s_m: float, s_l: float) -> bool:
@@ -137,8 +153,10 @@ def spans(recs: list[Record], start: str, pre_window: float, sig0) -> list[Span]
                 )
             i0 = i_s - n_pre
         sl = slice(i0, None)
+        pos = {} if not rec.has_positions else {"p_m": rec.phi_motor[sl] - rec.phi_motor[i0],
+                                                "p_l": rec.phi_load[sl] - rec.phi_load[i0]}
         out.append(Span(rec, k, i0, rec.t[sl], rec.torque[sl], rec.w_motor[sl],
-                        rec.w_load[sl], level))
+                        rec.w_load[sl], level, **pos))
     return out
 
 
@@ -167,11 +185,8 @@ def screen_spans(spans_: list[Span]) -> list[Span]:
         if i_s < 3 or np.any(sp.torque[:i_s] != level):
             out.append(sp)
             continue
-        out.append(replace(sp, t=sp.t[:i_s], torque=sp.torque[:i_s], y_m=sp.y_m[:i_s],
-                           y_l=sp.y_l[:i_s]))
-        out.append(replace(sp, i0=sp.i0 + i_s, t=sp.t[i_s:], torque=sp.torque[i_s:],
-                           y_m=sp.y_m[i_s:], y_l=sp.y_l[i_s:], level=level,
-                           hold=float(sp.t[i_s] - sp.t[0])))
+        out.append(sp.cut(0, i_s))
+        out.append(sp.cut(i_s, level=level, hold=float(sp.t[i_s] - sp.t[0])))
     return out
 
 
@@ -209,7 +224,9 @@ def initial_states(p: np.ndarray, level: float | None, torque0: float = 0.0) -> 
 
 def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None
                   ) -> np.ndarray:
-    """States ``(len(p), end, 3)`` of packed parameter rows ``p`` over a span.
+    """States ``(len(p), end, S)`` of packed parameter rows ``p`` over a span: the two
+    speeds and the shaft angle, the motor torque with a current loop, and the motor's
+    angle from 0 at the span's start where the span fits angles.
 
     What the compiled core refuses (contact chatter, a mode too fast for the sample
     time) becomes an :class:`InputError` naming the record; the searches catch it as
@@ -224,9 +241,12 @@ def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = Non
             x0 = held[:, -1, :]
         else:
             x0 = initial_states(p, span.level, float(span.torque[0]))
+        if span.positions:
+            x0 = np.column_stack([x0, np.zeros(len(x0))])
         end = span.t.size if end is None else max(end, 2)
         return simulate_packed(2, p, span.t[0], span.record.ts,
-                               span.torque[np.newaxis, :end], x0, law=law, workers=workers)
+                               span.torque[np.newaxis, :end], x0, law=law, workers=workers,
+                               track_angle=span.positions)
     except InputError:
         raise
     except ValueError as exc:
@@ -253,3 +273,11 @@ def model_commutation(drive: TwoMassDrive, span: Span, law: str, tau_i: float = 
                     None)
     return (float(t_s), None if lost is None else float(lost),
             None if made is None else float(made))
+
+
+def model_angles(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The motor's and load's angles from the span's first sample, in rad, of states
+    ``x`` (``(b, n, S)``, simulated with the motor angle: :func:`simulate_span`). The
+    load turns by the motor's angle less the change of the shaft angle."""
+    motor = x[:, :, -1]
+    return motor, motor - (x[:, :, 2] - x[:, :1, 2])

@@ -24,6 +24,7 @@ from ._model import (
     PACKED_LONG,
     TIED,
     Span,
+    model_angles,
     screen_spans,
     simulate_span,
 )
@@ -185,7 +186,9 @@ class Problem:
 
 class Residual:
     """Weighted residual rows of log-parameter rows: every selected sample of ``w_M``
-    then ``w_L`` per span, divided by its noise level, then the prior's rows. With
+    then ``w_L`` per span (of the angles ``phi_M``, ``phi_L`` from the span's start,
+    less their mean, where the record holds encoder angles), divided by its noise
+    level, then the prior's rows. With
     ``ar`` (record, channel, lag) each channel is whitened by ``A(q)`` first and
     ``sig`` is the innovation's std."""
 
@@ -197,7 +200,8 @@ class Residual:
         self.ends = [s_.stop if isinstance(s_, slice) else int(s_[-1]) + 1 for s_ in self.sels]
         self.lag = 0 if ar is None else ar.shape[-1]  # samples without a past, dropped
         self.n_res = 2 * sum(m - self.lag for m in self.sizes) + len(problem.free)
-        self.ys = [(sp.y_m[s_], sp.y_l[s_]) for sp, s_ in zip(spans, self.sels, strict=True)]
+        self.ys = [(sp.p_m[s_], sp.p_l[s_]) if sp.positions else (sp.y_m[s_], sp.y_l[s_])
+                   for sp, s_ in zip(spans, self.sels, strict=True)]
 
     def __call__(self, z_rows: np.ndarray) -> np.ndarray:
         pb, lag = self.problem, self.lag
@@ -206,12 +210,16 @@ class Residual:
         pos = 0
         for sp, y2, s_, x, m in zip(self.spans, self.ys, self.sels, sims, self.sizes,
                                     strict=True):
-            for c, y in enumerate(y2):  # w_M, then w_L
+            model = model_angles(x) if sp.positions else (x[:, :, 0], x[:, :, 1])
+            for c, y in enumerate(y2):  # w_M (or phi_M), then w_L (or phi_L)
                 block = out[:, pos : pos + m - lag]
+                e = y - model[c][:, s_]
+                if sp.positions:  # the angles' common offset: the first sample's error
+                    e -= e.mean(axis=1, keepdims=True)
                 if self.ar is None:
-                    np.subtract(y, x[:, s_, c], out=block)
+                    block[:] = e
                 else:
-                    block[:] = whiten(y - x[:, s_, c], self.ar[sp.k, c])
+                    block[:] = whiten(e, self.ar[sp.k, c])
                 block /= self.sig[sp.k, c]
                 pos += m - lag
         p = pb.values(z_rows)[:, 1:]
@@ -245,6 +253,15 @@ class Residual:
         return r[self.n_res - len(self.problem.free):]
 
 
+def angle_noise_std(rec: Record) -> np.ndarray:
+    """Starting noise levels of a record's two angles in rad: the quantisation noise
+    ``q / sqrt(12)`` of its encoders where their step ``q`` is known, else a high-pass
+    estimate."""
+    if rec.quantum > 0:
+        return np.full(2, rec.quantum / math.sqrt(12.0))
+    return np.array([highpass_noise_std(rec.phi_motor), highpass_noise_std(rec.phi_load)])
+
+
 def build_problem(prior: TwoMassDrive, recs: list[Record], rel: dict, noise,
                   search: JointSearch, law: str, workers, terms: Sequence[Term] = ()
                   ) -> tuple[Problem, np.ndarray]:
@@ -261,8 +278,12 @@ def build_problem(prior: TwoMassDrive, recs: list[Record], rel: dict, noise,
         sig0 = [np.array([highpass_noise_std(r.w_motor), highpass_noise_std(r.w_load)])
                 for r in recs]
     spans_ = record_spans(recs, search.start, float(search.pre_window), sig0)
+    if noise is None:  # records of encoder angles are fitted as angles
+        sig0 = [angle_noise_std(r) if r.has_positions else s0 for r, s0 in zip(recs, sig0,
+                                                                              strict=True)]
     sigma = np.array(sig0, float).reshape(len(recs), 2)
-    scale = [max(float(np.max(np.abs(r.w_motor))), float(np.max(np.abs(r.w_load))))
+    scale = [max(float(np.ptp(r.phi_motor)), float(np.ptp(r.phi_load))) if r.has_positions
+             else max(float(np.max(np.abs(r.w_motor))), float(np.max(np.abs(r.w_load))))
              for r in recs]
     sigma = np.maximum(sigma, NOISE_FLOOR * np.array(scale)[:, np.newaxis] + 1e-300)
     base = np.array([getattr(prior, n) for n in PACKED[:-1]] + [0.0])

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -22,9 +22,9 @@ import numpy as np
 from ..errors import InputError
 from ..plants import TwoMassDrive
 from ._lm import LMState
-from ._model import LINEAR_PARAMS, Span
+from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
-from .intervals import IntervalInputs, ThetaInterval
+from .intervals import Z_95, IntervalInputs, ThetaInterval
 from .noise import sample_noise
 from .record import Record
 from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
@@ -59,12 +59,16 @@ RESTART_SCREEN_ITER = 5
 #: units, and the refinement can stop on a bump next to a lower point.
 RECENTRE_MARGIN = 0.5
 RECENTRE_MAX = 2
-#: Iterations of the refit that tests a term added after the search (the current
-#: loop): from the search's result a loop the data show lowers the cost by far more
-#: than the test's threshold within the first steps, while refitting one the data do
-#: not show only walks its time constant down to the floor, and each of those
-#: simulations is slower (terms.TAU_FLOOR_SAMPLES).
+#: Iterations of the screening refits of a term added after the search (the current
+#: loop), one from each of its starts. Those that end within TEST_MARGIN (chi-square
+#: units) of the model without it are converged. On speeds with friction and a loop,
+#: the starts that find the loop's lag can still cost a little more than the model
+#: without it after 4 iterations, and less once converged; on encoder angles, whose
+#: noise is a count's, a loop at its floor (a quarter sample) costs orders of
+#: magnitude more, and converging it took most of the fit's time for a term the test
+#: drops anyway.
 TEST_ITER = 4
+TEST_MARGIN = 100.0
 #: The added terms (friction, current loop) start from rough guesses
 #: (:mod:`backlashkit.identify.terms`): the first window may move them a factor 100
 #: either way, where the linear parameters stay within ``FirstHorizon.search_factor``.
@@ -306,11 +310,14 @@ def resample(pb: Problem, z: np.ndarray, sig: np.ndarray, ar: np.ndarray | None,
     """Records simulated from log-parameters ``z`` with the fitted noise added."""
     sims = pb.simulate(z[np.newaxis, :], pb.spans)
     records = []
-    for sp, x in zip(pb.spans, (x[0] for x in sims), strict=True):
-        w_m, w_l = (x[:, c] + sample_noise(rng, sig[sp.k, c],
-                                           None if ar is None else ar[sp.k, c], sp.t.size)
+    for sp, x in zip(pb.spans, sims, strict=True):
+        clean = model_angles(x) if sp.positions else (x[:, :, 0], x[:, :, 1])
+        y_m, y_l = (clean[c][0] + sample_noise(rng, sig[sp.k, c],
+                                               None if ar is None else ar[sp.k, c], sp.t.size)
                     for c in (0, 1))
-        records.append(Record(sp.t, sp.torque, w_m, w_l, name=f"{sp.record.name} (bootstrap)"))
+        name = f"{sp.record.name} (bootstrap)"
+        records.append(Record.from_positions(sp.t, sp.torque, y_m, y_l, name=name)
+                       if sp.positions else Record(sp.t, sp.torque, y_m, y_l, name=name))
     return records
 
 
@@ -344,9 +351,9 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
                  ) -> tuple[Problem, LMState, list[TermChoice]]:
     """Likelihood-ratio tests of the ``"auto"`` terms, in order. A term in the search
     is removed and the nested model refitted from ``best``; one outside it is added
-    (from each start of :meth:`Term.start_grid`, the lowest going on) and the larger
-    model refitted. The term is kept only if ``-2 log L`` is lower with it by more
-    than its threshold (:mod:`backlashkit.identify.terms`)."""
+    (each start of :meth:`Term.start_grid` refitted, the lowest going on) and the
+    larger model refitted. The term is kept where ``-2 log L`` is lower with it by more
+    than its threshold, or where removing it moves ``theta`` (:meth:`TermChoice.decide`)."""
     choices = []
     for term in terms:
         if term.mode != "auto":
@@ -355,23 +362,76 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             other, keep = pb.without(term.params)
             res = other.residual(other.final_spans(final_h), final_h, sig)
             st = other.refine(res, best.z[keep], max_iter)
+            (small, st_small), st_big = (other, st), best
         else:
             other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
             res = other.residual(other.final_spans(final_h), final_h, sig)
-            st = min((other.refine(res, np.r_[best.z, other.z_of(term.params, [
-                start[n] for n in term.params])], TEST_ITER)
-                for start in term.start_grid(recs)), key=lambda s_: s_.cost)
-        with_cost, without_cost = (best.cost, st.cost) if term.searched else (st.cost,
-                                                                            best.cost)
-        rise = without_cost - with_cost
-        kept = bool(rise > term.threshold)
-        if kept and not term.searched and not st.done:  # the added term stays: converge
-            st = other.refine(res, st.z, max_iter, state=st)
-            rise = best.cost - st.cost
-        choices.append(TermChoice(term.name, kept, float(rise), term.threshold))
-        if kept != term.searched:  # the other model wins
+            st = added_term_fit(other, res, best.z, best.cost, term, recs, max_iter)
+            (small, st_small), st_big = (pb, best), st
+        rise = st_small.cost - st_big.cost
+        std_small = estimate_std(small, st_small, sig, final_h)
+        big = pb if term.searched else other
+        std_big = estimate_std(big, st_big, sig, final_h)
+        choice = TermChoice.decide(
+            term.name, rise, term.threshold, abs(st_big.z[0] - st_small.z[0]) / std_small[0],
+            determined(big, st_big.z, std_big, [big.names.index(n) for n in term.params]),
+            (fisher_ci95(st_big.z, std_big), fisher_ci95(st_small.z, std_small)))
+        choices.append(choice)
+        if choice.kept != term.searched:  # the other model wins
             pb, best = other, st
     return pb, best, choices
+
+
+def added_term_fit(pb: Problem, res: Residual, z: np.ndarray, cost: float, term: Term,
+                   recs: list[Record], max_iter: int) -> LMState:
+    """The larger model's fit from the smaller one's point ``z`` (of cost ``cost``):
+    every start of the added term refitted for :data:`TEST_ITER` iterations, those
+    then within :data:`TEST_MARGIN` of ``cost`` converged, the lowest kept. A start that
+    walks the term to its floor can be a local minimum where the drive has friction as
+    well, so more than the best screened start goes on."""
+    screened = [pb.refine(res, np.r_[z, pb.z_of(term.params, [start[n] for n in term.params])],
+                          TEST_ITER) for start in term.start_grid(recs)]
+    hopeful = [st for st in screened if st.cost < cost + TEST_MARGIN]
+    return min((pb.refine(res, st.z, max_iter, state=st) for st in hopeful) if hopeful
+               else screened, key=lambda st: st.cost)
+
+
+def estimate_std(pb: Problem, st: LMState, sig: np.ndarray, final_h: float | None
+                 ) -> np.ndarray:
+    """Standard errors of the estimated values at ``st`` from the Gauss-Newton
+    information of the whole-record residual (forward differences: they only scale
+    and qualify a test); inf where the information is singular."""
+    res = pb.residual(pb.final_spans(final_h), final_h, sig)
+    jac = res.forward_jacobian(st.z, res.at(st.z))
+    try:
+        cov = np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return np.full(st.z.size, math.inf)
+    return np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf)
+
+
+def fisher_ci95(z: np.ndarray, std: np.ndarray) -> tuple[float, float]:
+    """``theta -+ 1.96 std`` in rad of log-parameters ``z`` (theta first) and their
+    standard errors."""
+    theta = math.exp(z[0])
+    return theta * (1.0 - Z_95 * std[0]), theta * (1.0 + Z_95 * std[0])
+
+
+def widened(found: ThetaInterval, choices: Sequence[TermChoice]) -> ThetaInterval:
+    """The interval, widened to the other model's where a test could not tell the two
+    apart (:attr:`TermChoice.other_ci95`)."""
+    lo, hi = found.ci95
+    for c in choices:
+        if c.other_ci95 is not None:
+            lo, hi = min(lo, c.other_ci95[0]), max(hi, c.other_ci95[1])
+    return found if (lo, hi) == found.ci95 else replace(found, ci95=(lo, hi))
+
+
+def determined(pb: Problem, z: np.ndarray, std: np.ndarray, cols: list[int]) -> bool:
+    """Whether the data pin the values ``z[cols]`` down: a logarithm within a factor
+    ``e`` at one standard error, a value in natural units away from 0 (a parameter
+    sitting on its floor has next to no information and fails)."""
+    return all(std[i] < (1.0 if pb.scales[i] == 0 else abs(z[i])) for i in cols)
 
 
 @dataclass
@@ -448,6 +508,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
     unc = uncertainty(pb, best, rows_unc, interval, max_iter,
                       partial(_refit_resample, pb, sig, ar, refit))
+    unc.interval = widened(unc.interval, choices)
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
         sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
     return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices)

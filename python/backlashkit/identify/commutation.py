@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError
+from ..errors import InputError, Option
 from .record import Record
 from .step import find_step_down
 
@@ -289,12 +289,17 @@ def commutation_instants(
     n1, n2, n3 = (int(round(x / ts)) for x in (dt1, dt2, dt3))
     if n1 < 2 or n3 - n2 < 2:
         raise InputError(
-            f"{record.name}: the windows of eq. 9 span too few samples (dt1 = {dt1:.3g} s, "
-            f"dt3 - dt2 = {dt3 - dt2:.3g} s at Ts = {ts:.3g} s)"
+            f"{record.name}: the windows searched for the contact loss and the impact "
+            f"after the step-down must each span at least 2 samples, got {dt1:.3g} s and "
+            f"{dt3 - dt2:.3g} s at a sample time of {ts:.3g} s (lengthen ",
+            Option("dt1", None), " and the span from ", Option("dt2", None), " to ",
+            Option("dt3", None), ", or record at a higher sample rate)"
         )
     if i_s + n3 >= record.t.size:
         raise InputError(
-            f"{record.name}: the record ends before t_s + dt3 = {t_s + dt3:.6g} s"
+            f"{record.name}: the record ends at t = {record.t[-1]:.6g} s, before the end "
+            f"of the window searched for the impact, t = {t_s + dt3:.6g} s ({dt3:.3g} s "
+            f"after the step-down at t = {t_s:.6g} s): record longer after the step-down"
         )
     t, y = record.t, record.w_load
     # eq. 9's argmins do not depend on the speed's scale, but 1e300 rad/s would overflow
@@ -307,8 +312,11 @@ def commutation_instants(
     i_b = lo + int(np.argmin(wb))
     if not i_b > i_c:
         raise InputError(
-            f"{record.name}: eq. 9 put the impact (t_b = {t[i_b]:.6g} s) before the contact "
-            f"loss (t_c = {t[i_c]:.6g} s); no contact change found"
+            f"{record.name}: the impact on the other flank, located at t = {t[i_b]:.6g} s, "
+            f"comes before the contact loss, located at t = {t[i_c]:.6g} s: the load speed "
+            "shows no passage through the backlash after the step-down (record a step-down "
+            "to 0 with less noise on the load speed, or give the windows searched as ",
+            Option("dt1", None), ", ", Option("dt2", None), ", ", Option("dt3", None), ")"
         )
     return Commutation(i_s, i_c, i_b, t_s, float(t[i_c]), float(t[i_b]), dt1, dt2, dt3)
 

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError, SearchEdgeWarning
+from ..errors import InputError, Option, SearchEdgeWarning
 from ..plants import TwoMassDrive
 from .commutation import Commutation
 from .record import Record
@@ -256,8 +256,10 @@ def criterion_window(record: Record, dt4: float, level_window: float) -> Criteri
     n4 = int(round(dt4 / ts))
     if i_s + n4 >= record.t.size:
         raise InputError(
-            f"{record.name}: the record ends before t_s + dt4 = {t_s + dt4:.6g} s "
-            f"(t_s = {t_s:.6g} s): record longer after the step-down or lower dt4"
+            f"{record.name}: the final least squares fits the motor speed over the "
+            f"{dt4:.6g} s after the step-down at t = {t_s:.6g} s, but the record ends at "
+            f"t = {record.t[-1]:.6g} s (record at least {dt4:.6g} s after the step-down, or "
+            "shorten that span with ", Option("dt4", None), ")"
         )
     nl = max(1, min(i_s, int(round(level_window / ts))))
     w0 = float(np.mean(record.w_motor[i_s - nl : i_s]))
@@ -581,11 +583,18 @@ def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = ()) -> l
     Warns
     -----
     SearchEdgeWarning
-        For each end it sits on: the criterion's minimum may lie beyond it.
+        For each end it sits on: the criterion's minimum may lie beyond it (at a lower
+        end of 0: the criterion is smallest without backlash).
     """
     ends = [end for end, edge in (("lower", lo), ("upper", hi))
             if abs(theta - edge) <= AT_EDGE * max(hi, 1e-300)]
     for end in ends:
+        if end == "lower" and lo == 0.0:  # no minimum lies below a half-width of 0
+            warnings.warn(SearchEdgeWarning(
+                "theta is 0, the lower end of the search interval: the criterion is "
+                "smallest without backlash on these records (check the prior's linear "
+                "parameters, or use the joint method, which refines them)"), stacklevel=3)
+            continue
         warnings.warn(SearchEdgeWarning(
             f"theta is at the {end} end of the search interval: the cost's minimum may lie "
             "beyond it", *advice), stacklevel=3)

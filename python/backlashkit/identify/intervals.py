@@ -20,7 +20,8 @@ Each object computes its own interval from what the fit hands it
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -28,9 +29,13 @@ import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
+from ..parallel import ProgressBar
 from ._lm import lm
 
 __all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
+
+#: ``progress(done, total)``: a report of the refits done.
+Progress = Callable[[int, int], None]
 
 #: chi-square quantile with one degree of freedom at 95 % (1.959964 ** 2).
 CHI2_95 = 3.841458820694124
@@ -231,10 +236,18 @@ class ParametricBootstrap:
     seed : int or numpy.random.SeedSequence, optional
         Root of the resamples' noise (default 0): resample ``i`` uses
         ``SeedSequence(seed).spawn(n_resamples)[i]``.
+    progress : bool or callable, optional
+        Progress of the refits (each takes about as long as the fit itself): True draws
+        a :class:`~backlashkit.parallel.ProgressBar` on stderr, which shows nothing
+        when stderr is not a terminal; a callable is called ``progress(done,
+        n_resamples)`` before the first refit and after every one (e.g. a
+        :class:`~backlashkit.parallel.ProgressBar` of the caller, ``quiet`` or not).
+        Default False: nothing. Not part of the configuration's equality.
     """
 
     n_resamples: int = 30
     seed: int | np.random.SeedSequence = 0
+    progress: bool | Progress = field(default=False, compare=False, kw_only=True)
 
     def __post_init__(self) -> None:
         v.integer("n_resamples", self.n_resamples, 2)
@@ -244,12 +257,20 @@ class ParametricBootstrap:
             raise InputError(
                 f"seed must be an integer >= 0 or a numpy.random.SeedSequence, got {seed!r}"
             )
+        if not (isinstance(self.progress, bool) or callable(self.progress)):
+            raise InputError("progress must be True, False or a callable "
+                             f"progress(done, total), got {self.progress!r}")
 
     def _interval(self, fit: IntervalInputs) -> ThetaInterval:
         root = self.seed if isinstance(self.seed, np.random.SeedSequence) else (
             np.random.SeedSequence(self.seed))
-        thetas = np.array([fit.refit(np.random.default_rng(child))
-                           for child in root.spawn(self.n_resamples)])
+        with _progress(self.progress) as bar:
+            bar(0, self.n_resamples)
+            refitted: list[float] = []
+            for child in root.spawn(self.n_resamples):
+                refitted.append(fit.refit(np.random.default_rng(child)))
+                bar(len(refitted), self.n_resamples)
+        thetas = np.array(refitted)
         std = float(np.std(thetas, ddof=1))
         # the std is itself estimated from n_resamples refits: Student's quantile with
         # n_resamples - 1 degrees of freedom, not 1.96 (2.05 for 30 refits, 2.57 for 6)
@@ -258,6 +279,19 @@ class ParametricBootstrap:
         half = float(student_t.ppf(0.975, self.n_resamples - 1)) * std
         return ThetaInterval("bootstrap", (max(0.0, fit.theta - half), fit.theta + half),
                              std=std, bootstrap_thetas=thetas)
+
+
+@contextmanager
+def _progress(progress: bool | Progress) -> Iterator[Progress]:
+    """The callable that ``progress`` asks for: a bar made (and closed) here for True, the
+    caller's own (left open), or one that does nothing."""
+    if callable(progress):
+        yield progress
+    elif progress:
+        with ProgressBar("bootstrap", unit="refit") as bar:
+            yield bar
+    else:
+        yield lambda done, total: None
 
 
 def profile_crossing(rise: Callable[[float], float], first: float, *, level: float = CHI2_95,

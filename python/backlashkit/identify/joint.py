@@ -58,6 +58,12 @@ Fitted attributes besides those in the class docstring
     when it succeeded (else None).
 ``model_start_``
     ``"rest"`` or ``"steady"`` per record: how the model was started.
+``measured_``
+    ``"angles"`` or ``"speeds"`` per record: what the model was fitted to. Records
+    of encoder angles (:meth:`Record.from_positions`), or whose two speeds are
+    differenced encoder counts (:func:`~backlashkit.identify.noise.encoder_angles`),
+    are fitted as angles with white noise (quantisation: ``q^2 / 12``); their
+    ``noise_std_`` is then in rad.
 ``commutations_``, ``t_c_``, ``t_b_``
     ``(t_s, t_c, t_b)`` per record in s: the step-down and, in the identified model,
     its first contact loss after it and the next contact made (None where absent).
@@ -104,6 +110,7 @@ from .noise import (
     WhiteNoise,
     beyond_noise,
     check_noise_model,
+    encoder_angles,
     held_noise_lag1,
     lag1,
     noise_coloured,
@@ -190,7 +197,7 @@ class JointIdentifier:
     ...                 signals.add_noise(r.w_load, 30, rng=2))
     >>> fit = bk.JointIdentifier(truth.with_theta(None), workers=1).fit(rec)
     >>> print(f"{fit.theta_:.4f} rad, 95 % in [{fit.ci95_[0]:.4f}, {fit.ci95_[1]:.4f}]")
-    0.0348 rad, 95 % in [0.0342, 0.0353]
+    0.0348 rad, 95 % in [0.0341, 0.0353]
     >>> search = bk.JointSearch(restarts=bk.Restarts(misfit=False), final_horizon=1.0)
     >>> expert = bk.JointIdentifier(truth.with_theta(None), search=search)
     """
@@ -278,6 +285,7 @@ class JointIdentifier:
         prior = self.prior.with_theta(None)
         records = as_records(records, prior=prior)
         check_step_downs(records, prior)
+        records = [encoder_angles(r) for r in records]
         # one BLAS thread: the products J^T J (n_samples x 7) gain nothing from more,
         # and their rounding then does not depend on the machine's core count (the
         # multimodal fits of a rattling load can follow a different path on it);
@@ -287,7 +295,10 @@ class JointIdentifier:
             warnings.simplefilter("ignore", SensitivityWarning)
             fitted = self._fit(records)
             restarted = won = False
-            if self.search.restarts.misfit and _misfits(fitted):
+            # an encoder's angle errors are constant while a shaft stands still, so its
+            # residual's correlation says nothing of the basin: no restart on them
+            if (self.search.restarts.misfit and not any(r.has_positions for r in records)
+                    and _misfits(fitted)):
                 restarted = True
                 try:  # the whole search again, from the fitted linear parameters
                     again = self._fit(records, anchor=fitted["drive_"],
@@ -308,6 +319,7 @@ class JointIdentifier:
         parts = self._correlation_parts()
         if parts is not None:
             warnings.warn(CorrelatedResidualsWarning(*parts), stacklevel=2)
+        self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
         _warn_quantised(records)
         return self
 
@@ -431,9 +443,12 @@ def _same(value, default) -> bool:
 
 
 def _warn_quantised(records) -> None:
-    """Warn where a record's speeds are an encoder's differenced counts
-    (:class:`~backlashkit.errors.QuantisedSpeedsWarning`)."""
+    """Warn where one speed of a record is an encoder's differenced counts and the
+    other is not (:class:`~backlashkit.errors.QuantisedSpeedsWarning`); records with
+    both are fitted as angles (:func:`~backlashkit.identify.noise.encoder_angles`)."""
     for rec in records:
+        if rec.has_positions:
+            continue
         for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
             q = speed_quantum(w)
             if q > 0:
@@ -441,10 +456,11 @@ def _warn_quantised(records) -> None:
                 warnings.warn(QuantisedSpeedsWarning(
                     f"{rec.name}: {name} is quantised to steps of {q:.3g} rad/s (an encoder "
                     f"of about {counts:.0f} counts per revolution differenced over "
-                    f"Ts = {rec.ts:.3g} s): the model takes it as the speed at each sample "
-                    "with white noise, not the mean over the sample with quantisation "
-                    "noise, so theta may be off by about a percent and its interval too "
-                    "narrow (encoder records are not modelled yet)"), stacklevel=3)
+                    f"Ts = {rec.ts:.3g} s) but the other speed is not: the model takes it "
+                    "as the speed at each sample with white noise, so theta may be off by "
+                    "about a percent and its interval too narrow; give both encoders' "
+                    "angles (Record.from_positions) to have them fitted as angles"),
+                    stacklevel=3)
                 break
 
 

@@ -35,6 +35,7 @@ import numpy as np
 from .. import validate as v
 from ..errors import InputError
 from ..plants import TwoMassDrive
+from .quantum import QUANTUM_RTOL, speed_quantum
 from .record import Record
 from .step import find_step_down
 
@@ -42,6 +43,7 @@ __all__ = [
     "ARNoise",
     "AutoNoise",
     "WhiteNoise",
+    "encoder_angles",
     "fit_ar",
     "held_noise_lag1",
     "innovation_ratio",
@@ -310,38 +312,33 @@ def innovation_ratio(a) -> float:
     return float(1.0 / (psi @ psi))
 
 
-#: A speed whose distinct values number at most this share of its samples, all integer
-#: multiples of the smallest step between them (to QUANTUM_RTOL of a step), is
-#: quantised: an encoder's differenced counts. An 8 s record at 1 ms of a drive turning
-#: at 94 rad/s through a 16 384-count encoder has about 250 distinct speeds in 8000
-#: samples; a speed with any analogue noise has as many as samples.
-QUANTISED_SHARE = 0.5
-QUANTUM_RTOL = 1e-6
+def encoder_angles(rec: Record) -> Record:
+    """The record as encoder angles where both its speeds are differenced counts.
 
-
-def speed_quantum(w: np.ndarray) -> float:
-    """The step of a quantised speed, or 0 where it is not quantised.
+    Such speeds are the mean speeds over each sample, and their errors are the
+    differences of the angles' quantisation errors: a moving average that no white
+    or autoregressive model of the speeds fits. Their running sum gives the angles
+    back (:meth:`Record.with_positions`), whose quantisation errors are nearly
+    white, of variance ``q^2 / 12``: the joint estimator fits those.
 
     Parameters
     ----------
-    w : numpy.ndarray
-        Measured speed samples in rad/s.
+    rec : Record
+        A record.
 
     Returns
     -------
-    float
-        The smallest step between its distinct values in rad/s when every value is an
-        integer multiple of it (an encoder's differenced counts: ``2 pi / (N Ts)`` for
-        ``N`` counts per revolution); 0 otherwise.
+    Record
+        With angles where both speeds are quantised to the same step (:func:`speed_quantum`);
+        ``rec`` otherwise.
     """
-    u = np.unique(np.asarray(w, float))
-    if u.size < 3 or u.size > QUANTISED_SHARE * np.size(w):
-        return 0.0
-    q = float(np.min(np.diff(u)))
-    k = u / q
-    if not np.all(np.abs(k - np.round(k)) <= QUANTUM_RTOL * np.maximum(np.abs(k), 1.0)):
-        return 0.0
-    return q
+    if rec.has_positions:
+        return rec
+    q_m, q_l = speed_quantum(rec.w_motor), speed_quantum(rec.w_load)
+    if not (q_m > 0 and q_l > 0):
+        return rec
+    same = math.isclose(q_m, q_l, rel_tol=QUANTUM_RTOL)
+    return rec.with_positions(q_m * rec.ts if same else 0.0)
 
 
 def lag1(e: np.ndarray) -> float:
@@ -386,7 +383,9 @@ def held_noise_lag1(records: list[Record], prior: TwoMassDrive
     Returns
     -------
     lag1 : numpy.ndarray
-        ``(n_records, 2)`` for ``(w_M, w_L)``; NaN where the record holds no level of
+        ``(n_records, 2)`` for ``(w_M, w_L)`` (for ``(phi_M, phi_L)`` where the record
+        holds encoder angles: the angles' own lag-1 less their trend, since they are
+        fitted); NaN where the record holds no level of
         :data:`HELD_NOISE_MIN` samples, or where the speed's own motion dominates the
         differences (above 2); values between 1 and 2 (noise averaged over samples)
         count as 1.
@@ -410,11 +409,14 @@ def held_noise_lag1(records: list[Record], prior: TwoMassDrive
             continue
         samples[k] = m
         x = np.linspace(-1.0, 1.0, m)
-        for c, w in enumerate((rec.w_motor, rec.w_load)):
+        angles = rec.has_positions
+        for c, w in enumerate((rec.phi_motor, rec.phi_load) if angles
+                              else (rec.w_motor, rec.w_load)):
             y = w[i_s - m : i_s]
             y = y - np.polynomial.polynomial.polyval(  # a speed still settling: its trend
-                x, np.polynomial.polynomial.polyfit(x, y, HELD_TREND_DEGREE))
-            rho = 1.0 + 2.0 * lag1(np.diff(y))
+                x, np.polynomial.polynomial.polyfit(x, y, HELD_TREND_DEGREE + angles))
+            # an angle's noise is what is left of it; a speed's is seen in its differences
+            rho = lag1(y) if angles else 1.0 + 2.0 * lag1(np.diff(y))
             out[k, c] = min(rho, 1.0) if rho <= 2.0 else np.nan
     return out, samples
 

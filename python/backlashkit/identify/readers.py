@@ -52,11 +52,20 @@ import numpy as np
 
 from .. import validate as v
 from ..errors import InputError, Option
-from ._csv_reader import COLUMNS, DELIMITERS, FIELDS, RESAMPLE, SAMPLE_TIME, PathLike, _from_csv
+from ._csv_reader import (
+    ANGLE_FIELDS,
+    COLUMNS,
+    DELIMITERS,
+    FIELDS,
+    RESAMPLE,
+    SAMPLE_TIME,
+    PathLike,
+    _from_csv,
+)
 from ._mat_reader import _from_mat, _from_npz
 from .record import Record
 
-__all__ = ["FIELDS", "read_records", "read_torque"]
+__all__ = ["ANGLE_FIELDS", "FIELDS", "read_records", "read_torque"]
 
 
 #: Accepted speed units and their factor to rad/s.
@@ -75,6 +84,8 @@ def read_records(
     decimal: str | None = None,
     speed_unit: str = "rad/s",
     resample: str | None = None,
+    angles: bool = False,
+    counts_per_rev: float | None = None,
 ) -> list[Record]:
     """Read the step-down experiments held in a measured file.
 
@@ -102,6 +113,12 @@ def read_records(
         linearly, torque as a zero-order hold) and bridges runs of at most
         :data:`MAX_BRIDGE` missing samples; default None: non-uniform time, gaps and
         missing values are errors.
+    angles : bool, optional
+        The file holds the encoders' angles ``phi_motor``, ``phi_load`` in rad instead
+        of the speeds (:meth:`Record.from_positions`; the joint estimator fits them).
+    counts_per_rev : float, optional
+        The file holds the angles ``phi_motor``, ``phi_load`` as encoder counts, with
+        this many counts per revolution (implies ``angles``).
 
     Returns
     -------
@@ -120,6 +137,17 @@ def read_records(
     if speed_unit not in SPEED_UNITS:
         raise InputError(f"speed_unit must be 'rad/s' or 'rpm', got {speed_unit!r}")
     factor = SPEED_UNITS[speed_unit]
+    if counts_per_rev is not None:
+        v.positive("counts_per_rev", counts_per_rev)
+        angles = True
+    if angles:
+        if speed_unit != "rad/s":
+            raise InputError("speed_unit does not apply to angles (in rad, or in counts with "
+                             f"counts_per_rev), got speed_unit={speed_unit!r}")
+        return [Record.from_positions(t, data["torque"], data["phi_motor"], data["phi_load"],
+                                      counts_per_rev=counts_per_rev, name=rec_name)
+                for rec_name, t, data in _read(path, ANGLE_FIELDS, columns, sample_time,
+                                               delimiter, decimal, resample)]
     return [Record(t, data["torque"], data["w_motor"] * factor, data["w_load"] * factor,
                    name=rec_name)
             for rec_name, t, data in _read(path, FIELDS, columns, sample_time, delimiter,
@@ -228,18 +256,23 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
 
 def _check_columns(columns: Mapping[str, str] | None,
                    fields: Sequence[str] = FIELDS) -> dict[str, str]:
-    out = {f: f for f in FIELDS}
+    known = ANGLE_FIELDS if "phi_motor" in fields else FIELDS
+    out = {f: f for f in known}
     if columns is None:
         return out
     if not isinstance(columns, Mapping):
         raise InputError(
-            f"columns must be a mapping of our names {', '.join(FIELDS)} to the file's names, "
+            f"columns must be a mapping of our names {', '.join(known)} to the file's names, "
             f"got {type(columns).__name__}"
         )
     for key, value in columns.items():
-        if key not in FIELDS:
+        if key not in known:
+            other = ("; the angles phi_motor, phi_load are read with angles or counts_per_rev"
+                     if key in ANGLE_FIELDS else
+                     "; the speeds are read without angles and counts_per_rev"
+                     if key in FIELDS else "")
             raise InputError(COLUMNS, f": unknown key {key!r}; allowed keys: "
-                             f"{', '.join(FIELDS)}")
+                             f"{', '.join(known)}{other}")
         if not isinstance(value, str) or not value.strip():
             raise InputError(f"columns[{key!r}] must be a non-empty string, got {value!r}")
         out[key] = value.strip()

@@ -1,11 +1,12 @@
 """Measured experiments and the checks that refuse an unusable one.
 
 A :class:`Record` holds one uniformly sampled experiment: the motor torque and the two
-measured speeds. :func:`as_records` turns what a user passes (a Record, a tuple
+measured speeds, or the two measured angles of encoders
+(:meth:`Record.from_positions`). :func:`as_records` turns what a user passes (a Record, a tuple
 ``(t, torque, w_motor, w_load)`` or a sequence of them) into checked Records; every
 estimator calls it, so the library and the command line refuse the same records.
 
-Units are SI: s, N m, rad/s.
+Units are SI: s, N m, rad/s, rad.
 """
 
 from __future__ import annotations
@@ -50,6 +51,14 @@ class Record:
         Measured motor and load speeds in rad/s.
     name : str, optional
         Name used in messages (e.g. the file name).
+    phi_motor, phi_load : array_like, optional
+        Measured motor and load angles in rad (encoders), set by
+        :meth:`from_positions` or :meth:`with_positions`. Where they are given the
+        joint estimator fits them, not the speeds: ``w_motor`` and ``w_load`` are then
+        their differences over each sample, the mean speeds over the sample before.
+    quantum : float, optional
+        Step of the angles in rad (``2 pi`` over the encoder's counts per
+        revolution); 0 where they are not quantised or it is not known.
     """
 
     t: np.ndarray
@@ -57,23 +66,100 @@ class Record:
     w_motor: np.ndarray
     w_load: np.ndarray
     name: str = field(default="record")
+    phi_motor: np.ndarray | None = field(default=None, repr=False)
+    phi_load: np.ndarray | None = field(default=None, repr=False)
+    quantum: float = 0.0
 
     def __post_init__(self) -> None:
         t, _ = v.time_grid(self.t, name=f"{self.name}: t", min_samples=3)
         object.__setattr__(self, "t", t)
-        for col in ("torque", "w_motor", "w_load"):
+        cols = ["torque", "w_motor", "w_load"]
+        if (self.phi_motor is None) != (self.phi_load is None):
+            raise InputError(f"{self.name}: give both phi_motor and phi_load, or neither")
+        if self.phi_motor is not None:
+            cols += ["phi_motor", "phi_load"]
+        for col in cols:
             arr = v.finite_array(f"{self.name}: {col}", getattr(self, col))
             if arr.size != t.size:
                 raise InputError(
                     f"{self.name}: {col} must have one sample per t ({t.size}), got {arr.size}"
                 )
             object.__setattr__(self, col, arr)
+        q = float(self.quantum)
+        if not (math.isfinite(q) and q >= 0):
+            raise InputError(f"{self.name}: quantum must be a finite angle >= 0 in rad, "
+                             f"got {self.quantum!r}")
 
     @property
     def ts(self) -> float:
         """Sample time in s."""
         return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
 
+    @property
+    def has_positions(self) -> bool:
+        """Whether the record holds measured angles (fitted instead of the speeds)."""
+        return self.phi_motor is not None
+
+    @classmethod
+    def from_positions(cls, t: ArrayLike, torque: ArrayLike, phi_motor: ArrayLike,
+                       phi_load: ArrayLike, *, counts_per_rev: float | None = None,
+                       name: str = "record") -> Record:
+        """A record of measured angles: encoder counts, or angles in rad.
+
+        Parameters
+        ----------
+        t, torque : array_like
+            As for :class:`Record`.
+        phi_motor, phi_load : array_like
+            The motor's and load's angles: in rad, or in counts with
+            ``counts_per_rev``.
+        counts_per_rev : float, optional
+            Counts per revolution of both encoders: the angles are counts, and their
+            quantum is ``2 pi / counts_per_rev`` rad.
+        name : str, optional
+            Name used in messages.
+
+        Returns
+        -------
+        Record
+            With ``w_motor``, ``w_load`` the angles' differences over each sample
+            divided by the sample time (the first sample repeats the second's).
+        """
+        quantum = 0.0
+        phi = [v.finite_array(f"{name}: {c}", x)
+               for c, x in (("phi_motor", phi_motor), ("phi_load", phi_load))]
+        if counts_per_rev is not None:
+            cpr = v.positive("counts_per_rev", counts_per_rev)
+            quantum = 2 * math.pi / cpr
+            phi = [x * quantum for x in phi]
+        tt, _ = v.time_grid(t, name=f"{name}: t", min_samples=3)
+        ts = float((tt[-1] - tt[0]) / (tt.size - 1))
+        w = [np.r_[x[1:2] - x[0:1], np.diff(x)] / ts if x.size > 1 else x for x in phi]
+        return cls(tt, torque, w[0], w[1], name, phi[0], phi[1], quantum)
+
+    def with_positions(self, quantum: float = 0.0) -> Record:
+        """The record with its angles: the speeds summed over the samples.
+
+        For speeds that are differences of encoder counts, ``w_k = (phi_k -
+        phi_(k-1)) / Ts``: their running sum gives the angles back exactly, from 0 at the
+        first sample (whose own speed is not used).
+
+        Parameters
+        ----------
+        quantum : float, optional
+            Step of the angles in rad (the speeds' step times the sample time).
+
+        Returns
+        -------
+        Record
+            Itself where it already holds angles.
+        """
+        if self.has_positions:
+            return self
+        ts = self.ts
+        phi = [np.r_[0.0, np.cumsum(w[1:]) * ts] for w in (self.w_motor, self.w_load)]
+        return Record(self.t, self.torque, self.w_motor, self.w_load, self.name,
+                      phi[0], phi[1], quantum)
 
 
 def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
