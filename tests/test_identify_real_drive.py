@@ -267,7 +267,7 @@ def test_encoder_speeds_are_fitted_as_angles(encoder):
     """Speeds that are differenced encoder counts (issue 20's third row: +0.7 %, the
     truth 6 std outside the interval) are fitted as the encoders' angles: theta within
     3 %, and the interval no narrower than its error calls for."""
-    from backlashkit.identify.noise import speed_quantum
+    from backlashkit.identify.quantum import speed_quantum
 
     q = bk.Encoder(COUNTS).resolution / TS
     assert speed_quantum(encoder[1].w_motor) == pytest.approx(q, rel=1e-9)

@@ -114,8 +114,8 @@ from .noise import (
     held_noise_lag1,
     lag1,
     noise_coloured,
-    speed_quantum,
 )
+from .quantum import speed_quantum
 from .record import as_records, check_prior
 from .search import JointSearch
 from .step import check_fit_near_prior, check_step_downs, held_speed_gain

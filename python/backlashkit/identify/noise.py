@@ -47,7 +47,6 @@ __all__ = [
     "fit_ar",
     "held_noise_lag1",
     "innovation_ratio",
-    "speed_quantum",
     "whiten",
 ]
 
