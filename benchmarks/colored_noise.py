@@ -40,7 +40,7 @@ from backlashkit.errors import CorrelatedResidualsWarning, SensitivityWarning
 from backlashkit.identify import Record
 from backlashkit.identify.noise import ARNoise, WhiteNoise
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, T_S, THETA, TS
-from backlashkit.parallel import process_pool
+from backlashkit.parallel import ProgressBar, map_tasks
 
 
 def colored(signal: np.ndarray, snr_db: float, corr: float, rng) -> np.ndarray:
@@ -102,8 +102,8 @@ def main() -> None:
     start = time.perf_counter()
     tasks = [(s, args.corr, args.snr, args.order, args.err_p)
              for s in np.random.SeedSequence(args.seed).spawn(args.trials)]
-    with process_pool(args.jobs) as pool:
-        results = list(pool.map(trial, tasks, chunksize=1))
+    with ProgressBar("colored noise", unit="fit") as bar:
+        results = map_tasks(trial, tasks, jobs=args.jobs, progress=bar)
     bound = crb(args.snr, args.corr)
     print(f"paper A's drive and experiments, theta = {THETA:.4g} rad, noise e_t = "
           f"{args.corr:g} e_(t-1) + w_t at {args.snr:g} dB on both speeds, Err_p = "

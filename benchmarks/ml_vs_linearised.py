@@ -29,7 +29,7 @@ import robustness_joint as rj
 import backlashkit as bk
 from backlashkit.errors import SensitivityWarning
 from backlashkit.identify.joint import JointIdentifier
-from backlashkit.parallel import process_pool
+from backlashkit.parallel import ProgressBar, map_tasks
 
 NAMES = ("theta", "J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
 FD_STEP = 1e-5
@@ -85,8 +85,8 @@ def main() -> None:
     scen = {k: (d, snr) for k, d, snr, _ in rj.scenarios(0.4)}
     tasks = [(*scen[k], s) for k in rows
              for s in np.random.SeedSequence([args.seed, k]).spawn(args.trials)]
-    with process_pool(args.jobs) as pool:
-        out = np.array(list(pool.map(trial, tasks, chunksize=1)))
+    with ProgressBar("ML vs linearised", unit="fit") as bar:
+        out = np.array(map_tasks(trial, tasks, jobs=args.jobs, progress=bar))
     print(f"seed {args.seed}, {args.trials} trials per scenario, Err_p = 40 %, Fisher intervals")
     print(f"{'row':>3} {'drive':<11} {'theta':>6} {'SNR':>4} | {'z std':>5} {'lin std':>7} "
           f"{'(est-lin)/sd':>12} {'std_/sd':>11} {'cover95':>7}")

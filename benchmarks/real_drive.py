@@ -14,13 +14,17 @@
    95 % interval covers the truth with its 2-binomial-standard-deviation band, how
    often ``friction="auto"`` and ``actuator="auto"`` kept each term, and the median
    rise of ``-2 log L`` and shift of ``theta`` (in its standard errors) without the
-   current loop (``TermChoice``).
+   current loop (``TermChoice``). The Cramér-Rao bound of theta for the model with the
+   scenario's terms (``CRB %``, analogue speeds only) and the number of fits beyond
+   max(5 %, 3 CRB) (``beyond``). ``--effects extended`` runs the extended scenarios:
+   half and three times the Coulomb torques, loops of 0.5 and 2 ms, encoders of 4 096
+   and 65 536 counts.
 2. ``--speed``: paper A's two 80 s records (its protocol at Err_p 0.3, one seed) fitted
    with ``friction="viscous"``, ``"coulomb"`` and the default ``"auto"`` (the last two
    against the first, as ratios of medians), one worker thread, in one process.
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
-[--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three"]
+[--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
 [--speed --repeats 3]``.
 """
 
@@ -36,6 +40,7 @@ import warnings
 import numpy as np
 
 import backlashkit as bk
+from backlashkit.identify.crb import LINEAR_PARAMS, cramer_rao_bound
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA, protocol_records
 from backlashkit.parallel import ProgressBar, map_tasks
 from backlashkit.verify import reference_angles, reference_simulate
@@ -51,6 +56,31 @@ EFFECTS = {"ideal": ((0.0, 0.0), 0.0, 0), "coulomb": ((0.01, 0.02), 0.0, 0),
            "loop 1 ms": ((0.0, 0.0), 1e-3, 0), "coulomb + loop": ((0.01, 0.02), 1e-3, 0),
            "encoder": ((0.0, 0.0), 0.0, 16384),
            "all three": ((0.01, 0.02), 1e-3, 16384)}
+#: The extended scenarios: half and three times the Coulomb torques, a faster and a
+#: slower loop, a coarser and a finer encoder (``--effects extended``).
+EXTENDED = {"coulomb x0.5": ((0.005, 0.01), 0.0, 0), "coulomb x3": ((0.03, 0.06), 0.0, 0),
+            "loop 0.5 ms": ((0.0, 0.0), 5e-4, 0), "loop 2 ms": ((0.0, 0.0), 2e-3, 0),
+            "encoder 4096": ((0.0, 0.0), 0.0, 4096),
+            "encoder 65536": ((0.0, 0.0), 0.0, 65536)}
+#: Errors are judged against max(ERR_FLOOR, CRB_FACTOR x the Cramér-Rao bound of the
+#: model with the scenario's terms (issue 20's bar).
+ERR_FLOOR, CRB_FACTOR = 0.05, 3.0
+#: Entropy word of the extended scenarios' seeds.
+EXTENDED_STREAM = 1
+
+
+def crb_theta(linear, theta, fc, tau_i) -> float:
+    """Cramér-Rao bound (rad) of theta from both records at the study's SNR, for the
+    model with the scenario's terms estimated: theta, the six linear parameters, the
+    Coulomb torques where the drive has them and the loop's lag where it has one."""
+    drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
+    names = ["theta", *LINEAR_PARAMS] + (["fc_M", "fc_L"] if fc[0] else []) + (
+        ["tau_i"] if tau_i else [])
+    t = bk.signals.time_grid(T_END, TS)
+    bounds = [cramer_rao_bound(drive, t, bk.signals.step_down(t, a, t_s=T_STEP), snr_db=SNR,
+                               estimate=names, initial_state="steady", tau_i=tau_i)
+              for a in (A1, A2)]
+    return (bounds[0] + bounds[1]).theta_std
 def clean_records(linear, theta, fc, tau_i, counts=0):
     """The noise-free reference records of one scenario: ``(t, u, w_M, w_L)``, or with
     encoders ``(t, u, phi_M, phi_L)``, the exact angles."""
@@ -98,27 +128,39 @@ def one_trial(task, seed):
 
 def coverage(args) -> None:
     print(f"{'drive':<7} {'has':<15} {'answered':>8} {'|err| med %':>11} {'max %':>7} "
-          f"{'cover':>6} {'2-sigma band':>14} {'fc kept':>8} {'loop kept':>9} "
-          f"{'loop rise':>9} {'shift':>6} {'s':>6}")
+          f"{'CRB %':>6} {'beyond':>6} {'cover':>6} {'2-sigma band':>14} {'fc kept':>8} "
+          f"{'loop kept':>9} {'loop rise':>9} {'shift':>6} {'s':>6}")
     root = np.random.SeedSequence(args.seed)
     drives = {"paper": (P_TRUE, THETA), "other": OTHER}
-    for (dname, (linear, theta)), ss in zip(drives.items(), root.spawn(2), strict=True):
+    for i, ((dname, (linear, theta)), ss) in enumerate(zip(drives.items(), root.spawn(2),
+                                                          strict=True)):
         if dname not in args.drives:
             continue
-        for (ename, (fc, tau, counts)), ss2 in zip(EFFECTS.items(), ss.spawn(len(EFFECTS)),
-                                                   strict=True):
-            if ename not in args.effects:
-                continue
-            t0 = time.perf_counter()
-            clean = clean_records(linear, theta, fc, tau, counts)
-            bar = ProgressBar(f"{dname}, {ename}", quiet=False)
-            res = map_tasks(one_trial, [(linear, theta, clean, counts)] * args.trials,
-                            jobs=args.jobs, seed=ss2, progress=bar)
-            bar.close()
-            _print_row(dname, ename, theta, res, time.perf_counter() - t0)
+        # the extended scenarios draw from a stream of their own, so adding them left
+        # the first six rows' seeds as they were
+        extended = np.random.SeedSequence([args.seed, EXTENDED_STREAM, i])
+        for table, seeds in ((EFFECTS, ss.spawn(len(EFFECTS))),
+                             (EXTENDED, extended.spawn(len(EXTENDED)))):
+            for (ename, effect), ss2 in zip(table.items(), seeds, strict=True):
+                if ename in args.effects:
+                    _scenario(args, dname, linear, theta, ename, effect, ss2)
 
 
-def _print_row(dname, ename, theta, res, seconds) -> None:
+def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
+    """Run and print one scenario's row."""
+    fc, tau, counts = effect
+    t0 = time.perf_counter()
+    clean = clean_records(linear, theta, fc, tau, counts)
+    # quantised angles are not white Gaussian noise: no bound is printed for encoders
+    crb = math.nan if counts else crb_theta(linear, theta, fc, tau)
+    bar = ProgressBar(f"{dname}, {ename}", quiet=False)
+    res = map_tasks(one_trial, [(linear, theta, clean, counts)] * args.trials,
+                    jobs=args.jobs, seed=seed, progress=bar)
+    bar.close()
+    _print_row(dname, ename, theta, res, crb, time.perf_counter() - t0)
+
+
+def _print_row(dname, ename, theta, res, crb, seconds) -> None:
     ok = [r for r in res if "theta" in r]
     err = [abs(r["theta"] / theta - 1) * 100 for r in ok]
     n = len(ok)
@@ -130,9 +172,12 @@ def _print_row(dname, ename, theta, res, seconds) -> None:
     rise = statistics.median(rises) if rises else math.nan
     shifts = [r["shift"]["actuator"] for r in ok if "actuator" in r["shift"]]
     shift = statistics.median(shifts) if shifts else math.nan
+    limit = 100 * max(ERR_FLOOR, CRB_FACTOR * crb / theta) if crb == crb else 100 * ERR_FLOOR
+    beyond = sum(e > limit for e in err)
     print(f"{dname:<7} {ename:<15} {n:>4}/{len(res):<3} "
           f"{statistics.median(err) if err else math.nan:>11.2f} "
-          f"{max(err) if err else math.nan:>7.2f} {cover:>6.1%} "
+          f"{max(err) if err else math.nan:>7.2f} {100 * crb / theta:>6.2f} {beyond:>6d} "
+          f"{cover:>6.1%} "
           f"{f'{0.95 - band:.1%}-{0.95 + band:.1%}':>14} {kept['friction']:>8.1%} "
           f"{kept['actuator']:>9.1%} {rise:>9.3g} {shift:>6.2f} {seconds:>6.0f}", flush=True)
     for r in res:
@@ -169,12 +214,14 @@ def main(argv=None) -> int:
     p.add_argument("--drives", default="paper,other",
                    help="comma-separated drives of the coverage study (paper, other)")
     p.add_argument("--effects", default=",".join(EFFECTS),
-                   help=f"comma-separated scenarios (default all: {', '.join(EFFECTS)})")
+                   help=f"comma-separated scenarios (default: {', '.join(EFFECTS)}; "
+                        f"'extended': {', '.join(EXTENDED)})")
     p.add_argument("--speed", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args(argv)
     args.drives = args.drives.split(",")
-    args.effects = args.effects.split(",")
+    args.effects = [e for name in args.effects.split(",")
+                    for e in (EXTENDED if name == "extended" else [name])]
     (speed if args.speed else coverage)(args)
     return 0
 

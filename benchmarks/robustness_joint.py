@@ -69,7 +69,7 @@ from backlashkit.identify.crb import cramer_rao_bound
 from backlashkit.identify.intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood
 from backlashkit.identify.joint import JointIdentifier
 from backlashkit.identify.search import Continuation, FirstHorizon, JointSearch, Restarts, ThetaGrid
-from backlashkit.parallel import process_pool
+from backlashkit.parallel import ProgressBar, map_tasks
 
 BASE = dict(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=0.5e-2, f_L=0.5e-2, f_sh=1.575e-2)
 #: load inertia -> label (ratio J_L / J_M about 2, 14, 50)
@@ -246,8 +246,8 @@ def main() -> None:
             if args.bootstrap:
                 opts["interval"] = ParametricBootstrap(args.bootstrap, seed=i)
             tasks.append((d, snr, e, s, opts, args.corr, args.torque_noise))
-    with process_pool(args.jobs) as pool:
-        results = list(pool.map(trial, tasks, chunksize=1))
+    with ProgressBar("robustness", unit="fit") as bar:
+        results = map_tasks(trial, tasks, jobs=args.jobs, progress=bar)
     if args.dump:
         rows = [{"scenario": k, "trial": i, "drive": INERTIAS[d.J_L], "theta": d.theta,
                  "theta_deg": math.degrees(d.theta), "snr_db": snr,

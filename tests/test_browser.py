@@ -6,7 +6,7 @@ a reader's browser does. For each page the test asserts that every ``<img>`` loa
 it keeps a screenshot of the whole page in ``$BACKLASHKIT_ARTEFACTS`` (default: the
 test's ``tmp_path``). The pages are those of ``make demo`` (the drive plot and the
 ``reproduce tao1995`` report), the ``identify --report`` page of the two-step and the
-joint method, and a small ``reproduce ravanbod2002`` report.
+joint method, a small ``reproduce ravanbod2002`` report and the fleet's wear report.
 
 Where no Chromium can be found, the tests skip and say so.
 """
@@ -182,12 +182,34 @@ def _ravanbod2002(out: Path) -> Path:
     return out / "ravanbod2002" / "index.html"
 
 
+def _fleet_wear(out: Path) -> Path:
+    """``fleet --report``'s wear page from a results table of three drives (one wearing
+    fast, one steady, one with a refused test), 12 weekly tests each."""
+    import datetime as dt
+
+    from backlashkit.fleet import write_wear_report
+
+    rng = np.random.default_rng(5)
+    rows = []
+    for drive, rate in (("drive-001", 0.05), ("drive-002", 0.0), ("drive-003", 0.01)):
+        for k in range(12):
+            theta = 0.035 + rate * 7 * k / 365.25 + 2e-4 * rng.standard_normal()
+            day = (dt.date(2026, 1, 5) + dt.timedelta(days=7 * k)).isoformat()
+            rows.append({"drive": drive, "date": day, "status": "ok", "theta": theta,
+                         "std": 2e-4, "ci95_low": theta - 4e-4, "ci95_high": theta + 4e-4,
+                         "reason": ""})
+    rows[-1] = {"drive": "drive-003", "date": rows[-1]["date"], "status": "refused",
+                "theta": None, "reason": "e.csv: file not found"}
+    return write_wear_report(rows, out / "wear")
+
+
 PAGES = {
     "demo_drive_plot": _demo_drive_plot,
     "demo_tao1995": _demo_tao1995,
     "identify_two_step": _identify("two-step", _record_csv),
     "identify_joint": _identify("joint", _from_rest_csv),
     "reproduce_ravanbod2002": _ravanbod2002,
+    "fleet_wear_report": _fleet_wear,
 }
 
 

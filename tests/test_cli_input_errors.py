@@ -352,6 +352,8 @@ def test_a_regression_at_zero_says_so(exp, exp_csv, capsys):
     ("argv", "message"),
     [
         (["--seed", "3"], "--seed only applies with --bootstrap"),
+        (["--jobs", "2"], "--jobs only applies with --bootstrap"),
+        (["--jobs", "0", "--bootstrap", "3"], "jobs must be an integer >= 1"),
         (["--n-theta", "0.2"], "--n-theta only applies with --method two-step"),
         (["--cutoff-load", "10", "--method", "regression"],
          "--cutoff-load only applies with --method two-step"),

@@ -134,11 +134,13 @@ OLGAC_B = np.array([[-5.9, 7.1, -70.3], [2.0, -1.0, 5.0], [2.0, 0.0, 6.0]])
 @pytest.mark.parametrize("method", METHODS)
 def test_olgac_sipahi_2002_two_windows(method):
     """Olgac & Sipahi, IEEE TAC 47(5) 2002, example: stable for tau in [0, 0.1624) and
-    (0.1859, 0.2219), unstable beyond, as recalled from the paper. Neither the matrices
-    nor these figures could be found in the reference store: both are written from
-    memory. The computed edges are 0.162346, 0.185906, 0.221985: they match the
-    recalled figures to 3 decimals but not all to 4 (0.16235 is 0.1623 either rounded
-    or truncated), so the test asserts 3 decimals and the two-window structure."""
+    (0.1859, 0.2219), unstable beyond. The matrices are confirmed by an independent copy:
+    example 3 of Haag, Muenz & Allgoewer (2009) as transcribed in the glob_stab examples
+    (github.com/schauss/glob_stab, examples/haag2009/haag2009examples.m). The window
+    edges are recalled from the paper, not confirmed. The computed edges are 0.162346,
+    0.185906, 0.221985: they match the recalled figures to 3 decimals but not all to 4
+    (0.16235 is 0.1623 either rounded or truncated), so the test asserts 3 decimals and
+    the two-window structure."""
     r = delay_margin(OLGAC_A, [OLGAC_B], method=method)
     windows = r.stability_windows((0.0, 2.0))
     assert len(windows) == 2

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from backlashkit.cli import main
@@ -221,3 +222,17 @@ def test_progress_is_silent_when_stderr_is_no_terminal(fleet, serial, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
     assert "6 tests: 6 identified, 0 refused" in proc.stdout
+
+
+def test_truth_table_holds_plain_numbers(fleet):
+    """TRUTH.csv: every value but the drive's name reads back as a float, equal to the
+    truth returned (it once held ``np.float64(...)`` strings)."""
+    import csv
+
+    with open(fleet.manifest.parent / "TRUTH.csv", encoding="utf-8", newline="") as fh:
+        rows = [r for r in csv.reader(fh) if r and not r[0].startswith("#")]
+    header, body = rows[0], rows[1:]
+    assert [r[0] for r in body] == fleet.drives
+    values = np.array([[float(x) for x in r[1:]] for r in body])
+    np.testing.assert_array_equal(values[:, header.index("theta0") - 1], fleet.theta0)
+    np.testing.assert_array_equal(values[:, header.index("rate_rad_per_year") - 1], fleet.rate)

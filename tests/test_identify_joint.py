@@ -292,6 +292,9 @@ def test_parametric_bootstrap(short):
     assert 0.3 < e.std_ / f.std_ < 3
     again = JointIdentifier(prior, interval=boot).fit(rec)
     np.testing.assert_array_equal(again.bootstrap_thetas_, e.bootstrap_thetas_)
+    # the refits pickled to two worker processes: the same refits, bit for bit
+    pooled = JointIdentifier(prior, interval=bk.ParametricBootstrap(6, seed=3, jobs=2)).fit(rec)
+    np.testing.assert_array_equal(pooled.bootstrap_thetas_, e.bootstrap_thetas_)
 
 
 @pytest.mark.parametrize(

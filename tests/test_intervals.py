@@ -103,10 +103,40 @@ def test_each_interval_computes_its_own():
 
     draws = iter([0.9, 1.1, 1.0])
     fit = IntervalInputs(theta=1.0, std=0.6, z=np.zeros(1), cov_z=np.eye(1), cost=0.0,
-                         residual=None, fd_step=1e-6, refit=lambda rng: next(draws))
+                         residual=None, fd_step=1e-6, resample=lambda rng: None,
+                         refit=lambda records: next(draws))
     fisher = bk.FisherInterval()._interval(fit)
     assert fisher.kind == "fisher" and fisher.ci95 == (0.0, 1.0 + 1.96 * 0.6)  # cut at 0
     boot = bk.ParametricBootstrap(3)._interval(fit)
     assert boot.kind == "bootstrap" and boot.std == pytest.approx(0.1)
     assert boot.ci95 == pytest.approx((1.0 - 4.3027 * 0.1, 1.0 + 4.3027 * 0.1), rel=1e-4)
     assert boot.bootstrap_thetas.tolist() == [0.9, 1.1, 1.0] and boot.lowest_rise == 0.0
+
+
+def _refit_from_seed(records):
+    """A picklable refit: the resample here is the noise draw itself."""
+    return float(records)
+
+
+def test_bootstrap_refits_anywhere_give_the_same_interval():
+    """The resamples are drawn in order in the caller; the refits (picklable) may run
+    serially, on a process pool or on any executor, with the same answer bit for bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numpy as np
+
+    from backlashkit.identify.intervals import IntervalInputs
+
+    fit = IntervalInputs(theta=1.0, std=0.6, z=np.zeros(1), cov_z=np.eye(1), cost=0.0,
+                         residual=None, fd_step=1e-6,
+                         resample=lambda rng: 1.0 + 0.1 * rng.standard_normal(),
+                         refit=_refit_from_seed)
+    serial = bk.ParametricBootstrap(8, seed=4)._interval(fit)
+    pooled = bk.ParametricBootstrap(8, seed=4, jobs=2)._interval(fit)
+    with ThreadPoolExecutor(2) as ex:
+        threaded = bk.ParametricBootstrap(8, seed=4, executor=ex)._interval(fit)
+    for other in (pooled, threaded):
+        np.testing.assert_array_equal(other.bootstrap_thetas, serial.bootstrap_thetas)
+        assert other.ci95 == serial.ci95
+    with ThreadPoolExecutor(1) as ex, pytest.raises(bk.InputError, match="executor or jobs"):
+        bk.ParametricBootstrap(8, jobs=2, executor=ex)

@@ -70,7 +70,8 @@ def _interval_inputs():
 
     draws = iter([0.9, 1.1, 1.0])
     return IntervalInputs(theta=1.0, std=0.6, z=np.zeros(1), cov_z=np.eye(1), cost=0.0,
-                          residual=None, fd_step=1e-6, refit=lambda rng: next(draws))
+                          residual=None, fd_step=1e-6, resample=lambda rng: None,
+                          refit=lambda records: next(draws))
 
 
 def test_bootstrap_refits_report_their_progress(monkeypatch):
@@ -114,3 +115,29 @@ def test_identify_bootstrap_draws_its_bar_on_stderr(short_csv, monkeypatch, caps
     assert doc["interval"] == "bootstrap"
     drawn = term.getvalue()
     assert ("bootstrap" in drawn and "2/2" in drawn) is not quiet, drawn
+
+
+def test_joint_fit_reports_its_stages(short_csv, monkeypatch, capsys):
+    """``JointIdentifier(progress=callable)`` hears every stage of the search, in order,
+    up to the last; the CLI's joint fit draws an "identify" bar on a terminal stderr."""
+    from pathlib import Path
+
+    import backlashkit as bk
+    from backlashkit.identify.readers import read_records
+    from backlashkit.io import read_drive_toml
+
+    drive = Path(__file__).resolve().parents[1] / "examples" / "paper_drive.toml"
+    heard = []
+    fit = bk.JointIdentifier(read_drive_toml(drive, require_theta=False),
+                             interval=bk.FisherInterval(),
+                             progress=lambda done, total: heard.append((done, total)))
+    fit.fit(read_records(short_csv))
+    total = heard[-1][1]
+    assert total in (7, 14) and heard[-1][0] == total
+    assert [d for d, _ in heard] == list(range(1, total + 1))
+    assert "progress" not in repr(bk.JointIdentifier(fit.prior))
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    assert main(["identify", str(short_csv), "--drive", str(drive), "--interval",
+                 "fisher"]) == 0
+    assert "identify" in term.getvalue() and "7/7" in term.getvalue()

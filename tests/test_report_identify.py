@@ -197,7 +197,7 @@ def test_plot_helpers_take_ax_and_return_figure(record, fitted):
     assert isinstance(plot_cost([0.0, 0.01], [1.0, 2.0]), Figure)
 
 
-def test_cli_hook(tmp_path, record):
+def test_cli_hook(tmp_path, record, capsys):
     parser = add_report_option(argparse.ArgumentParser())
     result = SimpleNamespace(theta_=0.02)
     args = parser.parse_args([])
@@ -206,6 +206,7 @@ def test_cli_hook(tmp_path, record):
     args = parser.parse_args(["--report", str(tmp_path / "cli")])
     index = maybe_write_report(args, [record], result, PRIOR)
     assert index is not None and index.is_file()
+    assert capsys.readouterr().err == f"backlashkit: wrote {index}\n"  # says where
     with pytest.raises(InputError, match="--force"):
         maybe_write_report(args, [record], result, PRIOR)
     args = parser.parse_args(["--report", str(tmp_path / "cli"), "--force"])

@@ -45,7 +45,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["ProgressBar", "dask_client", "iter_tasks", "map_tasks", "process_pool",
-           "task_seeds"]
+           "reporter", "task_seeds"]
 
 #: Seconds to wait for a Dask scheduler before calling it unreachable: a scheduler on
 #: the network answers in well under a second; the default of distributed (30 s) makes
@@ -133,6 +133,8 @@ class ProgressBar:
             self._bar = tqdm(total=total, initial=done, desc=self.desc, unit=self.unit,
                              file=self.stream, dynamic_ncols=True)
         else:
+            if total != self._bar.total:  # the work grew (e.g. a second search)
+                self._bar.total = total
             self._bar.update(done - self._bar.n)
 
     def close(self) -> None:
@@ -411,3 +413,30 @@ def dask_client(
                          f"({reason[:160]}); is it running? check the address") from None
     with client:
         yield client
+
+
+@contextmanager
+def reporter(progress: bool | Callable[[int, int], None], desc: str, *,
+             unit: str = "fit") -> Iterator[Callable[[int, int], None]]:
+    """The ``progress(done, total)`` callable that a ``progress=`` option asks for.
+
+    Parameters
+    ----------
+    progress : bool or callable
+        True: a :class:`ProgressBar` made here (and closed on exit), drawn only on a
+        terminal; a callable: the caller's own, left open; False: one that does nothing.
+    desc, unit : str
+        The bar's label and the name of one step, when it is made here.
+
+    Yields
+    ------
+    callable
+        ``progress(done, total)``.
+    """
+    if callable(progress):
+        yield progress
+    elif progress:
+        with ProgressBar(desc, unit=unit) as bar:
+            yield bar
+    else:
+        yield lambda done, total: None

@@ -4,6 +4,7 @@ its wear."""
 from __future__ import annotations
 
 import argparse
+import sys
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -104,5 +105,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(rows)} tests: {len(rows) - len(refused)} identified, {len(refused)} "
           f"refused; results in {args.out}")
     if report is not None:
-        print(f"report: {write_wear_report(rows, report, **thresholds)}")
+        print(f"backlashkit: wrote {write_wear_report(rows, report, **thresholds)}",
+              file=sys.stderr)
     return 0

@@ -190,8 +190,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    "is an error)")
     p.add_argument("--json", action="store_true", help="print only a JSON object on stdout")
     p.add_argument("--quiet", action="store_true",
-                   help="no progress bar of the --bootstrap refits on stderr (there is none "
-                   "when stderr is not a terminal either)")
+                   help="no progress bar on stderr (of the joint fit's stages and of the "
+                   "--bootstrap refits; there is none when stderr is not a terminal either)")
     add_report_option(p)
     p.set_defaults(func=run)
     return p
@@ -216,6 +216,9 @@ def _add_joint_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None,
                    help="joint --bootstrap: seed of the resamples' noise (default "
                    f"{_default(ParametricBootstrap, 'seed')})")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="joint --bootstrap: run the refits on N processes (the same "
+                   "result as on one; default 1)")
     p.add_argument(
         "--noise", choices=("auto", "white", "ar"), default=None,
         help="joint: measurement noise model, white, autoregressive (for filtered "
@@ -337,6 +340,8 @@ def _check_options(args: argparse.Namespace) -> None:
             raise InputError(f"{option} only applies with --method two-step")
     if args.seed is not None and args.bootstrap is None:
         raise InputError("--seed only applies with --bootstrap (the seed of its resamples)")
+    if args.jobs is not None and args.bootstrap is None:
+        raise InputError("--jobs only applies with --bootstrap (the processes of its refits)")
     if args.final and args.method == "regression":
         raise InputError("--final only applies with --method two-step")
     if args.bootstrap is not None and args.interval is not None:
@@ -443,7 +448,8 @@ def _joint_identifier(args: argparse.Namespace, prior: Any) -> Any:
     if args.bootstrap is not None:
         seed = {} if args.seed is None else {"seed": args.seed}
         # a bar on stderr unless --quiet; the library draws it only on a terminal
-        interval = ParametricBootstrap(args.bootstrap, **seed, progress=not args.quiet)
+        interval = ParametricBootstrap(args.bootstrap, **seed, progress=not args.quiet,
+                                       jobs=args.jobs)
     order = {} if args.noise_order is None else {"order": args.noise_order}
     noise_model: Any = WhiteNoise()
     if args.noise == "ar":
@@ -458,7 +464,8 @@ def _joint_identifier(args: argparse.Namespace, prior: Any) -> Any:
     return JointIdentifier(prior, prior_rel_std=rel, interval=interval,
                            noise_model=noise_model, **terms,
                            search=JointSearch(final_horizon=args.final_horizon),
-                           allow_far_from_prior=args.allow_far_from_prior)
+                           allow_far_from_prior=args.allow_far_from_prior,
+                           progress=not args.quiet)
 
 
 def _current_loop(text: str) -> Any:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -70,7 +71,9 @@ def maybe_write_report(
     if args.report is None:
         return None
     with flag_names({"force": "--force"}):
-        return write_identification_report(
+        index = write_identification_report(
             args.report, records, result, prior=prior, force=bool(args.force),
             final_records=final_records,
         )
+    print(f"backlashkit: wrote {index}", file=sys.stderr)
+    return index

@@ -43,7 +43,7 @@ PUBLISHED = [
     ("Olgac & Sipahi 2002 (3x3)",
      np.array([[-1.0, 13.5, -1.0], [-3.0, -1.0, -2.0], [-2.0, -1.0, -4.0]]),
      [np.array([[-5.9, 7.1, -70.3], [2.0, -1.0, 5.0], [2.0, 0.0, 6.0]])], None, 0.1624,
-     "Olgac & Sipahi 2002 (recalled)"),
+     "Olgac & Sipahi 2002 (matrices as in Haag et al. 2009, ex. 3)"),
 ]
 
 #: Paper B, Section IV: plant and the backlash slopes (true, initial estimate).

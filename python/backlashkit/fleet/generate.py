@@ -236,7 +236,7 @@ def generate_fleet(
     _write_table(manifest, list(MANIFEST_COLUMNS), [r for d in done for r in d[0]], force)
     names = list(P_TRUE)
     _write_table(root / "TRUTH.csv", ["drive", "theta0", "rate_rad_per_year", *names],
-                 [[n, repr(d[2]), repr(d[3]), *(repr(d[1][k]) for k in names)]
+                 [[n, repr(float(d[2])), repr(float(d[3])), *(repr(float(d[1][k])) for k in names)]
                   for n, d in zip(drives, done, strict=True)], force)
     return FleetTruth(manifest=manifest, drives=drives,
                       theta0=np.array([d[2] for d in done]),

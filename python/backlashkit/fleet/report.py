@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..htmlpage import figure, page, save_figure, table
-from .wear import GROWTH_THRESHOLD, DriveTrend, wear_trends
+from .wear import GROWTH_THRESHOLD, MIN_TREND_TESTS, DriveTrend, wear_trends
 
 __all__ = ["check_report_dir", "plot_drives", "plot_rates", "plot_theta_distribution",
            "write_wear_report"]
@@ -138,6 +138,9 @@ def plot_theta_distribution(trends: Sequence[DriveTrend], *, ax=None):
     ax.hist(last, bins=bins, histtype="step", lw=2, color=_FLAG, label="at the last test")
     ax.set_xlabel("backlash half-width theta (mrad)")
     ax.set_ylabel("drives")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # drives come whole
     ax.set_title(f"The fleet's backlash ({len(trends)} drives, trend line values)")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=8)
     return ax.figure
@@ -222,9 +225,15 @@ def _why(t: DriveTrend, growth_threshold: float) -> str:
 
 def _trend_rows(trends: Sequence[DriveTrend], growth_threshold: float) -> list[list[Any]]:
     return [[t.drive, t.n_tests, f"{t.first} to {t.last}", _fmt(t.slope),
-             f"[{_fmt(t.ci95_low)}, {_fmt(t.ci95_high)}]", _fmt(t.theta_first),
-             _fmt(t.theta_last), _fmt(t.growth),
-             (_why(t, growth_threshold), "miss") if t.flagged else ""] for t in trends]
+             _interval(t), _fmt(t.theta_first), _fmt(t.theta_last), _fmt(t.growth),
+             (_why(t, growth_threshold), "miss") if t.flagged else "none"] for t in trends]
+
+
+def _interval(t: DriveTrend) -> str:
+    """Sen's interval in mrad/yr, or why there is none."""
+    if math.isnan(t.ci95_low) or math.isnan(t.ci95_high):
+        return f"needs {MIN_TREND_TESTS} tests"
+    return f"[{_fmt(t.ci95_low)}, {_fmt(t.ci95_high)}]"
 
 
 def write_wear_report(

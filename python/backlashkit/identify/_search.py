@@ -276,10 +276,12 @@ class Uncertain:
 
 
 def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_iter: int,
-                refit: Callable[[np.ndarray, np.random.Generator], float]) -> Uncertain:
+                draw: Callable[[np.ndarray, np.random.Generator], list[Record]],
+                refit: Callable[[list[Record]], float]) -> Uncertain:
     """Stage 8: Gauss-Newton covariance and the interval object's interval; a profile
     refit well below the estimate's cost moves the estimate there (at most
-    :data:`RECENTRE_MAX` times). ``refit(z, rng)``: the bootstrap's refit."""
+    :data:`RECENTRE_MAX` times). ``draw(z, rng)``: a bootstrap resample at ``z``;
+    ``refit(records)``: its ``theta``."""
     for k_centre in range(RECENTRE_MAX + 1):
         z = best.z
         # the prior's rows are in the residual: its information is in J^T J
@@ -295,7 +297,7 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         found = interval._interval(IntervalInputs(
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
-            pb.fd_step, partial(refit, z)))
+            pb.fd_step, partial(draw, z), refit))
         if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
             break
         st = pb.refine(rows_unc, found.lowest_z, max_iter)
@@ -450,13 +452,20 @@ class Outcome:
     choices: list[TermChoice]  # the likelihood-ratio tests of the "auto" terms
 
 
+#: Stages of :func:`run` reported to its ``stage`` callback: the starts, the first
+#: window, the continuation, the whole records, the noise, the model's terms and the
+#: uncertainty.
+STAGES = 7
+
+
 def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record], *,
         start_drive: TwoMassDrive, z_anchor: np.ndarray, fixed_noise: bool, noise_model,
-        interval, refit: Callable[[list[Record]], float], terms: Sequence[Term] = ()
-        ) -> Outcome:
+        interval, refit: Callable[[list[Record]], float], terms: Sequence[Term] = (),
+        stage: Callable[[int], None] = lambda done: None) -> Outcome:
     """The whole search from ``z_anchor`` (log linear parameters, then the added
     terms'), the noise levels, the choice of the ``"auto"`` terms, the uncertainty and
-    the interval. ``refit(records)``: ``theta`` of a bootstrap resample's fit."""
+    the interval. ``refit(records)``: ``theta`` of a bootstrap resample's fit;
+    ``stage(k)``: called as each of the :data:`STAGES` stages ends."""
     short = [search.first.horizon, *search.continuation.horizons]
     rows0 = pb.residual(pb.screen, short[0], sigma)
     zg, minima = grid_minima(pb, rows0, search.grid, z_anchor)
@@ -469,8 +478,10 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
         if two_step is not None:
             starts.append(two_step[0])
             z_starts.append(np.concatenate([[math.log(two_step[0])], z_anchor]))
+    stage(1)
     box = widen_box(pb, search.first.box(search.grid.theta_max, z_anchor))
     states = first_window(pb, rows0, z_starts, search.first, box)
+    stage(2)
     cont, max_iter = search.continuation, search.max_iter
     cands = distinct(states, cont.candidates, CONTINUE_RATIO * states[0].cost)
     # two paths, the second finer and from the best candidate only: a long step can
@@ -491,24 +502,29 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
         states.sort(key=lambda st: st.cost)
         extra = distinct(states, cont.ambiguity_starts, math.inf, taken=cands)
         ends += continue_on(pb, paths[0], extra, windows, sigma, max_iter)
+    stage(3)
     final_h = search.final_horizon
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
     best = whole_record(pb, ends, rows_full, max_iter)
     best = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
                    search.restarts, max_iter)
+    stage(4)
     best, sig = reestimate_noise(pb, best, sigma, final_h, len(recs),
                                  0 if fixed_noise else search.noise_iter, max_iter)
+    stage(5)
     pb, best, choices = select_terms(pb, best, sig, final_h, terms, recs, max_iter)
     best, sig, ar = whiten_noise(pb, best, sig, noise_model, len(recs), search.noise_iter,
                                  max_iter)
+    stage(6)
     # a model that explains a speed worse than its mean has fitted nothing: say so
     # before the uncertainty (whose refits at such a point can take minutes)
     checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
     refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1])
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
     unc = uncertainty(pb, best, rows_unc, interval, max_iter,
-                      partial(_refit_resample, pb, sig, ar, refit))
+                      partial(_resample_at, pb, sig, ar), refit)
     unc.interval = widened(unc.interval, choices)
+    stage(7)
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
         sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
     return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices)
@@ -526,7 +542,6 @@ def widen_box(pb: Problem, box: tuple[np.ndarray, np.ndarray] | None
     return lo, hi
 
 
-def _refit_resample(pb: Problem, sig: np.ndarray, ar: np.ndarray | None,
-                    refit: Callable[[list[Record]], float], z: np.ndarray,
-                    rng: np.random.Generator) -> float:
-    return refit(resample(pb, z, sig, ar, rng))
+def _resample_at(pb: Problem, sig: np.ndarray, ar: np.ndarray | None, z: np.ndarray,
+                 rng: np.random.Generator) -> list[Record]:
+    return resample(pb, z, sig, ar, rng)

@@ -17,12 +17,16 @@ import numpy as np
 from .. import validate as v
 from ..errors import InputError
 from ..plants import TwoMassDrive
-from ._model import LINEAR_PARAMS, drive_with, rel_std
+from ._model import LINEAR_PARAMS, drive_with, initial_states, packed_row, rel_std
 from .noise import innovation_ratio, whiten
 
 __all__ = ["CramerRaoBound", "cramer_rao_bound"]
 
 ArrayLike = Sequence[float] | np.ndarray
+
+#: Terms beyond the linear model that the bound can count as estimated: the Coulomb
+#: torques of the drive and the current loop's time constant (``tau_i=``).
+EXTRA_PARAMS = ("fc_M", "fc_L", "tau_i")
 
 @dataclass(frozen=True)
 class CramerRaoBound:
@@ -87,9 +91,10 @@ def cramer_rao_bound(
     estimate: Sequence[str] | str = ("theta",),
     prior_rel_std: None | float | Mapping[str, float] = None,
     law: str = "paper",
-    initial_state: ArrayLike | None = None,
+    initial_state: ArrayLike | str | None = None,
     fd_step: float = 1e-6,
     noise_ar: ArrayLike | None = None,
+    tau_i: float = 0.0,
 ) -> CramerRaoBound:
     """Cramér-Rao bound of ``theta`` from both measured speeds with white or AR noise.
 
@@ -114,13 +119,20 @@ def cramer_rao_bound(
     estimate : sequence of str or "all", optional
         Parameters estimated: ``("theta",)`` (default, linear parameters known) or
         ``"all"`` (theta and the six linear parameters) or any list with ``"theta"``.
+        The list may also hold ``"fc_M"``, ``"fc_L"`` (the drive's Coulomb torques,
+        N m) and ``"tau_i"`` (the current loop's time constant, s): the bound of the
+        larger model that :class:`~backlashkit.identify.joint.JointIdentifier` fits
+        when it keeps those terms. Each must be non-zero.
     prior_rel_std : None, float or dict, optional
         Relative std of a Gaussian prior on the linear parameters, added to the
         information as ``1 / (rel_std p)^2`` (as in :class:`JointIdentifier`).
     law : {"paper", "no-pull"}, optional
         Contact law (default ``"paper"``).
-    initial_state : array_like, optional
-        State at ``t[0]`` (default rest), known.
+    initial_state : array_like or "steady", optional
+        State at ``t[0]``, known (default rest). ``"steady"``: the steady state under
+        ``torque[0]`` of each model, which then moves with the parameters as in the
+        joint estimator's ``start="steady"``. With a current loop the state has a
+        fourth entry, the motor torque (default ``torque[0]``).
     fd_step : float, optional
         Relative central-difference step (default 1e-6).
     noise_ar : array_like, optional
@@ -128,6 +140,9 @@ def cramer_rao_bound(
         :class:`~backlashkit.identify.noise.ARNoise` fits them, ``JointIdentifier.noise_ar_``):
         one row for both speeds or rows ``(w_M, w_L)``. ``noise_std`` and ``snr_db``
         then give the noise's own level, not its innovation's. Default: white noise.
+    tau_i : float, optional
+        Time constant in s of the current loop between the torque command and the
+        motor (default 0: none). Known unless ``"tau_i"`` is in ``estimate``.
 
     Returns
     -------
@@ -141,34 +156,32 @@ def cramer_rao_bound(
         unknown, a parameter to estimate is 0, or ``noise_ar`` is not a stationary
         autoregression.
     """
-    from ..simulate import simulate_batch
-
     if not isinstance(drive, TwoMassDrive):
         raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
     theta = drive._require_theta()
     if (noise_std is None) == (snr_db is None):
         raise InputError("give exactly one of noise_std=(s_M, s_L) and snr_db")
     names = _estimated(estimate)
-    values = np.array([getattr(drive, n) for n in names], float)
+    tau_i = v.nonnegative("tau_i", tau_i)
+    values = np.array([tau_i if n == "tau_i" else getattr(drive, n) for n in names], float)
     zero = [n for n, x in zip(names, values, strict=True) if not x > 0]
     if zero:
         raise InputError(f"cannot estimate parameter(s) {zero} at value 0 (e.g. theta = {theta!r})")
     h = v.positive("fd_step", fd_step)
     n = len(names)
-    drives = []
+    points = [values]
     for i in range(n):
         for sgn in (1.0, -1.0):
             x = values.copy()
             x[i] *= 1.0 + sgn * h
-            drives.append(drive_with(drive, names, x))
-    runs = simulate_batch([drive, *drives], t, torque, law=law, initial_state=initial_state)
-    nominal = runs[0]
-    sig = _noise_levels(noise_std, snr_db, nominal)
+            points.append(x)
+    speeds = _speeds(drive, names, points, tau_i, t, torque, law, initial_state)
+    sig = _noise_levels(noise_std, snr_db, speeds[0])
     ar, ratios = _autoregression(noise_ar)
     fisher = np.zeros((n, n))
-    for c, (ch, s) in enumerate((("w_motor", sig[0]), ("w_load", sig[1]))):
+    for c, s in enumerate(sig):
         sens = np.column_stack([
-            (getattr(runs[1 + 2 * i], ch) - getattr(runs[2 + 2 * i], ch)) / (2 * h * values[i])
+            (speeds[1 + 2 * i][c] - speeds[2 + 2 * i][c]) / (2 * h * values[i])
             for i in range(n)
         ])
         if ar is not None:  # whitened sensitivities, weighted by the innovation
@@ -182,16 +195,53 @@ def cramer_rao_bound(
             if r is not None and r > 0:
                 fisher[i, i] += 1.0 / (r * values[i]) ** 2
     return CramerRaoBound(names, values, fisher, (float(sig[0]), float(sig[1])),
-                          int(np.size(nominal.t)))
+                          int(np.size(speeds[0][0])))
+
+
+def _speeds(drive, names, points, tau_i, t, torque, law, initial_state
+            ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(w_M, w_L)`` of the drive at each parameter point (order ``names``)."""
+    from ..simulate import simulate_batch, simulate_packed
+
+    models = [(drive_with(drive, [m for m in names if m != "tau_i"],
+                          np.array([x for m, x in zip(names, p, strict=True) if m != "tau_i"])),
+               float(p[names.index("tau_i")]) if "tau_i" in names else tau_i)
+              for p in points]
+    if tau_i == 0 and not isinstance(initial_state, str):
+        runs = simulate_batch([d for d, _ in models], t, torque, law=law,
+                              initial_state=initial_state)
+        return [(r.w_motor, r.w_load) for r in runs]
+    t_arr, ts = v.time_grid(t)
+    u = np.asarray(torque, float)
+    if u.shape != t_arr.shape:
+        raise InputError(f"torque must have the shape of t {t_arr.shape}, got {u.shape}")
+    rows = np.stack([packed_row(d, ti) for d, ti in models])
+    if isinstance(initial_state, str):
+        if initial_state != "steady":
+            raise InputError(f"initial_state must be an array or 'steady', got {initial_state!r}")
+        x0 = initial_states(rows, float(u[0]))
+    elif initial_state is None:
+        x0 = initial_states(rows, None, float(u[0]))
+    else:
+        x = np.asarray(initial_state, float).ravel()
+        if tau_i > 0 and x.size == 3:  # the loop starts at the held torque
+            x = np.append(x, u[0])
+        x0 = np.tile(x, (len(rows), 1))
+    try:
+        states = simulate_packed(2, rows, float(t_arr[0]), ts, u[np.newaxis, :], x0,
+                                 law=law, workers=None)
+    except ValueError as exc:
+        raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
+    return [(x[:, 0], x[:, 1]) for x in states]
 
 
 def _estimated(estimate) -> tuple[str, ...]:
     """The estimated parameters' names, ``theta`` first, in the fitted order."""
-    all_names = ("theta", *LINEAR_PARAMS)
+    all_names = ("theta", *LINEAR_PARAMS, *EXTRA_PARAMS)
     if isinstance(estimate, str):
         if estimate != "all":
             raise InputError(f"estimate must be 'all' or a sequence of names, got {estimate!r}")
-        return all_names
+        return ("theta", *LINEAR_PARAMS)
     names = tuple(estimate)
     bad = [n for n in names if n not in all_names]
     if bad or "theta" not in names or len(set(names)) != len(names):
@@ -199,11 +249,12 @@ def _estimated(estimate) -> tuple[str, ...]:
             f"estimate must list distinct names among {', '.join(all_names)} including "
             f"'theta', got {estimate!r}"
         )
-    return ("theta", *[n for n in LINEAR_PARAMS if n in names])
+    return tuple(n for n in all_names if n in names)
 
 
 def _noise_levels(noise_std, snr_db, nominal) -> tuple[float, float]:
-    """Noise std ``(s_M, s_L)``: given, or from the SNR of the nominal speeds."""
+    """Noise std ``(s_M, s_L)``: given, or from the SNR of the nominal speeds
+    ``(w_M, w_L)``."""
     if noise_std is not None:
         try:
             s_m, s_l = noise_std
@@ -215,7 +266,7 @@ def _noise_levels(noise_std, snr_db, nominal) -> tuple[float, float]:
         raise InputError(f"snr_db must be a number or a pair (w_M, w_L), got {snr_db!r}")
     s_m, s_l = (
         math.sqrt(float(np.mean(w**2)) / 10.0 ** (v.finite_scalar("snr_db", s) / 10.0))
-        for w, s in ((nominal.w_motor, snr[0]), (nominal.w_load, snr[1]))
+        for w, s in zip(nominal, snr, strict=True)
     )
     return (s_m, s_l)
 

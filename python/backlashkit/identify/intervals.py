@@ -20,16 +20,16 @@ Each object computes its own interval from what the fit hands it
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Any
 
 import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
-from ..parallel import ProgressBar
+from ..parallel import map_tasks, reporter
 from ._lm import lm
 
 __all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
@@ -51,8 +51,10 @@ class IntervalInputs:
 
     ``z`` are the log-parameters at the estimate (``theta`` first), ``cov_z`` their
     Fisher covariance, ``cost`` the cost there (chi-square units), ``residual`` the
-    weighted residual rows of log-parameter rows, ``refit`` the ``theta`` refitted to
-    one record set simulated from the estimate with noise drawn from ``rng``.
+    weighted residual rows of log-parameter rows, ``resample(rng)`` one record set
+    simulated from the estimate with noise drawn from ``rng``, and ``refit(records)``
+    the ``theta`` of the same fit on it (a picklable callable, so that the refits can
+    run in other processes).
     """
 
     theta: float
@@ -62,7 +64,8 @@ class IntervalInputs:
     cost: float
     residual: Callable[[np.ndarray], np.ndarray]
     fd_step: float
-    refit: Callable[[np.random.Generator], float]
+    resample: Callable[[np.random.Generator], list]
+    refit: Callable[[list], float]
 
 
 @dataclass
@@ -243,11 +246,20 @@ class ParametricBootstrap:
         n_resamples)`` before the first refit and after every one (e.g. a
         :class:`~backlashkit.parallel.ProgressBar` of the caller, ``quiet`` or not).
         Default False: nothing. Not part of the configuration's equality.
+    executor : concurrent.futures.Executor or dask.distributed.Client, optional
+        Where the refits run (:func:`backlashkit.parallel.map_tasks`); default serial.
+        The resamples are drawn here, in order, so ``std_`` and ``ci95_`` are the same
+        bit for bit whatever runs them. All ``n_resamples`` record sets are held in
+        memory at once when the refits run elsewhere. Not part of the equality.
+    jobs : int, optional
+        Instead of ``executor``: refits on a local pool of this many processes.
     """
 
     n_resamples: int = 30
     seed: int | np.random.SeedSequence = 0
     progress: bool | Progress = field(default=False, compare=False, kw_only=True)
+    executor: Any = field(default=None, compare=False, kw_only=True, repr=False)
+    jobs: int | None = field(default=None, compare=False, kw_only=True)
 
     def __post_init__(self) -> None:
         v.integer("n_resamples", self.n_resamples, 2)
@@ -260,16 +272,26 @@ class ParametricBootstrap:
         if not (isinstance(self.progress, bool) or callable(self.progress)):
             raise InputError("progress must be True, False or a callable "
                              f"progress(done, total), got {self.progress!r}")
+        if self.jobs is not None:
+            v.integer("jobs", self.jobs, 1)
+            if self.executor is not None:
+                raise InputError("give executor or jobs, not both")
 
     def _interval(self, fit: IntervalInputs) -> ThetaInterval:
         root = self.seed if isinstance(self.seed, np.random.SeedSequence) else (
             np.random.SeedSequence(self.seed))
-        with _progress(self.progress) as bar:
-            bar(0, self.n_resamples)
-            refitted: list[float] = []
-            for child in root.spawn(self.n_resamples):
-                refitted.append(fit.refit(np.random.default_rng(child)))
-                bar(len(refitted), self.n_resamples)
+        children = root.spawn(self.n_resamples)
+        with reporter(self.progress, "bootstrap", unit="refit") as bar:
+            if self.executor is None and self.jobs in (None, 1):  # one resample at a time
+                bar(0, self.n_resamples)
+                refitted: list[float] = []
+                for child in children:
+                    refitted.append(fit.refit(fit.resample(np.random.default_rng(child))))
+                    bar(len(refitted), self.n_resamples)
+            else:
+                samples = [fit.resample(np.random.default_rng(c)) for c in children]
+                refitted = map_tasks(fit.refit, samples, executor=self.executor,
+                                     jobs=self.jobs, progress=bar)
         thetas = np.array(refitted)
         std = float(np.std(thetas, ddof=1))
         # the std is itself estimated from n_resamples refits: Student's quantile with
@@ -279,19 +301,6 @@ class ParametricBootstrap:
         half = float(student_t.ppf(0.975, self.n_resamples - 1)) * std
         return ThetaInterval("bootstrap", (max(0.0, fit.theta - half), fit.theta + half),
                              std=std, bootstrap_thetas=thetas)
-
-
-@contextmanager
-def _progress(progress: bool | Progress) -> Iterator[Progress]:
-    """The callable that ``progress`` asks for: a bar made (and closed) here for True, the
-    caller's own (left open), or one that does nothing."""
-    if callable(progress):
-        yield progress
-    elif progress:
-        with ProgressBar("bootstrap", unit="refit") as bar:
-            yield bar
-    else:
-        yield lambda done, total: None
 
 
 def profile_crossing(rise: Callable[[float], float], first: float, *, level: float = CHI2_95,

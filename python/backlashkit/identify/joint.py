@@ -84,7 +84,8 @@ from __future__ import annotations
 import inspect
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -99,6 +100,7 @@ from ..errors import (
     QuantisedSpeedsWarning,
     SensitivityWarning,
 )
+from ..parallel import reporter
 from ..plants import TwoMassDrive
 from . import _search
 from ._model import LINEAR_PARAMS, TAU_COL, drive_with, model_commutation, rel_std
@@ -171,6 +173,11 @@ class JointIdentifier:
         Answer even where a parameter ends over 5 times off the prior (default False).
     workers : int, optional
         Threads for the simulations (default all cores).
+    progress : bool or callable, optional
+        Progress of the fit's stages (a fit of two 80 s records takes seconds to
+        minutes): True draws a :class:`~backlashkit.parallel.ProgressBar` on stderr,
+        shown only on a terminal; a callable is called ``progress(done, total)``.
+        Default False. Bootstrap refits report nothing.
 
     Attributes
     ----------
@@ -218,6 +225,7 @@ class JointIdentifier:
         law: str = "paper",
         allow_far_from_prior: bool = False,
         workers: int | None = None,
+        progress: bool | Callable[[int, int], None] = False,
     ) -> None:
         self.prior = prior
         self.prior_rel_std = prior_rel_std
@@ -230,6 +238,7 @@ class JointIdentifier:
         self.law = law
         self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
+        self.progress = progress
 
     def __repr__(self) -> str:
         sig = inspect.signature(type(self).__init__).parameters
@@ -293,27 +302,9 @@ class JointIdentifier:
         with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="blas"), \
                 np.errstate(over="ignore", invalid="ignore"):
             warnings.simplefilter("ignore", SensitivityWarning)
-            fitted = self._fit(records)
-            restarted = won = False
-            # an encoder's angle errors are constant while a shaft stands still, so its
-            # residual's correlation says nothing of the basin: no restart on them
-            if (self.search.restarts.misfit and not any(r.has_positions for r in records)
-                    and _misfits(fitted)):
-                restarted = True
-                try:  # the whole search again, from the fitted linear parameters
-                    again = self._fit(records, anchor=fitted["drive_"],
-                                      anchor_extra=fitted["params_"])
-                except InputError:  # e.g. a model that explains nothing from there
-                    again = None
-                won = again is not None and (
-                    again["_neg2_loglik"] < fitted["_neg2_loglik"] - MISFIT_MARGIN)
-                fitted = again if won else fitted
-        # refused (beyond REFUSE_FROM_PRIOR) before the estimator holds the answer
-        far = check_fit_near_prior(
-            {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS},
-            self.prior, allow_far_from_prior=self.allow_far_from_prior, stacklevel=2,
-            held_gains=[held_speed_gain(r, prior) for r in records],
-            missing=self._missing_terms())
+            with reporter(self.progress, "identify", unit="stage") as bar:
+                fitted, restarted, won = self._fit_and_restart(records, bar)
+        far = self._far_from_prior(fitted, records, prior)
         self.__dict__.update(fitted, misfit_restarted_=restarted, misfit_restart_won_=won,
                              far_from_prior_=far)
         parts = self._correlation_parts()
@@ -322,6 +313,35 @@ class JointIdentifier:
         self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
         _warn_quantised(records)
         return self
+
+    def _fit_and_restart(self, records, bar) -> tuple[dict[str, Any], bool, bool]:
+        """The search, and again from its answer where its residuals say it missed."""
+        fitted = self._fit(records, stage=lambda k: bar(k, _search.STAGES))
+        restarted = won = False
+        # an encoder's angle errors are constant while a shaft stands still, so its
+        # residual's correlation says nothing of the basin: no restart on them
+        if (self.search.restarts.misfit and not any(r.has_positions for r in records)
+                and _misfits(fitted)):
+            restarted = True
+            try:  # the whole search again, from the fitted linear parameters
+                again = self._fit(records, anchor=fitted["drive_"],
+                                  anchor_extra=fitted["params_"],
+                                  stage=lambda k: bar(_search.STAGES + k,
+                                                      2 * _search.STAGES))
+            except InputError:  # e.g. a model that explains nothing from there
+                again = None
+            won = again is not None and (
+                again["_neg2_loglik"] < fitted["_neg2_loglik"] - MISFIT_MARGIN)
+            fitted = again if won else fitted
+        return fitted, restarted, won
+
+    def _far_from_prior(self, fitted, records, prior):
+        """Refuse (beyond REFUSE_FROM_PRIOR) before the estimator holds the answer."""
+        return check_fit_near_prior(
+            {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS},
+            self.prior, allow_far_from_prior=self.allow_far_from_prior, stacklevel=3,
+            held_gains=[held_speed_gain(r, prior) for r in records],
+            missing=self._missing_terms())
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.
@@ -370,10 +390,12 @@ class JointIdentifier:
                 "error and interval of theta are too narrow; ", *fix)
 
     def _fit(self, records, anchor: TwoMassDrive | None = None,
-             anchor_extra: Mapping[str, float] | None = None) -> dict[str, Any]:
+             anchor_extra: Mapping[str, float] | None = None,
+             stage: Callable[[int], None] = lambda done: None) -> dict[str, Any]:
         """One search; ``anchor`` (and ``anchor_extra``, values of the added terms)
         replaces the prior as its starting point (grid, box, two-step start), not in
-        the penalty. Returns the fitted attributes."""
+        the penalty. ``stage(k)``: the search's progress. Returns the fitted
+        attributes."""
         prior = self.prior.with_theta(None)
         recs = list(records)  # checked by fit
         search = self.search
@@ -404,7 +426,8 @@ class JointIdentifier:
         out = _search.run(
             pb, search, sigma, recs, start_drive=start.with_theta(None), z_anchor=z_anchor,
             fixed_noise=self.noise is not None, noise_model=noise_model,
-            interval=self.interval, refit=self._refit_theta, terms=terms)
+            interval=self.interval, refit=_BootstrapRefit(self._refit_params()), terms=terms,
+            stage=stage)
         return {**_published(out, prior, self.law), "held_noise_lag1_": held,
                 "_held_samples": held_samples, "noise_model_": noise_model,
                 "_record_names": [r.name for r in recs]}
@@ -422,11 +445,21 @@ class JointIdentifier:
         """The friction and actuator terms of the model (checked)."""
         return friction_term(self.friction), actuator_term(self.actuator)
 
-    def _refit_theta(self, records) -> float:
-        """``theta`` of the same search on ``records`` (a bootstrap resample)."""
+    def _refit_params(self) -> dict[str, Any]:
+        """The hyperparameters of a bootstrap refit: these, with Fisher's interval."""
         params = {name: getattr(self, name) for name in _INIT_NAMES}
-        refit = JointIdentifier(**{**params, "interval": FisherInterval()})
-        return refit._fit(records)["theta_"]
+        return {**params, "interval": FisherInterval(), "progress": False}
+
+
+@dataclass(frozen=True)
+class _BootstrapRefit:
+    """``theta`` of the same search on a bootstrap resample; picklable (no executor or
+    progress bar inside), so the refits can run in other processes or on Dask."""
+
+    params: dict[str, Any]
+
+    def __call__(self, records) -> float:
+        return JointIdentifier(**self.params)._fit(records)["theta_"]
 
 
 #: Names of :class:`JointIdentifier`'s hyperparameters (its ``__init__`` arguments).

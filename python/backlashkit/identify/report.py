@@ -285,6 +285,19 @@ class _Shown:
                    getattr(result, "workers", None), has_comm)
 
 
+def _commutation_caption(result: Any) -> str:
+    """What the commutation figure shows: the joint fit's window is its model's own,
+    not the one the two-step pre-estimate detected in the speeds."""
+    head = ("Filtered speeds around the step-down: contact lost at t_c, impact at t_b, "
+            "and the area between the speeds (shaded)")
+    if hasattr(result, "residuals_"):
+        return (f"{head}. Here t_c and t_b are those of the identified model, so -1/2 of "
+                "the area (in the title) is the backlash the speeds show over the model's "
+                "window; the pre-estimate theta_ini in the table takes its own t_c and t_b "
+                "from the speeds, and differs from it")
+    return f"{head}, whose -1/2 is the pre-estimate theta_ini"
+
+
 def _draw_fits(out: Path, prior: TwoMassDrive, recs: list[Record], finals: list[Record],
                shown: _Shown, result: Any) -> list[_Fit]:
     """The figures of the speeds: measured against simulated, the commutation windows
@@ -471,12 +484,7 @@ def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_F
     if shown.has_comm:
         sections += [
             "<h2>Commutation window</h2>",
-            figure(
-                "commutation",
-                "Filtered speeds around the step-down: contact lost at t_c, impact at t_b, "
-                "and the area between the speeds (shaded), whose -1/2 is the pre-estimate "
-                "theta_ini",
-            ),
+            figure("commutation", _commutation_caption(result)),
         ]
     sections += [
         "<h2>Criterion against theta</h2>",

@@ -205,6 +205,10 @@ class Term:
         return dict.fromkeys(self.params, torque_scale(recs))
 
 
+#: What the messages call each term.
+TERM_NAMES = {"friction": "Coulomb friction", "actuator": "current loop"}
+
+
 @dataclass(frozen=True)
 class TermChoice:
     """What the likelihood-ratio test of one term found.
@@ -285,18 +289,24 @@ class TermChoice:
         str
             One sentence.
         """
-        test = f"(chi-square, {KEEP_LEVEL:.0%})"
+        name = TERM_NAMES.get(self.term, self.term)
+        test = f"likelihood-ratio test at {KEEP_LEVEL:.0%}"
         both = ("; the data cannot tell, so the 95 % interval spans the other model's too"
                 if self.other_ci95 is not None else "")
+        if self.rise <= 0:
+            # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
+            # torques of 0), so a fit with the term ending higher found no better point
+            return (f"{name} dropped: the fit with it ends no lower in -2 log L ({test}): "
+                    "the data do not call for it")
+        gain = f"it lowers -2 log L by {self.rise:.3g}"
+        moves = f"without it theta moves by {self.shift:.2g} of its standard errors"
         if self.kept and self.rise <= self.threshold:
-            return (f"{self.term} kept: without it theta moves by {self.shift:.2g} of its "
-                    f"standard errors (> {KEEP_SHIFT}), although -2 log L rises by only "
-                    f"{self.rise:.3g} <= {self.threshold:.3g} {test}{both}")
-        verb = "kept" if self.kept else "dropped"
-        cmp = ">" if self.kept else "<="
-        return (f"{self.term} {verb}: without it -2 log L rises by {self.rise:.3g} {cmp} "
-                f"{self.threshold:.3g} {test}, and theta moves by {self.shift:.2g} of "
-                f"its standard errors{both}")
+            return (f"{name} kept: {gain}, not above {self.threshold:.3g} ({test}), but "
+                    f"{moves} (> {KEEP_SHIFT}){both}")
+        if self.kept:
+            return f"{name} kept: {gain} > {self.threshold:.3g} ({test}); {moves}"
+        return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}), and "
+                f"{moves}{both}")
 
 
 def friction_term(friction: str) -> Term:
