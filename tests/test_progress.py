@@ -141,3 +141,21 @@ def test_joint_fit_reports_its_stages(short_csv, monkeypatch, capsys):
     assert main(["identify", str(short_csv), "--drive", str(drive), "--interval",
                  "fisher"]) == 0
     assert "identify" in term.getvalue() and "7/7" in term.getvalue()
+
+
+def test_a_terminal_of_no_size_still_sees_the_bar():
+    """A pseudo-terminal that reports 0 columns and 0 rows (some CI consoles and
+    ``script``): tqdm hid the bar below the last of 0 rows, so a long run looked hung."""
+    import os
+
+    master, slave = os.openpty()
+    try:
+        with os.fdopen(slave, "w", closefd=False) as stream:
+            assert tuple(os.get_terminal_size(slave)) == (0, 0)
+            with ProgressBar("demo", stream=stream) as bar:
+                bar(0, 3)
+                bar(3, 3)
+        assert "3/3" in os.read(master, 65536).decode("utf-8", "replace")
+    finally:
+        os.close(slave)
+        os.close(master)

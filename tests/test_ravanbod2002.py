@@ -173,4 +173,10 @@ def test_a_refused_fit_is_recorded_not_fatal(monkeypatch):
     (bar, value, met), (_, share, kept) = checks(doc)
     assert not met and value == "2 refused"
     assert share == "0%" and not kept  # a refused run keeps no model
-    assert "(2 refused)" in format_tables(doc)
+    text = format_tables(doc)
+    assert "(2 refused)" in text
+    # the empty cells ("-") keep the columns aligned under their headers
+    lines = text.splitlines()
+    header = next(k for k, line in enumerate(lines) if "cover95" in line)
+    bars = [i for i, c in enumerate(lines[header]) if c == "|"]
+    assert [i for i, c in enumerate(lines[header + 1]) if c == "|"] == bars

@@ -52,6 +52,10 @@ __all__ = ["ProgressBar", "dask_client", "iter_tasks", "map_tasks", "process_poo
 #: a typo in the address look like a hang.
 CONNECT_TIMEOUT = 10.0
 
+#: Width and height assumed of a terminal that reports no size (a pseudo-terminal of
+#: size 0x0), the common default.
+FALLBACK_COLUMNS, FALLBACK_ROWS = 80, 24
+
 #: Dask's setting of the environment of its workers that :func:`dask_client` unsets.
 _TRIM_KEY = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 
@@ -131,11 +135,22 @@ class ProgressBar:
             from tqdm import tqdm
 
             self._bar = tqdm(total=total, initial=done, desc=self.desc, unit=self.unit,
-                             file=self.stream, dynamic_ncols=True)
+                             file=self.stream, **self._width())
         else:
             if total != self._bar.total:  # the work grew (e.g. a second search)
                 self._bar.total = total
             self._bar.update(done - self._bar.n)
+
+    def _width(self) -> dict[str, Any]:
+        """Follow the terminal's width, or take :data:`FALLBACK_COLUMNS` where the
+        terminal reports none (a pseudo-terminal of size 0x0 drew no bar at all)."""
+        try:
+            size = os.get_terminal_size(self.stream.fileno())
+        except (AttributeError, OSError, ValueError):
+            size = os.terminal_size((0, 0))
+        # tqdm hides a bar below the terminal's last row: a size of 0 rows hid every bar
+        return {"dynamic_ncols": True} if size.columns > 0 and size.lines > 0 else {
+            "ncols": FALLBACK_COLUMNS, "nrows": FALLBACK_ROWS}
 
     def close(self) -> None:
         """End the bar's line (nothing when it was never drawn)."""

@@ -313,7 +313,9 @@ def checks(doc: dict[str, Any]) -> list[tuple[str, str, bool]]:
 
 
 def _fmt(x: float | None, spec: str) -> str:
-    return "-" if x is None else format(x, spec)
+    """``x`` formatted, or "-" padded to the same width (the columns stay aligned)."""
+    width = int(spec.split(".")[0] or 0)
+    return "-".rjust(width) if x is None else format(x, spec)
 
 
 def format_tables(doc: dict[str, Any]) -> str:
@@ -332,7 +334,7 @@ def format_tables(doc: dict[str, Any]) -> str:
     th = doc["theta_true"]
 
     def err(m: float | None) -> str:
-        return "-" if m is None else f"{100 * (th - m) / th:6.1f}"
+        return "-".rjust(6) if m is None else f"{100 * (th - m) / th:6.1f}"
 
     lines = [
         f"paper A protocol: theta* = {th:.4g} rad (half-width); {doc['protocol']['runs']} runs "
@@ -384,6 +386,10 @@ def format_tables(doc: dict[str, Any]) -> str:
             f"{row['seconds_per_run']:5.2f}"
             + (f"  ({j['failures']} refused)" if j["failures"] else "")
         )
+    lines.append("fail: runs the two-step method refused; std/CRB: spread over the "
+                 "Cramér-Rao bound; mean std_: the estimator's own standard error; cover95: "
+                 "95 % intervals holding theta*; viscous: fits that kept paper A's model "
+                 "(no Coulomb friction, no current loop)")
     return "\n".join(lines)
 
 
