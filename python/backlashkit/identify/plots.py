@@ -246,7 +246,7 @@ def plot_cost(
     fig, ax = _ax(ax)
     deg = 180.0 / math.pi
     th = np.asarray(thetas, float)
-    ax.plot(th * deg, costs, color="k", lw=1.2, marker=".", ms=3, label="W_1(theta)")
+    ax.plot(th * deg, costs, color="k", lw=1.2, marker=".", ms=3, label="squared error")
     if bounds is not None:
         ax.axvspan(bounds[0] * deg, bounds[1] * deg, color="C2", alpha=0.2,
                    label=f"search interval\n[{bounds[0] * deg:.3g}, {bounds[1] * deg:.3g}] deg")
@@ -260,8 +260,8 @@ def plot_cost(
     if c.size and c.min() > 0 and c.max() / c.min() > 20:  # several decades: log scale
         ax.set_yscale("log")
     ax.set_xlabel("theta (half-width) [deg]")
-    ax.set_ylabel("W_1 [(rad/s)^2]")
-    ax.set_title("Squared motor-speed error W_1 of the prior with each theta",
+    ax.set_ylabel("squared motor-speed error [(rad/s)^2]")
+    ax.set_title("Squared motor-speed error of the prior with each theta",
                  fontsize="medium")
     legend_outside(ax)
     ax.grid(alpha=0.3, which="both")

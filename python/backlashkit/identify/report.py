@@ -415,8 +415,8 @@ def _cost_sentence(shown: _Shown, result: Any) -> str:
     if not _given(cost):
         return ""
     if hasattr(result, "dt4"):  # the two-step and regression criterion
-        return (f'<p class="note">Criterion at the estimate: W_1 = {_fmt(cost)} (rad/s)^2, '
-                f"the squared motor-speed error summed over the {shown.dt4:g} s after the "
+        return (f'<p class="note">Criterion at the estimate: {_fmt(cost)} (rad/s)^2, the '
+                f"squared motor-speed error summed over the {shown.dt4:g} s after the "
                 "step-down t_s.</p>")
     return (f'<p class="note">Cost at the optimum: {_fmt(cost)}, the sum of squared '
             "residuals each divided by its noise level (no unit), plus the prior's "
@@ -488,7 +488,8 @@ def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_F
         ]
     sections += [
         "<h2>Criterion against theta</h2>",
-        figure("cost", f"Squared motor-speed error W_1 of the prior with each theta{shaded}"),
+        figure("cost", "Squared motor-speed error of the prior with each theta (the two-step "
+                       f"method's criterion; the joint fit also refits the drive){shaded}"),
     ]
     if profile is not None:
         sections += [
