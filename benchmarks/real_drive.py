@@ -25,7 +25,7 @@
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
-[--speed --repeats 3]``.
+[--speed --repeats 3] [--crb]``.
 """
 
 from __future__ import annotations
@@ -218,12 +218,27 @@ def main(argv=None) -> int:
                         f"'extended': {', '.join(EXTENDED)})")
     p.add_argument("--speed", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--crb", action="store_true",
+                   help="print only each scenario's Cramér-Rao bound and error limit")
     args = p.parse_args(argv)
     args.drives = args.drives.split(",")
     args.effects = [e for name in args.effects.split(",")
                     for e in (EXTENDED if name == "extended" else [name])]
-    (speed if args.speed else coverage)(args)
+    (speed if args.speed else bounds if args.crb else coverage)(args)
     return 0
+
+
+def bounds(args) -> None:
+    """The Cramér-Rao bound of theta per analogue scenario, and the error limit
+    max(5 %, 3 CRB) of issue 20's bar."""
+    drives = {"paper": (P_TRUE, THETA), "other": OTHER}
+    print(f"{'drive':<7} {'has':<15} {'CRB %':>6} {'limit %':>8}")
+    for dname, (linear, theta) in drives.items():
+        for ename, (fc, tau, counts) in {**EFFECTS, **EXTENDED}.items():
+            if dname in args.drives and ename in args.effects and not counts:
+                crb = crb_theta(linear, theta, fc, tau) / theta
+                print(f"{dname:<7} {ename:<15} {100 * crb:6.2f} "
+                      f"{100 * max(ERR_FLOOR, CRB_FACTOR * crb):8.2f}")
 
 
 if __name__ == "__main__":

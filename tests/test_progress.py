@@ -123,6 +123,7 @@ def test_joint_fit_reports_its_stages(short_csv, monkeypatch, capsys):
     from pathlib import Path
 
     import backlashkit as bk
+    from backlashkit.errors import InputError
     from backlashkit.identify.readers import read_records
     from backlashkit.io import read_drive_toml
 
@@ -136,6 +137,8 @@ def test_joint_fit_reports_its_stages(short_csv, monkeypatch, capsys):
     assert total in (7, 14) and heard[-1][0] == total
     assert [d for d, _ in heard] == list(range(1, total + 1))
     assert "progress" not in repr(bk.JointIdentifier(fit.prior))
+    with pytest.raises(InputError, match="progress must be True, False or a callable"):
+        bk.JointIdentifier(fit.prior, progress="yes").fit(read_records(short_csv))
     term = _Terminal()
     monkeypatch.setattr("sys.stderr", term)
     assert main(["identify", str(short_csv), "--drive", str(drive), "--interval",

@@ -260,6 +260,9 @@ class JointIdentifier:
                              f"got {type(self.search).__name__}")
         check_interval(self.interval)
         check_noise_model(self.noise_model)
+        if not (isinstance(self.progress, bool) or callable(self.progress)):
+            raise InputError("progress must be True, False or a callable "
+                             f"progress(done, total), got {self.progress!r}")
         self._terms()
         self.noise_model._check_with(self.noise, self.search.final_horizon)
         if self.noise is not None:
