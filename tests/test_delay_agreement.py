@@ -89,6 +89,25 @@ def test_spectral_root_changes_sign_at_h_max(case):
     assert below < 0 < above
 
 
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"case{c[0]}")
+def test_default_collocation_is_fine_enough_for_the_check(case):
+    """The default check solves at ``default_nodes`` (at least ``MIN_NODES``, 12): at
+    the two delays it checks, its rightmost root has the sign and three digits of the
+    one from the fine collocation above."""
+    from backlashkit.delay.margin import VERIFY_STEP
+
+    _, a0, a, b = case
+    r = delay_margin(a0, a, b, verify=False)
+    if math.isinf(r.h_max):
+        pytest.skip("stable for every delay")
+    s = DelaySystem(a0, a, b)
+    nodes = 40 + int(2 * r.omega * s.q * r.h_max)
+    for h in (r.h_max * (1 - VERIFY_STEP), r.h_max * (1 + VERIFY_STEP)):
+        coarse, fine = rightmost_root(s, h).real, rightmost_root(s, h, n_nodes=nodes).real
+        assert (coarse < 0) == (fine < 0)
+        assert coarse == pytest.approx(fine, rel=1e-3)
+
+
 @pytest.mark.parametrize("case", CASES[:12], ids=lambda c: f"case{c[0]}")
 def test_spectral_scan_finds_the_same_margin(case):
     """The spectral scan with bisection in h (no knowledge of omega) finds h_max."""
