@@ -171,20 +171,14 @@ class JointIdentifier:
         Contact law of the model (default ``"paper"``).
     allow_far_from_prior : bool, optional
         Answer even where a parameter ends over 5 times off the prior (default False).
-    workers : int, optional
-        Threads for the simulations (default all cores).
-    progress : bool or callable, optional
-        Progress of the fit's stages (a fit of two 80 s records takes seconds to
-        minutes): True draws a :class:`~backlashkit.parallel.ProgressBar` on stderr,
-        shown only on a terminal; a callable is called ``progress(done, total)``.
-        Default False. Bootstrap refits report nothing.
+    workers, progress : int; bool or callable, optional
+        Threads for the simulations (default all cores); the fit's stages on a
+        ProgressBar (True) or reported as ``progress(done, total)`` (default none).
 
     Attributes
     ----------
-    theta_, std_ : float
-        Estimate of ``theta`` and its standard error in rad.
-    ci95_ : tuple of float
-        95 % interval of ``theta`` in rad (``interval_`` says which kind).
+    theta_, std_, ci95_ : float, float, tuple of float
+        Estimate of ``theta``, its standard error and 95 % interval (``interval_``), rad.
     params_, drive_, estimated_ : dict, TwoMassDrive, tuple of str
         The linear parameters, the identified drive, the names estimated (theta first).
     noise_std_, fit_percent_ : numpy.ndarray
@@ -205,8 +199,8 @@ class JointIdentifier:
     >>> fit = bk.JointIdentifier(truth.with_theta(None), workers=1).fit(rec)
     >>> print(f"{fit.theta_:.4f} rad, 95 % in [{fit.ci95_[0]:.4f}, {fit.ci95_[1]:.4f}]")
     0.0348 rad, 95 % in [0.0341, 0.0353]
-    >>> search = bk.JointSearch(restarts=bk.Restarts(misfit=False), final_horizon=1.0)
-    >>> expert = bk.JointIdentifier(truth.with_theta(None), search=search)
+    >>> expert = bk.JointIdentifier(truth.with_theta(None), search=bk.JointSearch(
+    ...     restarts=bk.Restarts(misfit=False), final_horizon=1.0))
     """
 
     method = "joint"
