@@ -74,16 +74,22 @@ def test_methods_agree(case):
         assert q_ == pytest.approx(v, rel=AGREE, abs=1e-12)
 
 
-@pytest.mark.parametrize("case", CASES, ids=lambda c: f"case{c[0]}")
-def test_spectral_root_changes_sign_at_h_max(case):
-    """Independent of both methods: the rightmost root by Chebyshev collocation is left
-    of the axis just below h_max and right of it just above."""
+def _finite(case):
+    """The sweep's answer, the system and a fine collocation degree for it (one that
+    resolves the crossing root); skips a system stable for every delay."""
     _, a0, a, b = case
     r = delay_margin(a0, a, b, verify=False)
     if math.isinf(r.h_max):
         pytest.skip("stable for every delay")
     s = DelaySystem(a0, a, b)
-    nodes = 40 + int(2 * r.omega * s.q * r.h_max)
+    return r, s, 40 + int(2 * r.omega * s.q * r.h_max)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"case{c[0]}")
+def test_spectral_root_changes_sign_at_h_max(case):
+    """Independent of both methods: the rightmost root by Chebyshev collocation is left
+    of the axis just below h_max and right of it just above."""
+    r, s, nodes = _finite(case)
     below = rightmost_root(s, r.h_max * (1 - SIGN_STEP), n_nodes=nodes).real
     above = rightmost_root(s, r.h_max * (1 + SIGN_STEP), n_nodes=nodes).real
     assert below < 0 < above
@@ -96,12 +102,7 @@ def test_default_collocation_is_fine_enough_for_the_check(case):
     one from the fine collocation above."""
     from backlashkit.delay.margin import VERIFY_STEP
 
-    _, a0, a, b = case
-    r = delay_margin(a0, a, b, verify=False)
-    if math.isinf(r.h_max):
-        pytest.skip("stable for every delay")
-    s = DelaySystem(a0, a, b)
-    nodes = 40 + int(2 * r.omega * s.q * r.h_max)
+    r, s, nodes = _finite(case)
     for h in (r.h_max * (1 - VERIFY_STEP), r.h_max * (1 + VERIFY_STEP)):
         coarse, fine = rightmost_root(s, h).real, rightmost_root(s, h, n_nodes=nodes).real
         assert (coarse < 0) == (fine < 0)
@@ -111,12 +112,7 @@ def test_default_collocation_is_fine_enough_for_the_check(case):
 @pytest.mark.parametrize("case", CASES[:12], ids=lambda c: f"case{c[0]}")
 def test_spectral_scan_finds_the_same_margin(case):
     """The spectral scan with bisection in h (no knowledge of omega) finds h_max."""
-    _, a0, a, b = case
-    r = delay_margin(a0, a, b, verify=False)
-    if math.isinf(r.h_max):
-        pytest.skip("stable for every delay")
-    s = DelaySystem(a0, a, b)
-    nodes = 40 + int(2 * r.omega * s.q * r.h_max)
+    r, s, nodes = _finite(case)
     h = spectral_margin(s, 1.5 * r.h_max, n_scan=30, n_nodes=nodes, xtol=1e-11)
     assert h == pytest.approx(r.h_max, rel=1e-8)
 
