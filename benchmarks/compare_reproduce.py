@@ -18,6 +18,7 @@ deviations of the old runs, and the change of the mean in standard errors of the
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -71,14 +72,15 @@ def in_std(old, new) -> bool:
 
 
 def main() -> int:
-    args = sys.argv[1:]
-    tolerant = args[:1] == ["--in-std"]
-    args = args[1:] if tolerant else args
-    if len(args) != 2:
-        print("usage: compare_reproduce.py [--in-std] OLD.json NEW.json", file=sys.stderr)
-        return 2
-    old, new = (json.load(open(p, encoding="utf-8")) for p in args)
-    if tolerant:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("old", metavar="OLD.json")
+    parser.add_argument("new", metavar="NEW.json")
+    parser.add_argument("--in-std", action="store_true",
+                        help="measure how far the estimates moved instead of asking for "
+                        "identical documents")
+    args = parser.parse_args()
+    old, new = (json.load(open(p, encoding="utf-8")) for p in (args.old, args.new))
+    if args.in_std:
         return 0 if in_std(old, new) else 1
     found = differences(old, new)
     print("\n".join(found[:50]) if found else "IDENTICAL (timings excluded)")
