@@ -67,6 +67,8 @@ EXTENDED = {"coulomb x0.5": ((0.005, 0.01), 0.0, 0), "coulomb x3": ((0.03, 0.06)
 ERR_FLOOR, CRB_FACTOR = 0.05, 3.0
 #: Entropy word of the extended scenarios' seeds.
 EXTENDED_STREAM = 1
+#: The drives of the study: paper A's and the second one, with their backlash (rad).
+DRIVES = {"paper": (P_TRUE, THETA), "other": OTHER}
 
 
 def crb_theta(linear, theta, fc, tau_i) -> float:
@@ -131,8 +133,7 @@ def coverage(args) -> None:
           f"{'CRB %':>6} {'beyond':>6} {'cover':>6} {'2-sigma band':>14} {'fc kept':>8} "
           f"{'loop kept':>9} {'loop rise':>9} {'shift':>6} {'s':>6}")
     root = np.random.SeedSequence(args.seed)
-    drives = {"paper": (P_TRUE, THETA), "other": OTHER}
-    for i, ((dname, (linear, theta)), ss) in enumerate(zip(drives.items(), root.spawn(2),
+    for i, ((dname, (linear, theta)), ss) in enumerate(zip(DRIVES.items(), root.spawn(2),
                                                           strict=True)):
         if dname not in args.drives:
             continue
@@ -172,7 +173,8 @@ def _print_row(dname, ename, theta, res, crb, seconds) -> None:
     rise = statistics.median(rises) if rises else math.nan
     shifts = [r["shift"]["actuator"] for r in ok if "actuator" in r["shift"]]
     shift = statistics.median(shifts) if shifts else math.nan
-    limit = 100 * max(ERR_FLOOR, CRB_FACTOR * crb / theta) if crb == crb else 100 * ERR_FLOOR
+    floor = ERR_FLOOR if math.isnan(crb) else max(ERR_FLOOR, CRB_FACTOR * crb / theta)
+    limit = 100 * floor
     beyond = sum(e > limit for e in err)
     print(f"{dname:<7} {ename:<15} {n:>4}/{len(res):<3} "
           f"{statistics.median(err) if err else math.nan:>11.2f} "
@@ -231,9 +233,8 @@ def main(argv=None) -> int:
 def bounds(args) -> None:
     """The Cramér-Rao bound of theta per analogue scenario, and the error limit
     max(5 %, 3 CRB) of issue 20's bar."""
-    drives = {"paper": (P_TRUE, THETA), "other": OTHER}
     print(f"{'drive':<7} {'has':<15} {'CRB %':>6} {'limit %':>8}")
-    for dname, (linear, theta) in drives.items():
+    for dname, (linear, theta) in DRIVES.items():
         for ename, (fc, tau, counts) in {**EFFECTS, **EXTENDED}.items():
             if dname in args.drives and ename in args.effects and not counts:
                 crb = crb_theta(linear, theta, fc, tau) / theta
