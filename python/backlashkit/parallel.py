@@ -58,6 +58,8 @@ FALLBACK_COLUMNS, FALLBACK_ROWS = 80, 24
 
 #: Dask's setting of the environment of its workers that :func:`dask_client` unsets.
 _TRIM_KEY = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
+#: Whether Dask's workers sample their stacks (its statistical profiler).
+_PROFILE_KEY = "distributed.worker.profile.enabled"
 
 _BLAS_LIMITED = False  # this process has been limited to one BLAS thread (a worker)
 
@@ -415,7 +417,9 @@ def dask_client(
         # Dask's overhead against the pool went from +25 % to -1 %, docs/design/fleet.md).
         # The dashboard on any free port: on the default 8787 it collides with another
         # cluster on the machine (and None still binds the default)
-        with dask.config.set({_TRIM_KEY: None}), \
+        # The workers' statistical profiler takes the GIL every 10 ms to walk the stack
+        # of a fit that holds it; off (benchmarks/bench_fleet.py, docs/design/fleet.md).
+        with dask.config.set({_TRIM_KEY: None, _PROFILE_KEY: False}), \
                 LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                              dashboard_address=":0") as cluster, Client(cluster) as client:
             yield client
