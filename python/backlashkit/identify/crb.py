@@ -201,16 +201,12 @@ def cramer_rao_bound(
 def _speeds(drive, names, points, tau_i, t, torque, law, initial_state
             ) -> list[tuple[np.ndarray, np.ndarray]]:
     """``(w_M, w_L)`` of the drive at each parameter point (order ``names``)."""
-    from ..simulate import simulate_batch, simulate_packed
+    from ..simulate import simulate_packed
 
     models = [(drive_with(drive, [m for m in names if m != "tau_i"],
                           np.array([x for m, x in zip(names, p, strict=True) if m != "tau_i"])),
                float(p[names.index("tau_i")]) if "tau_i" in names else tau_i)
               for p in points]
-    if tau_i == 0 and not isinstance(initial_state, str):
-        runs = simulate_batch([d for d, _ in models], t, torque, law=law,
-                              initial_state=initial_state)
-        return [(r.w_motor, r.w_load) for r in runs]
     t_arr, ts = v.time_grid(t)
     u = np.asarray(torque, float)
     if u.shape != t_arr.shape:
