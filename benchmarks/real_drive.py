@@ -19,13 +19,16 @@
    max(5 %, 3 CRB) (``beyond``). ``--effects extended`` runs the extended scenarios:
    half and three times the Coulomb torques, loops of 0.5 and 2 ms, encoders of 4 096
    and 65 536 counts.
-2. ``--speed``: paper A's two 80 s records (its protocol at Err_p 0.3, one seed) fitted
+2. ``--offsets``: one record pair of encoder angles read from ``--trials`` random
+   offsets, fitted with ``friction="viscous"`` and no loop: the spread of ``theta``
+   against the standard error of the quantisation (``std_``) and of white noise.
+3. ``--speed``: paper A's two 80 s records (its protocol at Err_p 0.3, one seed) fitted
    with ``friction="viscous"``, ``"coulomb"`` and the default ``"auto"`` (the last two
    against the first, as ratios of medians), one worker thread, in one process.
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
-[--speed --repeats 3] [--crb]``.
+[--speed --repeats 3] [--crb] [--offsets]``.
 """
 
 from __future__ import annotations
@@ -188,6 +191,40 @@ def _print_row(dname, ename, theta, res, crb, seconds) -> None:
             break
 
 
+def offsets(args) -> None:
+    """One record pair of encoder angles read from ``--trials`` random offsets: the
+    spread of the estimates against the standard errors the fits report (the
+    quantisation's, ``std_``) and white noise's (``param_std_``)."""
+    linear, theta = DRIVES["paper"]
+    clean = clean_records(linear, theta, (0.0, 0.0), 0.0, EFFECTS["encoder"][2])
+    res = map_tasks(offset_trial, [(linear, clean)] * args.trials, jobs=args.jobs,
+                    seed=np.random.SeedSequence(args.seed))
+    err = np.array([r[0] for r in res]) - theta
+    print(f"{args.trials} offsets of one record pair (paper drive, 16 384 counts, "
+          "friction='viscous', no loop): spread of theta "
+          f"{np.std(err, ddof=1):.3g} rad, median std_ (quantisation) "
+          f"{np.median([r[1] for r in res]):.3g} rad, median white-noise std "
+          f"{np.median([r[2] for r in res]):.3g} rad; the 95 % interval covers in "
+          f"{np.mean([r[3] <= theta <= r[4] for r in res]):.1%}")
+
+
+def offset_trial(task, seed):
+    """``(theta, std, white std, low, high)`` of one fit of the clean angles read by
+    encoders from random offsets."""
+    linear, clean = task
+    enc = bk.Encoder(EFFECTS["encoder"][2])
+    recs = []
+    for (t, u, phi_m, phi_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
+        off = np.random.default_rng(ss).uniform(size=2) * enc.resolution
+        recs.append(bk.Record(t, u, *(enc.measure(t, p + o).speed
+                                      for p, o in zip((phi_m, phi_l), off, strict=True))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1, friction="viscous",
+                                 actuator=None).fit(recs)
+    return fit.theta_, fit.std_, fit.param_std_["theta"], *fit.ci95_
+
+
 def speed(args) -> None:
     r1, r2, prior = protocol_records(0.3, np.random.SeedSequence(args.seed))
     times: dict[str, list[float]] = {}
@@ -222,11 +259,14 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--crb", action="store_true",
                    help="print only each scenario's Cramér-Rao bound and error limit")
+    p.add_argument("--offsets", action="store_true",
+                   help="the spread over --trials encoder offsets of one record pair")
     args = p.parse_args(argv)
     args.drives = args.drives.split(",")
     args.effects = [e for name in args.effects.split(",")
                     for e in (EXTENDED if name == "extended" else [name])]
-    (speed if args.speed else bounds if args.crb else coverage)(args)
+    (speed if args.speed else bounds if args.crb else offsets if args.offsets
+     else coverage)(args)
     return 0
 
 

@@ -207,17 +207,31 @@ def _encoder_records(linear, theta, *, fc=(0.0, 0.0), tau_i=0.0, seed=0):
     """Two step-down records as a drive logs them from 16 384-count encoders: the
     differenced counts of the reference's exact angles, each encoder starting at a
     random angle within a count."""
+    return _read_by_encoders(_reference_angles(linear, theta, fc=fc, tau_i=tau_i), seed)
+
+
+def _reference_angles(linear, theta, *, fc=(0.0, 0.0), tau_i=0.0):
+    """``(t, torque, (phi_M, phi_L))`` of the two step-down records (scipy reference)."""
     drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
     loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
     t = bk.signals.time_grid(T_END, TS)
+    out = []
+    for a in (A1, A2):
+        u = bk.signals.step_down(t, a, t_s=T_STEP)
+        out.append((t, u, reference_angles(drive, t, u, actuator=loop,
+                                           initial_state=drive.steady_state(a))))
+    return out
+
+
+def _read_by_encoders(angles, seed):
+    """Records of the differenced counts of ``angles``, each encoder from a random
+    angle within a count."""
     enc = bk.Encoder(COUNTS)
     out = []
-    for a, ss in zip((A1, A2), np.random.SeedSequence(seed).spawn(2), strict=True):
-        u = bk.signals.step_down(t, a, t_s=T_STEP)
-        phi = reference_angles(drive, t, u, actuator=loop, initial_state=drive.steady_state(a))
+    for (t, u, phi), ss in zip(angles, np.random.SeedSequence(seed).spawn(2), strict=True):
         offsets = np.random.default_rng(ss).uniform(size=2) * enc.resolution
         w_m, w_l = (enc.measure(t, p + o).speed for p, o in zip(phi, offsets, strict=True))
-        out.append(bk.Record(t, u, w_m, w_l, name=f"a={a:.3g}"))
+        out.append(bk.Record(t, u, w_m, w_l, name=f"a={u[0]:.3g}"))
     return out
 
 
@@ -327,6 +341,9 @@ def test_cli_reads_encoder_counts(tmp_path, capsys):
                      str(COUNTS), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert abs(out["theta"] / THETA - 1) < THETA_RTOL
+    # the interval is the quantisation's, narrower than white noise's here
+    assert out["interval"] == "quantisation"
+    assert 0.3 * out["std_fisher"] < out["std"] < out["std_fisher"]
     assert cli_main(["identify", *paths, "--drive", str(prior), "--json"]) == 2
     assert "no column 'w_motor'" in capsys.readouterr().err
 
@@ -411,3 +428,69 @@ def test_crb_refuses_what_it_cannot_bound(kw, match):
     with pytest.raises(InputError, match=match):
         bk.cramer_rao_bound(drive, t, bk.signals.step_down(t, A1, t_s=0.5), snr_db=SNR,
                             **{"tau_i": 1e-3 if "initial_state" in kw else 0.0, **kw})
+
+
+def test_quantisation_error_is_the_encoders():
+    """The errors the interval of encoder angles draws are an encoder's: its reading
+    less the angle, in (-q, 0], uniform over the offsets within a count."""
+    from backlashkit.identify._quantised import quantisation_error
+
+    enc = bk.Encoder(COUNTS)
+    q = enc.resolution
+    phi = np.linspace(0.0, 37.3 * q, 200)
+    offset = np.random.default_rng(1).uniform(0.0, q, 2000)
+    err = quantisation_error(phi, offset, q)
+    shifted = phi[np.newaxis, :] + offset[:, np.newaxis]
+    reading = enc.counts(shifted.ravel()).reshape(shifted.shape) * q
+    np.testing.assert_allclose(err, reading - shifted, atol=1e-9 * q)
+    assert np.all((err > -q) & (err <= 0))
+    assert np.mean(err) == pytest.approx(-q / 2, rel=0.02)
+    assert np.std(err) == pytest.approx(q / np.sqrt(12), rel=0.02)
+
+
+#: Trials of the interval of encoder angles: the spread of 16 estimates is known to
+#: within about +-35 % (95 %, chi-square with 15 degrees of freedom).
+OFFSET_TRIALS = 16
+
+
+def test_encoder_interval_is_the_spread_over_the_offsets():
+    """On encoder angles the standard error is the spread of theta over the encoders'
+    offsets within a count (the records' only randomness here), not white noise of
+    variance q^2 / 12: the white-noise one is about 1.4 times that spread, the
+    quantisation's agrees with it (the figures: docs/design/real-drives.md)."""
+    angles = _reference_angles(P_TRUE, THETA)
+    fits = [_fit(_read_by_encoders(angles, seed), P_TRUE, friction="viscous", actuator=None,
+                 interval=bk.FisherInterval()) for seed in range(OFFSET_TRIALS)]
+    spread = np.std([f.theta_ for f in fits], ddof=1)
+    std = np.median([f.std_ for f in fits])
+    white = np.median([f.param_std_["theta"] for f in fits])
+    assert 0.65 < std / spread < 1.35
+    assert white / spread > 1.35
+    assert all(f.interval_ == "quantisation" for f in fits)
+    # the ends are the draws' quantiles: about 2 std either side, not exactly 1.96
+    half = [(f.ci95_[1] - f.ci95_[0]) / (2 * f.std_) for f in fits]
+    assert 1.6 < min(half) and max(half) < 2.3
+
+
+def test_bootstrap_resamples_encoder_records_as_encoders_read_them(encoder):
+    """A parametric bootstrap of encoder records draws its resamples as encoders read
+    the model's angles (counts from a random offset), so its spread is already the
+    quantisation's: its interval stays the bootstrap's, and its refits stay within a
+    few spreads over the offsets (about 9e-7 rad)."""
+    from backlashkit.identify._model import spans
+    from backlashkit.identify._search import quantised_resample
+
+    q = bk.Encoder(COUNTS).resolution
+    sp = spans([encoder[0].with_positions(q)], "steady", 1.0, [(1.0, 1.0)])[0]
+    angles = (sp.p_m[np.newaxis, :] + 0.1 * q, sp.p_l[np.newaxis, :] - 0.2 * q)
+    drawn = quantised_resample(sp, angles, np.random.default_rng(0))
+    assert drawn.quantum == pytest.approx(q) and drawn.has_positions
+    for got, exact in zip((drawn.phi_motor, drawn.phi_load), angles, strict=True):
+        steps = got / q
+        np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
+        assert np.max(np.abs(got - got[0] - (exact[0] - exact[0, 0]))) < q
+    fit = _fit(encoder, P_TRUE, friction="viscous", actuator=None,
+               interval=bk.ParametricBootstrap(4, seed=1))
+    assert fit.interval_ == "bootstrap"
+    assert np.all(np.abs(fit.bootstrap_thetas_ - fit.theta_) < 5e-6)
+    assert np.ptp(fit.bootstrap_thetas_) > 0

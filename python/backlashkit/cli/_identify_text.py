@@ -75,7 +75,8 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
         for note in notes:
             print(f"note: {note}")
         return
-    how = {"fisher": " (Fisher)", "profile": " (profile likelihood)"}.get(est.interval_, "")
+    how = {"fisher": " (Fisher)", "profile": " (profile likelihood)",
+           "quantisation": " (spread over the encoders' offsets)"}.get(est.interval_, "")
     if est.interval_ == "bootstrap":
         how = f" (parametric bootstrap, {est.bootstrap_thetas_.size} refits)"
     if est.search.final_horizon is not None:

@@ -212,20 +212,21 @@ class Residual:
                                     strict=True):
             model = model_angles(x) if sp.positions else (x[:, :, 0], x[:, :, 1])
             for c, y in enumerate(y2):  # w_M (or phi_M), then w_L (or phi_L)
-                block = out[:, pos : pos + m - lag]
-                e = y - model[c][:, s_]
-                if sp.positions:  # the angles' common offset: the first sample's error
-                    e -= e.mean(axis=1, keepdims=True)
-                if self.ar is None:
-                    block[:] = e
-                else:
-                    block[:] = whiten(e, self.ar[sp.k, c])
-                block /= self.sig[sp.k, c]
+                out[:, pos : pos + m - lag] = self.weigh(sp, c, y - model[c][:, s_])
                 pos += m - lag
         p = pb.values(z_rows)[:, 1:]
         with np.errstate(invalid="ignore"):  # inf / inf: no penalty on an overflow
             out[:, pos:] = np.nan_to_num((p - pb.p_prior) / (pb.pen * pb.p_prior))
         return out
+
+    def weigh(self, sp: Span, c: int, e: np.ndarray) -> np.ndarray:
+        """The rows of errors ``e`` (``(b, m)``: the selected samples of channel ``c`` of
+        span ``sp``): less their mean on angles, whitened, divided by the noise level."""
+        if sp.positions:  # the angles' common offset: the first sample's error
+            e = e - e.mean(axis=1, keepdims=True)
+        if self.ar is not None:
+            e = whiten(e, self.ar[sp.k, c])
+        return e / self.sig[sp.k, c]
 
     def at(self, z: np.ndarray) -> np.ndarray:
         """The residual at one point (inf where the model cannot be simulated)."""

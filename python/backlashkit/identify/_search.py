@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -24,6 +24,7 @@ from ..plants import TwoMassDrive
 from ._lm import LMState
 from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
+from ._quantised import log_theta_draws, quantised
 from .intervals import Z_95, IntervalInputs, ThetaInterval
 from .noise import sample_noise
 from .record import Record
@@ -273,6 +274,8 @@ class Uncertain:
     cov: np.ndarray
     std: np.ndarray
     interval: ThetaInterval
+    jz: np.ndarray = field(repr=False)  # Jacobian of the residual in log-parameters
+    cov_z: np.ndarray = field(repr=False)  # inverse of jz^T jz
 
 
 def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_iter: int,
@@ -304,15 +307,19 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
         if st.cost > best.cost - RECENTRE_MARGIN:
             break
         best = st
-    return Uncertain(best, values, cov, std, found)  # z is best.z on every exit
+    return Uncertain(best, values, cov, std, found, jz, cov_z)  # z is best.z on every exit
 
 
-def resample(pb: Problem, z: np.ndarray, sig: np.ndarray, ar: np.ndarray | None,
+def resample(pb: Problem, sig: np.ndarray, ar: np.ndarray | None, z: np.ndarray,
              rng: np.random.Generator) -> list[Record]:
-    """Records simulated from log-parameters ``z`` with the fitted noise added."""
+    """Records simulated from log-parameters ``z`` with the fitted noise added (read by
+    the records' encoders where they hold encoder angles)."""
     sims = pb.simulate(z[np.newaxis, :], pb.spans)
     records = []
     for sp, x in zip(pb.spans, sims, strict=True):
+        if sp.positions and sp.record.quantum > 0:
+            records.append(quantised_resample(sp, model_angles(x), rng))
+            continue
         clean = model_angles(x) if sp.positions else (x[:, :, 0], x[:, :, 1])
         y_m, y_l = (clean[c][0] + sample_noise(rng, sig[sp.k, c],
                                                None if ar is None else ar[sp.k, c], sp.t.size)
@@ -321,6 +328,16 @@ def resample(pb: Problem, z: np.ndarray, sig: np.ndarray, ar: np.ndarray | None,
         records.append(Record.from_positions(sp.t, sp.torque, y_m, y_l, name=name)
                        if sp.positions else Record(sp.t, sp.torque, y_m, y_l, name=name))
     return records
+
+
+def quantised_resample(sp: Span, angles: tuple[np.ndarray, np.ndarray],
+                       rng: np.random.Generator) -> Record:
+    """A span's record read by its encoders from the model's angles, each encoder from
+    a uniformly random offset within a count (its quantisation is the noise)."""
+    q = sp.record.quantum
+    counts = [np.floor((a[0] + rng.uniform(0.0, q)) / q) for a in angles]
+    return Record.from_positions(sp.t, sp.torque, *counts, counts_per_rev=2 * math.pi / q,
+                                 name=f"{sp.record.name} (bootstrap)")
 
 
 def residuals_and_fit(spans: Sequence[Span], sims: list[np.ndarray]):
@@ -522,12 +539,33 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1])
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
     unc = uncertainty(pb, best, rows_unc, interval, max_iter,
-                      partial(_resample_at, pb, sig, ar), refit)
+                      partial(resample, pb, sig, ar), refit)
+    if quantised(rows_unc):
+        errors = quantisation_errors(unc, rows_unc)
+        unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)
+        choices = quantised_choices(choices, errors)
     unc.interval = widened(unc.interval, choices)
     stage(7)
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
         sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
     return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices)
+
+
+def quantisation_errors(unc: Uncertain, rows: Residual) -> np.ndarray:
+    """Draws of the error of ``theta`` in rad over the encoders' offsets (a fit to
+    encoder angles: :mod:`._quantised`)."""
+    z = unc.best.z
+    return math.exp(z[0]) * np.expm1(log_theta_draws(rows, unc.jz, unc.cov_z, z))
+
+
+def quantised_choices(choices: Sequence[TermChoice], errors: np.ndarray
+                      ) -> list[TermChoice]:
+    """The choices with the other model's interval (Fisher, white noise) made from the
+    same quantisation ``errors`` about that model's ``theta`` (its midpoint)."""
+    lo, hi = np.quantile(errors, [0.025, 0.975])
+    return [c if c.other_ci95 is None else
+            replace(c, other_ci95=(max(0.0, 0.5 * sum(c.other_ci95) - hi),
+                                   0.5 * sum(c.other_ci95) - lo)) for c in choices]
 
 
 def widen_box(pb: Problem, box: tuple[np.ndarray, np.ndarray] | None
@@ -540,8 +578,3 @@ def widen_box(pb: Problem, box: tuple[np.ndarray, np.ndarray] | None
     lo[extra] -= EXTRA_BOX
     hi[extra] += EXTRA_BOX
     return lo, hi
-
-
-def _resample_at(pb: Problem, sig: np.ndarray, ar: np.ndarray | None, z: np.ndarray,
-                 rng: np.random.Generator) -> list[Record]:
-    return resample(pb, z, sig, ar, rng)

@@ -11,6 +11,12 @@ Configuration objects for ``JointIdentifier(interval=...)``:
   information at the optimum (the quadratic approximation of the same likelihood).
 * :class:`ParametricBootstrap` -- refits of records simulated from the estimate.
 
+On encoder angles of known step, the profile and Fisher intervals assume a white noise
+that quantisation is not; the fit replaces them by the spread of ``theta`` over the
+encoders' offsets within a count (kind ``"quantisation"``:
+:mod:`backlashkit.identify._quantised`), and the bootstrap reads its resamples through
+the encoders.
+
 Each object computes its own interval from what the fit hands it
 (:class:`IntervalInputs`); the search for the profile's crossings
 (:func:`profile_crossing`) is here too. The fit itself lives in
@@ -100,6 +106,10 @@ class FisherInterval:
         return ThetaInterval("fisher", (max(0.0, fit.theta - Z_95 * fit.std),
                                         fit.theta + Z_95 * fit.std))
 
+    def _quantised(self, found: ThetaInterval, theta: float, errors: np.ndarray
+                   ) -> ThetaInterval:
+        return quantisation_interval(theta, errors)
+
 
 @dataclass(frozen=True)
 class ProfileLikelihood:
@@ -170,6 +180,10 @@ class ProfileLikelihood:
         return ThetaInterval("profile", (ends[0], ends[1]), (bounded[0], bounded[1]),
                              profile=points, lowest_rise=float(lowest[0]),
                              lowest_z=lowest[1])
+
+    def _quantised(self, found: ThetaInterval, theta: float, errors: np.ndarray
+                   ) -> ThetaInterval:
+        return quantisation_interval(theta, errors)
 
 
 class _HeldTheta:
@@ -301,6 +315,19 @@ class ParametricBootstrap:
         half = float(student_t.ppf(0.975, self.n_resamples - 1)) * std
         return ThetaInterval("bootstrap", (max(0.0, fit.theta - half), fit.theta + half),
                              std=std, bootstrap_thetas=thetas)
+
+    def _quantised(self, found: ThetaInterval, theta: float, errors: np.ndarray
+                   ) -> ThetaInterval:
+        return found  # its resamples are read by encoders like the records
+
+
+def quantisation_interval(theta: float, errors: np.ndarray) -> ThetaInterval:
+    """The 95 % interval and standard error of an estimate ``theta`` whose errors are
+    distributed as the draws ``errors`` (the encoders' quantisation:
+    :mod:`backlashkit.identify._quantised`): the truth is ``theta`` less an error."""
+    lo, hi = np.quantile(errors, [0.025, 0.975])
+    return ThetaInterval("quantisation", (max(0.0, theta - hi), theta - lo),
+                         std=float(np.std(errors, ddof=1)))
 
 
 def profile_crossing(rise: Callable[[float], float], first: float, *, level: float = CHI2_95,

@@ -30,7 +30,10 @@ Fitted attributes besides those in the class docstring
     not rise to the 95 % level within ``ProfileLikelihood.max_factor`` of ``theta_``
     (the records hardly bound ``theta`` there). ``(True, True)`` for other intervals.
 ``interval_`` (str)
-    ``"profile"``, ``"fisher"`` or ``"bootstrap"``: where ``ci95_`` comes from.
+    ``"profile"``, ``"fisher"`` or ``"bootstrap"``: where ``ci95_`` comes from; or
+    ``"quantisation"`` on encoder angles of known step, where ``ci95_`` and ``std_``
+    come from the spread of ``theta`` over the encoders' offsets within a count
+    (:mod:`backlashkit.identify._quantised`), not from white noise.
 ``profile_`` (array or None)
     Rows ``(theta, rise)`` where the profile search evaluated the likelihood, sorted,
     ``rise`` in chi-square units above ``cost_``; None for the other intervals.

@@ -368,7 +368,9 @@ def _draw_criterion(out: Path, prior: TwoMassDrive, finals: list[Record], shown:
 def _estimate_rows(shown: _Shown, result: Any) -> list[tuple[str, str, str]]:
     """The rows of the estimates' table that have a value: (quantity, rad, deg)."""
     kind = {"profile": "profile likelihood", "fisher": "Fisher information",
-            "bootstrap": "parametric bootstrap"}.get(getattr(result, "interval_", None))
+            "bootstrap": "parametric bootstrap",
+            "quantisation": "spread over the encoders' offsets"}.get(
+                getattr(result, "interval_", None))
     std, ci95 = getattr(result, "std_", None), getattr(result, "ci95_", None)
     rows = [("theta, the backlash half-width", shown.theta),
             ("standard error of theta", std),
