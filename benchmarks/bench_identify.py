@@ -25,10 +25,15 @@
 
 ``--stiffness-grid N`` times ``ThetaGrid(stiffness_points=N)`` in 2. instead.
 
+``--count`` prints instead what one default fit and one ``cramer_rao_bound`` of the
+same records cost in simulations of those records: the samples the compiled kernel
+advanced (every parameter row of every call, counted by wrapping
+``simulate_packed``), divided by the records' samples (issue 24's measure).
+
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
 Run: ``python benchmarks/bench_identify.py [--repeats 5] [--reproduce]
-[--stiffness-grid N]``.
+[--stiffness-grid N] [--count]``.
 """
 
 from __future__ import annotations
@@ -55,6 +60,7 @@ from backlashkit.identify import (
     TwoStepIdentifier,
     commutation_instants,
 )
+from backlashkit.identify.crb import cramer_rao_bound
 from backlashkit.identify.intervals import FisherInterval
 from backlashkit.identify.joint import JointIdentifier
 from backlashkit.identify.noise import ARNoise
@@ -71,14 +77,72 @@ def _median(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
+#: The stages of a joint fit, as its ``progress`` callback reports them
+#: (``backlashkit.identify._search.STAGES``).
+STAGE_NAMES = ("starts (theta grid)", "first window", "continuation", "whole records",
+               "noise levels", "model terms (friction, loop)", "uncertainty and interval")
+
+
+def simulations(fn, samples: int, done=None) -> tuple[float, int]:
+    """What ``fn()`` costs in simulations of ``samples`` samples, and the kernel's
+    calls; ``done`` (a list ``[samples, calls]``) counts as it goes."""
+    import backlashkit.identify._model as model
+    import backlashkit.simulate as sim
+
+    done = [0, 0] if done is None else done
+    real = sim.simulate_packed
+
+    def counted(n, p, t0, ts, u, x0, **kw):
+        done[0] += np.shape(p)[0] * np.shape(u)[1]
+        done[1] += 1
+        return real(n, p, t0, ts, u, x0, **kw)
+
+    model.simulate_packed = sim.simulate_packed = counted
+    try:
+        fn()
+    finally:
+        model.simulate_packed = sim.simulate_packed = real
+    return done[0] / samples, done[1]
+
+
+def count(recs, prior) -> None:
+    """Issue 24's measure: one fit and one bound in simulations of the records."""
+    samples = sum(r.t.size for r in recs)
+    done = [0, 0]
+    marks = []
+    fit = JointIdentifier(prior, workers=1, progress=lambda k, total: marks.append(
+        (k, total, done[0] / samples))).fit
+    n_fit, calls = simulations(lambda: fit(recs), samples, done)
+    last = 0.0
+    for k, total, n in marks:
+        if k > 0:  # stage k ended (a misfit restart repeats the stages)
+            name = STAGE_NAMES[(k - 1) % len(STAGE_NAMES)]
+            print(f"  stage {k}/{total}, {name}: {n - last:.0f} simulations")
+            last = n
+    truth = TwoMassDrive(**P_TRUE, theta=THETA)
+    n_crb = sum(simulations(lambda r=r: cramer_rao_bound(
+        truth, r.t, r.torque, snr_db=40.0, estimate="all"), r.t.size)[0]
+        for r in recs)
+    print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
+          f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls "
+          f"(issue 24's bar: 250); cramer_rao_bound(estimate=\"all\") of each record "
+          f"costs {n_crb / 2:.0f} "
+          "simulations of it (bar: 3)")
+
+
 def main() -> None:
     """Print the timings."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--reproduce", action="store_true")
     ap.add_argument("--stiffness-grid", type=int, default=1)
+    ap.add_argument("--count", action="store_true",
+                    help="only the cost of one fit and one bound in simulations")
     args = ap.parse_args()
     rec1, rec2, prior = protocol_records(0.3, np.random.SeedSequence(2024))
+    if args.count:
+        count([rec1, rec2], prior)
+        return
     exe = [sys.executable, "-m", "backlashkit.cli"]
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
