@@ -25,7 +25,7 @@ from ._lm import LMState
 from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
 from ._quantised import log_theta_draws, quantised
-from .intervals import Z_95, IntervalInputs, ThetaInterval
+from .intervals import Z_95, IntervalInputs, ThetaInterval, quantisation_interval
 from .noise import sample_noise
 from .record import Record
 from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
@@ -562,10 +562,9 @@ def quantised_choices(choices: Sequence[TermChoice], errors: np.ndarray
                       ) -> list[TermChoice]:
     """The choices with the other model's interval (Fisher, white noise) made from the
     same quantisation ``errors`` about that model's ``theta`` (its midpoint)."""
-    lo, hi = np.quantile(errors, [0.025, 0.975])
     return [c if c.other_ci95 is None else
-            replace(c, other_ci95=(max(0.0, 0.5 * sum(c.other_ci95) - hi),
-                                   0.5 * sum(c.other_ci95) - lo)) for c in choices]
+            replace(c, other_ci95=quantisation_interval(0.5 * sum(c.other_ci95), errors).ci95)
+            for c in choices]
 
 
 def widen_box(pb: Problem, box: tuple[np.ndarray, np.ndarray] | None
