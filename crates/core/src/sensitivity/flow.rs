@@ -6,9 +6,10 @@
 //! unscaled, `dA/dJ_M ~ k / J_M^2` is 200 times `A` on paper A's drive and would set
 //! the exponential's scaling and squaring by itself.
 
+use super::coupled::coupled_expm;
 use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
 use super::{N_PARAMS, N_STATES};
-use crate::linalg::{expm_and_integral, matvec, Mat, Vector};
+use crate::linalg::{matvec, Mat, Vector};
 
 /// State and sensitivities: `x`, and `s[j] = scale_j dx/dp_j`.
 #[derive(Clone, Copy, Debug)]
@@ -132,62 +133,28 @@ pub(super) struct Flow {
     s1: [Vector<N_STATES>; N_PARAMS],
 }
 
-/// Size of the system of the state and one sensitivity.
-const PAIR: usize = 2 * N_STATES;
-
 impl Flow {
-    /// The flow of mode `flank` over `tau`, sensitivities scaled by `scale`: for each
-    /// parameter the exponential of `[[A, 0], [scale_j A_j, A]] tau` and its integral
-    /// (whose upper-left blocks, the state's own flow, are the same for every `j`).
+    /// The flow of mode `flank` over `tau`, sensitivities scaled by `scale`: the
+    /// exponential of `[[A, 0], [scale_j A_j, A]] tau` and its integral for every `j`
+    /// (see `coupled`), applied to the inputs `[b, scale_j b_j]` and `[c, scale_j c_j]`.
     pub fn new(p: &[f64; N_PARAMS], scale: &[f64; N_PARAMS], flank: i8, tau: f64) -> Self {
         let sys = system(p, flank);
-        let mut flow = Flow {
-            e: [[0.0; N_STATES]; N_STATES],
-            xu: [0.0; N_STATES],
-            x1: [0.0; N_STATES],
-            coupling: [[[0.0; N_STATES]; N_STATES]; N_PARAMS],
-            su: [[0.0; N_STATES]; N_PARAMS],
-            s1: [[0.0; N_STATES]; N_PARAMS],
+        let der: [System; N_PARAMS] =
+            std::array::from_fn(|j| system_derivative(p, flank, j).scaled(scale[j]));
+        let ex = coupled_expm(&sys.a, &der.map(|d| d.a), tau);
+        let (fb, fc) = (matvec(&ex.f, &sys.b), matvec(&ex.f, &sys.c));
+        let input = |j: usize, v: &Vector<N_STATES>, dv: &Vector<N_STATES>| {
+            let (kv, fdv) = (matvec(&ex.k[j], v), matvec(&ex.f, dv));
+            std::array::from_fn(|i| kv[i] + fdv[i])
         };
-        for j in 0..N_PARAMS {
-            let der = system_derivative(p, flank, j).scaled(scale[j]);
-            let mut m: Mat<PAIR> = [[0.0; PAIR]; PAIR];
-            for r in 0..N_STATES {
-                for c in 0..N_STATES {
-                    m[r][c] = sys.a[r][c];
-                    m[N_STATES + r][N_STATES + c] = sys.a[r][c];
-                    m[N_STATES + r][c] = der.a[r][c];
-                }
-            }
-            let (e, f) = expm_and_integral(&m, tau);
-            let stack = |top: &Vector<N_STATES>, bottom: &Vector<N_STATES>| -> Vector<PAIR> {
-                std::array::from_fn(|i| {
-                    if i < N_STATES {
-                        top[i]
-                    } else {
-                        bottom[i - N_STATES]
-                    }
-                })
-            };
-            let (gu, g1) = (
-                matvec(&f, &stack(&sys.b, &der.b)),
-                matvec(&f, &stack(&sys.c, &der.c)),
-            );
-            for r in 0..N_STATES {
-                for c in 0..N_STATES {
-                    flow.coupling[j][r][c] = e[N_STATES + r][c];
-                    if j == 0 {
-                        flow.e[r][c] = e[r][c];
-                    }
-                }
-                flow.su[j][r] = gu[N_STATES + r];
-                flow.s1[j][r] = g1[N_STATES + r];
-                if j == 0 {
-                    (flow.xu[r], flow.x1[r]) = (gu[r], g1[r]);
-                }
-            }
+        Flow {
+            e: ex.e,
+            xu: fb,
+            x1: fc,
+            su: std::array::from_fn(|j| input(j, &sys.b, &der[j].b)),
+            s1: std::array::from_fn(|j| input(j, &sys.c, &der[j].c)),
+            coupling: ex.c,
         }
-        flow
     }
 
     /// `z` advanced by the flow under torque `u`.

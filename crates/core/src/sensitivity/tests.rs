@@ -187,3 +187,43 @@ fn bad_inputs_are_errors() {
         .unwrap()
         .is_empty());
 }
+
+#[test]
+fn coupled_exponential_matches_the_dense_one() {
+    // Paper A's contact mode and its scaled couplings, over a sample and a sliver.
+    use crate::linalg::expm_and_integral;
+    let a = system(&PAPER, 1).a;
+    let d: [_; N_PARAMS] = std::array::from_fn(|j| {
+        system_derivative(&PAPER, 1, j)
+            .a
+            .map(|r| r.map(|v| v * PAPER[j]))
+    });
+    for tau in [TS, 3.7e-6] {
+        let ex = super::coupled::coupled_expm(&a, &d, tau);
+        for j in 0..N_PARAMS {
+            let mut m = [[0.0; 6]; 6];
+            for r in 0..3 {
+                for c in 0..3 {
+                    (m[r][c], m[r + 3][c + 3], m[r + 3][c]) = (a[r][c], a[r][c], d[j][r][c]);
+                }
+            }
+            let (e, f) = expm_and_integral(&m, tau);
+            let (big_e, big_f) = (crate::linalg::norm1(&e), crate::linalg::norm1(&f));
+            for r in 0..3 {
+                for c in 0..3 {
+                    let close = |x: f64, y: f64, big: f64| (x - y).abs() <= 1e-13 * big;
+                    assert!(close(ex.e[r][c], e[r][c], big_e), "E {tau} {r}{c}");
+                    assert!(
+                        close(ex.c[j][r][c], e[r + 3][c], big_e),
+                        "C{j} {tau} {r}{c}"
+                    );
+                    assert!(close(ex.f[r][c], f[r][c], big_f), "F {tau} {r}{c}");
+                    assert!(
+                        close(ex.k[j][r][c], f[r + 3][c], big_f),
+                        "K{j} {tau} {r}{c}"
+                    );
+                }
+            }
+        }
+    }
+}
