@@ -4,7 +4,10 @@ Workload: paper A's drive (``backlashkit.papers.ravanbod2002``: ``P_TRUE``, ``TH
 under an 8 s record at Ts = 1 ms (8 001 samples): torque ``A1`` = 0.157 N m from rest,
 stepped down to 0 at 4 s, paper law.
 
-Timed in this process, each the median of ``--repeats`` runs after one warm-up:
+Timed in this process, each the median of ``--repeats`` runs after one warm-up, the
+three interleaved (one run of each per round, so that a busy machine's load weighs
+on all three alike) and BLAS held to one thread (the twin's small products gain
+nothing from more):
 
 * ``compiled sensitivities``: :func:`backlashkit._sensitivity.sensitivities` (the
   kernel simulates the drive once for its contact changes, then integrates the seven
@@ -27,6 +30,7 @@ import statistics
 import time
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 import backlashkit as bk
 from backlashkit._numpy_sensitivity import PARAMS
@@ -41,15 +45,17 @@ TS = 1e-3
 FD_STEP = 1e-6
 
 
-def median_time(fn, repeats: int) -> tuple[float, object]:
-    """Median wall time of ``repeats`` calls of ``fn`` after one warm-up, and its result."""
-    out = fn()
-    times = []
+def median_times(fns, repeats: int) -> tuple[list[float], list[object]]:
+    """Median wall times of ``repeats`` rounds of one call of each of ``fns``, after one
+    warm-up round, and their last results."""
+    outs = [fn() for fn in fns]
+    times: list[list[float]] = [[] for _ in fns]
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), out
+        for i, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            outs[i] = fn()
+            times[i].append(time.perf_counter() - t0)
+    return [statistics.median(ts) for ts in times], outs
 
 
 def main() -> None:
@@ -64,9 +70,10 @@ def main() -> None:
     perturbed = [drive] + [bk.TwoMassDrive(**{**values, n: values[n] * (1 + FD_STEP)})
                            for n in PARAMS]
 
-    t_fast, fast = median_time(lambda: sensitivities(drive, t, u), args.repeats)
-    t_np, ref = median_time(lambda: numpy_sensitivities(drive, t, u), args.repeats)
-    t_fd, _ = median_time(lambda: [d.simulate(t, u) for d in perturbed], args.repeats)
+    with threadpool_limits(1):
+        (t_fast, t_np, t_fd), (fast, ref, _) = median_times(
+            [lambda: sensitivities(drive, t, u), lambda: numpy_sensitivities(drive, t, u),
+             lambda: [d.simulate(t, u) for d in perturbed]], args.repeats)
 
     n_changes = len(drive.simulate(t, u).contact_events)
     diff = np.max(np.max(np.abs(fast - ref), axis=(0, 1)) / np.max(np.abs(ref), axis=(0, 1)))
