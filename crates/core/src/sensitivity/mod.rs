@@ -7,7 +7,7 @@
 //! sensitivity `S_j = dx/dp_j`: `dS_j/dt = A S_j + A_j x + b_j u + c_j` (`A_j = dA/dp_j`
 //! and so on). The state and one sensitivity together follow a 6-state linear system
 //! whose flow over a span of held torque is exact (a matrix exponential, as the
-//! simulator's own); see `flow` and `coupled`. The contact changes are those the simulator locates:
+//! simulator's own); see `mode`, `flow` and `coupled`. The contact changes are those the simulator locates:
 //! the drive is simulated first and its events split the samples they fall in. At a
 //! change the sensitivities jump by the saltation `(f_- - f_+) dtau/dp`; see `run`.
 //!
@@ -19,6 +19,7 @@
 
 mod coupled;
 mod flow;
+mod mode;
 mod run;
 #[cfg(test)]
 mod tests;

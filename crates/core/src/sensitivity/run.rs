@@ -1,8 +1,9 @@
 //! Sensitivities along a run: the samples, split at the simulator's contact changes,
 //! and the saltation jump at each change.
 
-use super::flow::{system, Augmented, Flow};
+use super::flow::{Augmented, Flow};
 use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
+use super::mode::system;
 use super::{N_PARAMS, N_STATES};
 use crate::chain::{simulate_chain, ChainParams, Law};
 use crate::hybrid::Event;

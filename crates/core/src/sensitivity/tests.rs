@@ -1,5 +1,5 @@
-use super::flow::{system, system_derivative};
 use super::index::{F_M, J_M, THETA};
+use super::mode::{system, system_derivative};
 use super::*;
 use crate::chain::{simulate_chain, ChainParams, Law};
 use crate::Error;
@@ -46,7 +46,7 @@ fn mode_derivatives_match_differences() {
             let (a, b) = (system(&hi, flank), system(&lo, flank));
             let der = system_derivative(&PAPER, flank, j);
             let step = 2.0 * h * PAPER[j];
-            let flat = |s: &flow::System| -> Vec<f64> {
+            let flat = |s: &mode::System| -> Vec<f64> {
                 s.a.iter()
                     .flatten()
                     .chain(&s.b)
