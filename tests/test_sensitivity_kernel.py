@@ -22,8 +22,8 @@ from backlashkit.papers.ravanbod2002 import A2, P_TRUE, THETA
 
 #: Agreement asked of the two on paper A's drive (3.2e-10; ``-s`` prints the figures)...
 RTOL = 1e-8
-#: ... and on random drives: a median of 3e-10, but up to 2.5e-8 where a change comes
-#: at under 10 % of the largest relative speed (just clear of GRAZING): the jumps there
+#: ... and on random drives: a median of 3e-10, but up to 2.5e-8 where changes come at
+#: 6 to 7 % of the largest relative speed (just clear of GRAZING): the jumps there
 #: amplify the two exponentials' differing rounding (``-s`` prints the figures).
 RANDOM_RTOL = 1e-7
 #: Near grazing, as in test_sensitivity.py: a change at a relative speed below this
@@ -58,7 +58,7 @@ def test_paper_drive_matches_numpy_twin():
 
 
 def test_random_drives_match_numpy_twin():
-    """The draws of test_sensitivity.py's random drives."""
+    """Random drives drawn as in test_sensitivity.py."""
     checked: list[float] = []
 
     @settings(max_examples=EXAMPLES, derandomize=True, deadline=None, database=None)
