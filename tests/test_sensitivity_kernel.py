@@ -8,6 +8,8 @@ amplified by the saltation jumps near grazing.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -133,3 +135,28 @@ def test_bad_inputs_raise_value_error():
         sensitivities(drive, t, u[:-1])
     with pytest.raises(ValueError, match="no Coulomb friction"):
         sensitivities(bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01), t, u)
+
+
+def _tangent_case(margin_rel: float):
+    """test_simulate.py's free flight towards the positive flank whose twist peaks at
+    ``theta (1 - margin_rel)``, at 25.5 ms (no friction, constant torque)."""
+    jm, w0, theta = 0.01, 1.0, 0.02
+    a = jm * w0 / 0.0255
+    drive = bk.TwoMassDrive(J_M=jm, J_L=1.0, k_sh=100.0, f_M=0.0, f_L=0.0, f_sh=0.0,
+                            theta=theta)
+    phi0 = theta - w0**2 * jm / (2 * a) - margin_rel * theta
+    t = np.arange(50) * 1e-3
+    return drive, t, np.full(t.size, -a), [w0, 0.0, phi0]
+
+
+def test_near_grazing_warns_as_the_simulator():
+    """A pass within 1e-9 of the flank warns; a clear miss does not, and its
+    sensitivities (zero frictions: plain derivatives) are finite."""
+    drive, t, u, x0 = _tangent_case(1e-9)
+    with pytest.warns(bk.SensitivityWarning, match="grazing"):
+        sensitivities(drive, t, u, initial_state=x0)
+    drive, t, u, x0 = _tangent_case(1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = sensitivities(drive, t, u, initial_state=x0, states=True)
+    assert np.isfinite(out).all()

@@ -7,12 +7,13 @@ simulator locates. Not yet used by the estimators, which still difference simula
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
 
 from . import validate as v
-from .errors import InputError
+from .errors import InputError, SensitivityWarning
 from .plants import TwoMassDrive
 
 #: The parameters, in the order of the sensitivities' last axis.
@@ -56,6 +57,12 @@ def sensitivities(
         For a drive with Coulomb friction or without ``theta``, or mismatched inputs.
     ValueError
         From the kernel: invalid parameters, or a contact change that grazes a flank.
+
+    Warns
+    -----
+    SensitivityWarning
+        When the run passes close to a grazing contact, as the simulator warns: after
+        it the sensitivities are ill-conditioned.
     """
     from . import _core
 
@@ -72,5 +79,13 @@ def sensitivities(
     x0 = np.zeros(3) if initial_state is None else v.finite_array("initial_state",
                                                                    initial_state)
     p = np.array([getattr(drive, n) for n in PARAMS], float)
-    out = _core.drive_sensitivities(p, float(t_arr[0]), ts, u, np.ascontiguousarray(x0))
+    out, grazes = _core.drive_sensitivities(p, float(t_arr[0]), ts, u,
+                                            np.ascontiguousarray(x0))
+    if len(grazes):
+        time, _, margin = grazes[0]
+        warnings.warn(
+            f"the run passed within {abs(margin):.3g} (relative) of a grazing contact "
+            f"(t = {time:.6g} s; {len(grazes)} such pass(es)): the sensitivities after it "
+            "are ill-conditioned (the derivative barely exists there)",
+            SensitivityWarning, stacklevel=2)
     return out if states else out[:, :2, :]

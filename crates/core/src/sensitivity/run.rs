@@ -6,14 +6,26 @@ use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
 use super::mode::system;
 use super::{N_PARAMS, N_STATES};
 use crate::chain::{simulate_chain, ChainParams, Law};
-use crate::hybrid::Event;
+use crate::hybrid::{Event, Graze};
 use crate::Error;
+
+/// Sensitivities along a run, and the run's near-grazing passes.
+#[derive(Clone, Debug, Default)]
+pub struct DriveSensitivities {
+    /// `dx/dp`, row-major `(samples, 3, 7)`: state by parameter.
+    pub values: Vec<f64>,
+    /// The simulator's near-grazing passes (see [`Graze`]): after one, the
+    /// sensitivities are ill-conditioned (the derivative barely exists).
+    pub grazes: Vec<Graze>,
+}
 
 /// Sensitivities `dx/dp` of the two-mass drive on the grid `t0 + i ts`, row-major
 /// `(u.len(), 3, 7)`: state `[w_M, w_L, phi]` by parameter (order
 /// [`PARAMS`](super::PARAMS)), in the parameters' SI units. The torque `u[i]` is held
 /// over `[t_i, t_{i+1})`; the run starts at `x0` with zero sensitivity (paper A's law,
 /// no Coulomb friction, no current loop).
+///
+/// Also returns the simulator's near-grazing passes.
 ///
 /// Errors: invalid parameters (`J`, `k`, `theta` must be > 0, the frictions >= 0, all
 /// finite), sample time, input or initial state; a simulation error; a change at which
@@ -24,7 +36,7 @@ pub fn drive_sensitivities(
     ts: f64,
     u: &[f64],
     x0: &[f64],
-) -> Result<Vec<f64>, Error> {
+) -> Result<DriveSensitivities, Error> {
     let chain = chain_params(p)?;
     if !t0.is_finite() {
         return Err(Error::InvalidArgument(format!(
@@ -33,7 +45,7 @@ pub fn drive_sensitivities(
     }
     let run = simulate_chain(&chain, Law::Paper, t0, ts, u, x0)?;
     let Some(&first_mode) = run.modes.first() else {
-        return Ok(Vec::new());
+        return Ok(DriveSensitivities::default());
     };
     // Sensitivities are carried per log-parameter (see `flow`); a zero friction or
     // damping keeps the plain derivative.
@@ -50,7 +62,11 @@ pub fn drive_sensitivities(
         z,
         full: [None, None, None],
     };
-    walk.run(t0, ts, u, &run.events)
+    let values = walk.run(t0, ts, u, &run.events)?;
+    Ok(DriveSensitivities {
+        values,
+        grazes: run.grazes,
+    })
 }
 
 /// The chain of the two-mass drive, validated; `theta` must be positive (a zero gap

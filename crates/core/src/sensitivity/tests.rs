@@ -78,7 +78,9 @@ fn free_motor_matches_closed_form() {
     let mut p = PAPER;
     p[THETA] = 1e3;
     let u = vec![0.2; 2001];
-    let s = drive_sensitivities(&p, 0.0, TS, &u, &[0.0; 3]).unwrap();
+    let s = drive_sensitivities(&p, 0.0, TS, &u, &[0.0; 3])
+        .unwrap()
+        .values;
     let (jm, fm) = (p[J_M], p[F_M]);
     for (i, row) in s.chunks_exact(N_STATES * N_PARAMS).enumerate().step_by(100) {
         let t = i as f64 * TS;
@@ -113,7 +115,7 @@ fn worst_error_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64; 3]) -> Option<f64
     // Relative steps: the differences' error falls like h, the simulator's rounding
     // and event location grow like 1/h; the best of these resolves ~1e-7.
     const STEPS: [f64; 4] = [1e-5, 1e-6, 1e-7, 1e-8];
-    let sens = drive_sensitivities(p, 0.0, TS, u, x0).unwrap();
+    let sens = drive_sensitivities(p, 0.0, TS, u, x0).unwrap().values;
     let n_events = simulate_from(p, u, x0).events.len();
     let mut worst = 0.0f64;
     for j in 0..N_PARAMS {
@@ -212,6 +214,7 @@ fn bad_inputs_are_errors() {
     assert!(drive_sensitivities(&PAPER, 0.0, TS, &[f64::NAN; 3], &[0.0; 3]).is_err());
     assert!(drive_sensitivities(&PAPER, 0.0, TS, &[], &[0.0; 3])
         .unwrap()
+        .values
         .is_empty());
 }
 
