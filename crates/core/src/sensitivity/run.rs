@@ -50,6 +50,7 @@ pub fn drive_sensitivities(
     // Sensitivities are carried per log-parameter (see `flow`); a zero friction or
     // damping keeps the plain derivative.
     let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
+    // The simulator has checked that x0 has three finite entries.
     let x = [x0[0], x0[1], x0[2]];
     let z = Augmented {
         x,
@@ -69,8 +70,8 @@ pub fn drive_sensitivities(
     })
 }
 
-/// The chain of the two-mass drive, validated; `theta` must be positive (a zero gap
-/// has no guard between the flanks).
+/// The chain of the two-mass drive, validated; `theta` must be positive, the NumPy
+/// twin's scope (with no gap both flanks' changes fall at one instant, not checked).
 fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
     let chain = ChainParams::new(
         vec![p[J_M], p[J_L]],
