@@ -3,6 +3,7 @@
 //! * [`chain`] -- event-accurate simulation of drive chains with backlash (paper A's
 //!   two-mass drive is the two-inertia chain), one run or a parallel batch.
 //! * [`hybrid`] -- the piecewise-affine simulation engine underneath.
+//! * [`sensitivity`] -- exact forward sensitivities of the two-mass drive.
 //! * [`linalg`] -- small fixed-size linear algebra (matrix exponential and integral).
 //!
 //! Units are SI; every backlash `theta` is the half-width of the dead zone.
@@ -17,6 +18,7 @@ pub mod control;
 pub mod hybrid;
 pub mod linalg;
 pub mod play;
+pub mod sensitivity;
 
 use std::fmt;
 
@@ -29,6 +31,9 @@ pub enum Error {
     Diverged { time: f64 },
     /// More contact changes inside one step than the engine accepts.
     Zeno { time: f64 },
+    /// A contact change at which the shaft grazes a flank (zero relative speed): the
+    /// state is not differentiable in the parameters there.
+    Grazing { time: f64 },
 }
 
 impl fmt::Display for Error {
@@ -44,6 +49,13 @@ impl fmt::Display for Error {
                 f,
                 "contact chatter at t = {} s: too many contact changes inside one sample; \
                  use a shorter sample time or check the parameters and the input's magnitude",
+                Seconds(*time)
+            ),
+            Error::Grazing { time } => write!(
+                f,
+                "the shaft grazes a flank at t = {} s (zero relative speed at a contact \
+                 change): the sensitivities do not exist there; perturb the input or the \
+                 parameters",
                 Seconds(*time)
             ),
         }

@@ -5,11 +5,13 @@
 use pyo3::prelude::*;
 
 mod control;
+mod sensitivity;
 mod sim;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sim::register(m)?;
     control::register(m)?;
+    sensitivity::register(m)?;
     Ok(())
 }

@@ -1,0 +1,89 @@
+"""Cost of the exact forward sensitivities against what a Jacobian costs today.
+
+Workload: paper A's drive (``backlashkit.papers.ravanbod2002``: ``P_TRUE``, ``THETA``)
+under an 8 s record at Ts = 1 ms (8 001 samples): torque ``A1`` = 0.157 N m from rest,
+stepped down to 0 at 4 s, paper law.
+
+Timed in this process, each the median of ``--repeats`` runs after one warm-up, the
+three interleaved (one run of each per round, so that a busy machine's load weighs
+on all three alike) and BLAS held to one thread (the twin's small products gain
+nothing from more):
+
+* ``compiled sensitivities``: :func:`backlashkit._sensitivity.sensitivities` (the
+  kernel simulates the drive once for its contact changes, then integrates the seven
+  sensitivities along them);
+* ``numpy twin``: :func:`backlashkit._numpy_sensitivity.sensitivities`, the same
+  recurrence in plain NumPy;
+* ``8 simulations``: the compiled simulator at the nominal parameters and at each of
+  the seven perturbed by a relative 1e-6 -- a forward-difference Jacobian, as the
+  estimators difference simulations today.
+
+Usage::
+
+    python benchmarks/bench_sensitivity.py [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+import backlashkit as bk
+from backlashkit._numpy_sensitivity import PARAMS
+from backlashkit._numpy_sensitivity import sensitivities as numpy_sensitivities
+from backlashkit._sensitivity import sensitivities
+from backlashkit.papers.ravanbod2002 import A1, P_TRUE, THETA
+
+#: Record length and step-down instant, s (issue 24's benchmark record).
+DURATION, T_STEP = 8.0, 4.0
+TS = 1e-3
+#: Relative step of the forward differences timed (its value does not change the cost).
+FD_STEP = 1e-6
+
+
+def median_times(fns, repeats: int) -> tuple[list[float], list[object]]:
+    """Median wall times of ``repeats`` rounds of one call of each of ``fns``, after one
+    warm-up round, and their last results."""
+    outs = [fn() for fn in fns]
+    times: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeats):
+        for i, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            outs[i] = fn()
+            times[i].append(time.perf_counter() - t0)
+    return [statistics.median(ts) for ts in times], outs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+    t = bk.signals.time_grid(DURATION, TS)
+    u = bk.signals.step_down(t, A1, t_s=T_STEP)
+    values = {n: getattr(drive, n) for n in PARAMS}
+    perturbed = [drive] + [bk.TwoMassDrive(**{**values, n: values[n] * (1 + FD_STEP)})
+                           for n in PARAMS]
+
+    with threadpool_limits(1):
+        (t_fast, t_np, t_fd), (fast, ref, _) = median_times(
+            [lambda: sensitivities(drive, t, u), lambda: numpy_sensitivities(drive, t, u),
+             lambda: [d.simulate(t, u) for d in perturbed]], args.repeats)
+
+    n_changes = len(drive.simulate(t, u).contact_events)
+    diff = np.max(np.max(np.abs(fast - ref), axis=(0, 1)) / np.max(np.abs(ref), axis=(0, 1)))
+    print(f"paper A's drive, {t.size} samples, {n_changes} contact changes, "
+          f"median of {args.repeats}")
+    print(f"  compiled sensitivities {1e3 * t_fast:9.2f} ms")
+    print(f"  numpy twin             {1e3 * t_np:9.2f} ms   ({t_np / t_fast:.1f}x compiled)")
+    print(f"  8 simulations          {1e3 * t_fd:9.2f} ms   ({t_fd / t_fast:.2f}x compiled)")
+    print(f"  compiled vs numpy twin: largest relative difference {diff:.1e}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,67 @@
+//! The exact flow of the state and its sensitivities over a span of held torque in one
+//! mode.
+//!
+//! The sensitivities are carried scaled, `p_j dx/dp_j` (the derivative with respect to
+//! `log p_j`), so that each coupling block `p_j dA/dp_j` is of the size of `A` itself:
+//! unscaled, `dA/dJ_M ~ k / J_M^2` is 200 times `A` on paper A's drive and would set
+//! the exponential's scaling and squaring by itself.
+
+use super::coupled::coupled_expm;
+use super::mode::{system, system_derivative, System};
+use super::{N_PARAMS, N_STATES};
+use crate::linalg::{matvec, Mat, Vector};
+
+/// State and sensitivities: `x`, and `s[j] = scale_j dx/dp_j`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Augmented {
+    pub x: Vector<N_STATES>,
+    pub s: [Vector<N_STATES>; N_PARAMS],
+}
+
+/// The exact flow of a mode over a span `tau` of held torque `u`:
+/// `x <- e x + xu u + x1`, `s_j <- e s_j + coupling_j x + su_j u + s1_j`.
+#[derive(Clone, Debug)]
+pub(super) struct Flow {
+    e: Mat<N_STATES>,
+    xu: Vector<N_STATES>,
+    x1: Vector<N_STATES>,
+    coupling: [Mat<N_STATES>; N_PARAMS],
+    su: [Vector<N_STATES>; N_PARAMS],
+    s1: [Vector<N_STATES>; N_PARAMS],
+}
+
+impl Flow {
+    /// The flow of mode `flank` over `tau`, sensitivities scaled by `scale`: the
+    /// exponential of `[[A, 0], [scale_j A_j, A]] tau` and its integral for every `j`
+    /// (see `coupled`), applied to the inputs `[b, scale_j b_j]` and `[c, scale_j c_j]`.
+    pub fn new(p: &[f64; N_PARAMS], scale: &[f64; N_PARAMS], flank: i8, tau: f64) -> Self {
+        let sys = system(p, flank);
+        let der: [System; N_PARAMS] =
+            std::array::from_fn(|j| system_derivative(p, flank, j).scaled(scale[j]));
+        let ex = coupled_expm(&sys.a, &der.map(|d| d.a), tau);
+        let (fb, fc) = (matvec(&ex.f, &sys.b), matvec(&ex.f, &sys.c));
+        let input = |j: usize, v: &Vector<N_STATES>, dv: &Vector<N_STATES>| {
+            let (kv, fdv) = (matvec(&ex.k[j], v), matvec(&ex.f, dv));
+            std::array::from_fn(|i| kv[i] + fdv[i])
+        };
+        Flow {
+            e: ex.e,
+            xu: fb,
+            x1: fc,
+            su: std::array::from_fn(|j| input(j, &sys.b, &der[j].b)),
+            s1: std::array::from_fn(|j| input(j, &sys.c, &der[j].c)),
+            coupling: ex.c,
+        }
+    }
+
+    /// `z` advanced by the flow under torque `u`.
+    pub fn apply(&self, z: &Augmented, u: f64) -> Augmented {
+        let ex = matvec(&self.e, &z.x);
+        let x = std::array::from_fn(|i| ex[i] + self.xu[i] * u + self.x1[i]);
+        let s = std::array::from_fn(|j| {
+            let (es, cx) = (matvec(&self.e, &z.s[j]), matvec(&self.coupling[j], &z.x));
+            std::array::from_fn(|i| es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i])
+        });
+        Augmented { x, s }
+    }
+}

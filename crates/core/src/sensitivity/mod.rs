@@ -1,0 +1,46 @@
+//! Exact forward sensitivities of the two-mass drive (issue 24, first step): the
+//! derivatives of the state `[w_M, w_L, phi]` with respect to the parameters
+//! [`PARAMS`], under paper A's contact law, without Coulomb friction or current loop,
+//! from a given state whose sensitivity is zero (rest, for the estimators).
+//!
+//! Inside a mode the drive is linear, `dx/dt = A x + b u + c`, and so is each
+//! sensitivity `S_j = dx/dp_j`: `dS_j/dt = A S_j + A_j x + b_j u + c_j` (`A_j = dA/dp_j`
+//! and so on). The state and one sensitivity together follow a 6-state linear system
+//! whose flow over a span of held torque is exact (a matrix exponential, as the
+//! simulator's own); see `mode`, `flow` and `coupled`. The contact changes are those the simulator locates:
+//! the drive is simulated first and its events split the samples they fall in. At a
+//! change the sensitivities jump by the saltation `(f_- - f_+) dtau/dp`; see `run`.
+//!
+//! Where the shaft grazes a flank (`dphi/dt = 0` at the change) the derivative does not
+//! exist; near it the jump grows without bound. An exactly grazing change is an
+//! [`Error::Grazing`](crate::Error::Grazing).
+//!
+//! The NumPy twin is `backlashkit._numpy_sensitivity`.
+
+mod coupled;
+mod flow;
+mod mode;
+mod run;
+#[cfg(test)]
+mod tests;
+
+pub use run::{drive_sensitivities, DriveSensitivities};
+
+/// The parameters, in the order of a sensitivity row: motor and load inertias, shaft
+/// stiffness, motor and load viscous frictions, shaft damping, backlash half-width.
+pub const PARAMS: [&str; N_PARAMS] = ["J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta"];
+/// Number of parameters.
+pub const N_PARAMS: usize = 7;
+/// States of the two-mass drive: `[w_M, w_L, phi]`.
+pub const N_STATES: usize = 3;
+
+/// Indices into a parameter array (order [`PARAMS`]).
+pub(crate) mod index {
+    pub const J_M: usize = 0;
+    pub const J_L: usize = 1;
+    pub const K: usize = 2;
+    pub const F_M: usize = 3;
+    pub const F_L: usize = 4;
+    pub const D: usize = 5;
+    pub const THETA: usize = 6;
+}

@@ -1,0 +1,176 @@
+//! Sensitivities along a run: the samples, split at the simulator's contact changes,
+//! and the saltation jump at each change.
+
+use super::flow::{Augmented, Flow};
+use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
+use super::mode::system;
+use super::{N_PARAMS, N_STATES};
+use crate::chain::{simulate_chain, ChainParams, Law};
+use crate::hybrid::{Event, Graze};
+use crate::Error;
+
+/// Sensitivities along a run, and the run's near-grazing passes.
+#[derive(Clone, Debug, Default)]
+pub struct DriveSensitivities {
+    /// `dx/dp`, row-major `(samples, 3, 7)`: state by parameter.
+    pub values: Vec<f64>,
+    /// The simulator's near-grazing passes (see [`Graze`]): after one, the
+    /// sensitivities are ill-conditioned (the derivative barely exists).
+    pub grazes: Vec<Graze>,
+}
+
+/// Sensitivities `dx/dp` of the two-mass drive on the grid `t0 + i ts`, row-major
+/// `(u.len(), 3, 7)`: state `[w_M, w_L, phi]` by parameter (order
+/// [`PARAMS`](super::PARAMS)), in the parameters' SI units. The torque `u[i]` is held
+/// over `[t_i, t_{i+1})`; the run starts at `x0` with zero sensitivity (paper A's law,
+/// no Coulomb friction, no current loop).
+///
+/// Also returns the simulator's near-grazing passes.
+///
+/// Errors: invalid parameters (`J`, `k`, `theta` must be > 0, the frictions >= 0, all
+/// finite), sample time, input or initial state; a simulation error; a change at which
+/// the shaft exactly grazes a flank ([`Error::Grazing`]).
+pub fn drive_sensitivities(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    x0: &[f64],
+) -> Result<DriveSensitivities, Error> {
+    let chain = chain_params(p)?;
+    if !t0.is_finite() {
+        return Err(Error::InvalidArgument(format!(
+            "start time must be finite, got {t0}"
+        )));
+    }
+    let run = simulate_chain(&chain, Law::Paper, t0, ts, u, x0)?;
+    let Some(&first_mode) = run.modes.first() else {
+        return Ok(DriveSensitivities::default());
+    };
+    // Sensitivities are carried per log-parameter (see `flow`); a zero friction or
+    // damping keeps the plain derivative.
+    let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
+    // The simulator has checked that x0 has three finite entries.
+    let x = [x0[0], x0[1], x0[2]];
+    let z = Augmented {
+        x,
+        s: [[0.0; N_STATES]; N_PARAMS],
+    };
+    let mut walk = Walk {
+        p,
+        scale,
+        flank: first_mode,
+        z,
+        full: [None, None, None],
+    };
+    let values = walk.run(t0, ts, u, &run.events)?;
+    Ok(DriveSensitivities {
+        values,
+        grazes: run.grazes,
+    })
+}
+
+/// The chain of the two-mass drive, validated; `theta` must be positive, the NumPy
+/// twin's scope (with no gap both flanks' changes fall at one instant, not checked).
+fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
+    let chain = ChainParams::new(
+        vec![p[J_M], p[J_L]],
+        vec![p[F_M], p[F_L]],
+        vec![p[K]],
+        vec![p[D]],
+        vec![p[THETA]],
+    );
+    chain.validate()?;
+    if p[THETA] <= 0.0 {
+        return Err(Error::InvalidArgument(format!(
+            "theta must be > 0 for the sensitivities, got {}",
+            p[THETA]
+        )));
+    }
+    Ok(chain)
+}
+
+/// The state of the walk along the samples.
+struct Walk<'a> {
+    p: &'a [f64; N_PARAMS],
+    scale: [f64; N_PARAMS],
+    /// Current contact mode: 0 the gap, +-1 a flank.
+    flank: i8,
+    z: Augmented,
+    /// Whole-sample flows of the modes -1, 0, +1, built when first needed.
+    full: [Option<Flow>; 3],
+}
+
+impl Walk<'_> {
+    fn run(&mut self, t0: f64, ts: f64, u: &[f64], events: &[Event]) -> Result<Vec<f64>, Error> {
+        let n = u.len();
+        let mut out = vec![0.0; n * N_STATES * N_PARAMS];
+        let mut next_event = 0;
+        for k in 0..n {
+            self.write(&mut out[k * N_STATES * N_PARAMS..(k + 1) * N_STATES * N_PARAMS]);
+            if k + 1 == n {
+                break;
+            }
+            let (t_start, t_end) = (t0 + k as f64 * ts, t0 + (k + 1) as f64 * ts);
+            let mut t_now = t_start;
+            // Changes up to the sample's end, inclusive, belong to this sample.
+            while let Some(ev) = events.get(next_event).filter(|e| e.time <= t_end) {
+                self.advance(u[k], ev.time - t_now);
+                self.jump(ev, u[k])?;
+                (t_now, next_event) = (ev.time, next_event + 1);
+            }
+            if t_now == t_start {
+                let slot = (self.flank + 1) as usize;
+                let (p, scale, flank) = (self.p, &self.scale, self.flank);
+                let flow = self.full[slot].get_or_insert_with(|| Flow::new(p, scale, flank, ts));
+                self.z = flow.apply(&self.z, u[k]);
+            } else {
+                self.advance(u[k], t_end - t_now);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Rows `state x parameter` of `dx/dp` into `row`.
+    fn write(&self, row: &mut [f64]) {
+        for i in 0..N_STATES {
+            for j in 0..N_PARAMS {
+                row[i * N_PARAMS + j] = self.z.s[j][i] / self.scale[j];
+            }
+        }
+    }
+
+    /// Advance by `tau` in the current mode (nothing for `tau <= 0`).
+    fn advance(&mut self, u: f64, tau: f64) {
+        if tau > 0.0 {
+            self.z = Flow::new(self.p, &self.scale, self.flank, tau).apply(&self.z, u);
+        }
+    }
+
+    /// The change `ev` at the current state: the guard `g = phi - s theta` (`s` the
+    /// flank met or left) moves by `dtau/dp = -(dg/dx S + dg/dp) / (dg/dx f_-)` and the
+    /// sensitivities jump by `(f_- - f_+) dtau/dp`.
+    fn jump(&mut self, ev: &Event, u: f64) -> Result<(), Error> {
+        let side = if ev.from == 0 { ev.to } else { ev.from } as f64;
+        let f_minus = system(self.p, self.flank).field(&self.z.x, u);
+        let f_plus = system(self.p, ev.to).field(&self.z.x, u);
+        // dg/dx = [0, 0, 1]: the guard's rate is the twist rate w_M - w_L.
+        let rate = f_minus[2];
+        for j in 0..N_PARAMS {
+            let dg_dp = if j == THETA {
+                -side * self.scale[j]
+            } else {
+                0.0
+            };
+            let dtau = -(self.z.s[j][2] + dg_dp) / rate;
+            if !dtau.is_finite() {
+                return Err(Error::Grazing { time: ev.time });
+            }
+            for i in 0..N_STATES {
+                self.z.s[j][i] += (f_minus[i] - f_plus[i]) * dtau;
+            }
+        }
+        self.flank = ev.to;
+        Ok(())
+    }
+}

@@ -1,0 +1,91 @@
+"""Forward sensitivities of a two-mass drive with backlash, compiled (issue 24).
+
+The compiled twin of :mod:`backlashkit._numpy_sensitivity` (``crates/core``'s
+``sensitivity`` module): the same recurrence, with the contact changes the compiled
+simulator locates. Not yet used by the estimators, which still difference simulations.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from . import validate as v
+from .errors import InputError, SensitivityWarning
+from .plants import TwoMassDrive
+
+#: The parameters, in the order of the sensitivities' last axis.
+PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta")
+
+
+def sensitivities(
+    drive: TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    states: bool = False,
+) -> np.ndarray:
+    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to :data:`PARAMS`.
+
+    Parameters
+    ----------
+    drive : TwoMassDrive
+        Without Coulomb friction (``fc_M = fc_L = 0``) and with ``theta > 0``; paper
+        A's contact law, no current loop.
+    t : array_like
+        Uniform, strictly increasing time grid in s.
+    torque : array_like
+        Motor torque in N m, one sample per entry of ``t``, held over the sample.
+    initial_state : array_like, optional
+        ``[w_M, w_L, phi]`` at ``t[0]``, taken as independent of the parameters (zero
+        sensitivity); default rest.
+    states : bool, optional
+        Return the twist's sensitivity too; default False.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(len(t), 2, 7)`` (``(len(t), 3, 7)`` with ``states``): ``d x / d p`` in the
+        parameters' SI units, as :func:`backlashkit._numpy_sensitivity.sensitivities`.
+
+    Raises
+    ------
+    InputError
+        For a drive with Coulomb friction or without ``theta``, or mismatched inputs.
+    ValueError
+        From the kernel: invalid parameters, or a contact change that grazes a flank.
+
+    Warns
+    -----
+    SensitivityWarning
+        When the run passes close to a grazing contact, as the simulator warns: after
+        it the sensitivities are ill-conditioned.
+    """
+    from . import _core
+
+    if not isinstance(drive, TwoMassDrive):
+        raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
+    if drive.theta is None or drive.fc_M or drive.fc_L:
+        raise InputError("the sensitivities need theta set and no Coulomb friction "
+                         "(fc_M = fc_L = 0)")
+    t_arr, ts = v.time_grid(t)
+    u = v.finite_array("torque", torque)
+    if u.shape != t_arr.shape:
+        raise InputError(f"torque must have one sample per time step ({t_arr.size}), "
+                         f"got {u.size}")
+    x0 = np.zeros(3) if initial_state is None else v.finite_array("initial_state",
+                                                                   initial_state)
+    p = np.array([getattr(drive, n) for n in PARAMS], float)
+    out, grazes = _core.drive_sensitivities(p, float(t_arr[0]), ts, u,
+                                            np.ascontiguousarray(x0))
+    if len(grazes):
+        time, _, margin = grazes[0]
+        warnings.warn(
+            f"the run passed within {abs(margin):.3g} (relative) of a grazing contact "
+            f"(t = {time:.6g} s; {len(grazes)} such pass(es)): the sensitivities after it "
+            "are ill-conditioned (the derivative barely exists there)",
+            SensitivityWarning, stacklevel=2)
+    return out if states else out[:, :2, :]
