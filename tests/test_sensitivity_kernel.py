@@ -32,7 +32,7 @@ RANDOM_RTOL = 1e-7
 #: share of the largest amplifies rounding through the jump; such drives are skipped.
 GRAZING = 0.05
 #: Random drives drawn and the least number that must be away from grazing.
-EXAMPLES, N_DRIVES = 100, 80
+EXAMPLES, N_DRIVES = 120, 100
 
 
 def _relative_error(drive, t, u) -> float:
