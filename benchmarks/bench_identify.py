@@ -28,7 +28,10 @@
 ``--count`` prints instead what one default fit and one ``cramer_rao_bound`` of the
 same records cost in simulations of those records: the samples the compiled kernel
 advanced (every parameter row of every call, counted by wrapping
-``simulate_packed``), divided by the records' samples (issue 24's measure).
+``simulate_packed``), divided by the records' samples (issue 24's measure). The bound
+takes the compiled sensitivities where its model is theirs: their runs are counted
+apart, and the bound's time is also given in times of one simulation of the record
+(medians of 7, measured in the same run).
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
@@ -120,14 +123,53 @@ def count(recs, prior) -> None:
             print(f"  stage {k}/{total}, {name}: {n - last:.0f} simulations")
             last = n
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
-    n_crb = sum(simulations(lambda r=r: cramer_rao_bound(
-        truth, r.t, r.torque, snr_db=40.0, estimate="all"), r.t.size)[0]
-        for r in recs)
+    n_crb, n_sens, ratio = zip(*(crb_cost(truth, r) for r in recs), strict=True)
     print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
           f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls "
           f"(issue 24's bar: 250); cramer_rao_bound(estimate=\"all\") of each record "
-          f"costs {n_crb / 2:.0f} "
-          "simulations of it (bar: 3)")
+          f"costs {sum(n_crb) / 2:.0f} simulations of it and {sum(n_sens) / 2:.0f} "
+          f"sensitivity runs, in the time of {statistics.median([r[0] for r in ratio]):.1f}"
+          f" simulations (bar: 3; by central differences "
+          f"{statistics.median([r[1] for r in ratio]):.1f})")
+
+
+def crb_cost(drive, rec, repeats: int = 7) -> tuple[float, int, tuple[float, float]]:
+    """``cramer_rao_bound(estimate="all")`` of one record: simulations, compiled
+    sensitivity runs, and its median time over one simulation's, with the compiled
+    sensitivities and by central differences."""
+    import backlashkit._core as core
+
+    from backlashkit.identify import crb
+
+    real, runs = core.drive_sensitivities, [0]
+
+    def counted(*args):
+        runs[0] += 1
+        return real(*args)
+
+    def bound():
+        return cramer_rao_bound(drive, rec.t, rec.torque, snr_db=40.0, estimate="all")
+
+    core.drive_sensitivities = counted
+    try:
+        n_sim = simulations(bound, rec.t.size)[0]
+    finally:
+        core.drive_sensitivities = real
+    exact = crb._exact
+    times: dict[str, list[float]] = {"exact": [], "differences": [], "simulation": []}
+    for _ in range(repeats):  # interleaved: the machine's load weighs on all alike
+        for name, fn in (("exact", bound), ("differences", bound),
+                         ("simulation", lambda: drive.simulate(rec.t, rec.torque))):
+            crb._exact = exact if name == "exact" else lambda *a: (None, None)
+            try:
+                t0 = time.perf_counter()
+                fn()
+                times[name].append(time.perf_counter() - t0)
+            finally:
+                crb._exact = exact
+    med = {k: statistics.median(x) for k, x in times.items()}
+    return n_sim, runs[0], (med["exact"] / med["simulation"],
+                            med["differences"] / med["simulation"])
 
 
 def main() -> None:

@@ -114,6 +114,45 @@ def test_crb_structure_and_snr(short):
     assert known.theta_std <= sub.theta_std <= joint.theta_std
 
 
+#: Relative step of the central differences checked against the compiled
+#: sensitivities: the bound's default (1e-6) loses to rounding across the record's 42
+#: contact changes from the steady start (3.7e-4 of the largest of the k_sh column;
+#: 6.5e-5 at this step, 1e-2 at 1e-4, where truncation rules)...
+CHECK_STEP = 1e-5
+#: ... the agreement asked of the sensitivities (of each column's largest) and of the
+#: two bounds of theta (``-s`` prints it).
+SENS_FD_RTOL, CRB_EXACT_RTOL = 1e-4, 1e-5
+
+
+@pytest.mark.parametrize("initial_state", [None, "steady-values"])
+def test_crb_from_exact_sensitivities_matches_central_differences(short, initial_state):
+    """Within the compiled sensitivities' scope the bound takes them (one simulation
+    and one sensitivity run); it agrees with the bound of central differences."""
+    from backlashkit.identify import crb
+
+    t, u, _ = short
+    x0 = None if initial_state is None else TRUE.steady_state(float(u[0]))
+    names = ("theta", *LINEAR_PARAMS)
+    values = np.array([getattr(TRUE, n) for n in names])
+    speeds, exact = crb._exact(TRUE, names, 0.0, t, u, "paper", x0)
+    assert exact is not None
+    speeds_fd, fd = crb._differenced(TRUE, names, values, CHECK_STEP, 0.0, t, u, "paper",
+                                     x0)
+    np.testing.assert_allclose(speeds, speeds_fd, rtol=0, atol=0)
+    for s_exact, s_fd in zip(exact, fd, strict=True):
+        scale = np.max(np.abs(s_fd), axis=0)
+        assert np.max(np.abs(s_exact - s_fd) / scale) < SENS_FD_RTOL
+    bound = cramer_rao_bound(TRUE, t, u, snr_db=30, estimate="all", initial_state=x0)
+    fisher = sum(s.T @ s / sd**2 for s, sd in zip(fd, bound.noise_std, strict=True))
+    by_fd = np.sqrt(np.linalg.inv(fisher)[0, 0])
+    print(f"CRB of theta: exact {bound.theta_std:.6e}, central differences {by_fd:.6e} "
+          f"({bound.theta_std / by_fd - 1:+.1e})")
+    assert bound.theta_std == pytest.approx(by_fd, rel=CRB_EXACT_RTOL)
+    # outside the scope (Coulomb friction) the bound differences simulations
+    rough = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    assert crb._exact(rough, names, 0.0, t, u, "paper", x0) == (None, None)
+
+
 @pytest.mark.parametrize(
     "kwargs, pattern",
     [

@@ -2,7 +2,8 @@
 
 The compiled twin of :mod:`backlashkit._numpy_sensitivity` (``crates/core``'s
 ``sensitivity`` module): the same recurrence, with the contact changes the compiled
-simulator locates. Not yet used by the estimators, which still difference simulations.
+simulator locates. :func:`backlashkit.identify.cramer_rao_bound` uses them where its
+model is theirs; the fits still difference simulations.
 """
 
 from __future__ import annotations

@@ -9,13 +9,14 @@ Gaussian noise; :class:`CramerRaoBound` holds it. Units are SI.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError
+from ..errors import InputError, SensitivityWarning
 from ..plants import TwoMassDrive
 from ._model import LINEAR_PARAMS, drive_with, initial_states, packed_row, rel_std
 from .noise import innovation_ratio, whiten
@@ -98,8 +99,10 @@ def cramer_rao_bound(
 ) -> CramerRaoBound:
     """Cramér-Rao bound of ``theta`` from both measured speeds with white or AR noise.
 
-    ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the central-difference sensitivity of
-    speed ``c`` (motor, load) to the estimated parameters; with autoregressive noise
+    ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the sensitivity of speed ``c`` (motor,
+    load) to the estimated parameters: exact, from the compiled kernel, where the model
+    is its (paper A's law, no Coulomb friction or current loop, a known start), else by
+    central differences; with autoregressive noise
     (``noise_ar``) the sensitivities are whitened by ``A(q)`` first and ``s_c`` is the
     innovation's standard deviation (the likelihood of
     :class:`~backlashkit.identify.noise.ARNoise`, conditional on the first ``p`` samples).
@@ -134,7 +137,8 @@ def cramer_rao_bound(
         joint estimator's ``start="steady"``. With a current loop the state has a
         fourth entry, the motor torque (default ``torque[0]``).
     fd_step : float, optional
-        Relative central-difference step (default 1e-6).
+        Relative central-difference step (default 1e-6), where the sensitivities are
+        differenced.
     noise_ar : array_like, optional
         Coefficients ``a_1 .. a_p`` of ``A(q)`` of autoregressive noise (as
         :class:`~backlashkit.identify.noise.ARNoise` fits them, ``JointIdentifier.noise_ar_``):
@@ -169,21 +173,15 @@ def cramer_rao_bound(
         raise InputError(f"cannot estimate parameter(s) {zero} at value 0 (e.g. theta = {theta!r})")
     h = v.positive("fd_step", fd_step)
     n = len(names)
-    points = [values]
-    for i in range(n):
-        for sgn in (1.0, -1.0):
-            x = values.copy()
-            x[i] *= 1.0 + sgn * h
-            points.append(x)
-    speeds = _speeds(drive, names, points, tau_i, t, torque, law, initial_state)
-    sig = _noise_levels(noise_std, snr_db, speeds[0])
+    speeds, sensitivity = _exact(drive, names, tau_i, t, torque, law, initial_state)
+    if sensitivity is None:
+        speeds, sensitivity = _differenced(drive, names, values, h, tau_i, t, torque, law,
+                                           initial_state)
+    sig = _noise_levels(noise_std, snr_db, speeds)
     ar, ratios = _autoregression(noise_ar)
     fisher = np.zeros((n, n))
     for c, s in enumerate(sig):
-        sens = np.column_stack([
-            (speeds[1 + 2 * i][c] - speeds[2 + 2 * i][c]) / (2 * h * values[i])
-            for i in range(n)
-        ])
+        sens = sensitivity[c]
         if ar is not None:  # whitened sensitivities, weighted by the innovation
             s = s * math.sqrt(ratios[c])
             sens = whiten(sens.T, ar[c]).T
@@ -195,7 +193,45 @@ def cramer_rao_bound(
             if r is not None and r > 0:
                 fisher[i, i] += 1.0 / (r * values[i]) ** 2
     return CramerRaoBound(names, values, fisher, (float(sig[0]), float(sig[1])),
-                          int(np.size(speeds[0][0])))
+                          int(np.size(speeds[0])))
+
+
+def _exact(drive, names, tau_i, t, torque, law, initial_state):
+    """``((w_M, w_L), (S_M, S_L))`` of the nominal drive, ``S_c`` the exact sensitivities
+    ``(samples, len(names))`` of the compiled kernel, where the model is in its scope
+    (paper A's law, no Coulomb friction or current loop, a known start); else
+    ``(None, None)``. One simulation and one sensitivity run, against ``2 n + 1``
+    simulations of central differences."""
+    from .._sensitivity import PARAMS, sensitivities
+
+    if (law != "paper" or tau_i or drive.fc_M or drive.fc_L or drive.fs_M or drive.fs_L
+            or not set(names) <= set(PARAMS) or isinstance(initial_state, str)):
+        return None, None
+    speeds = _speeds(drive, names, [np.array([getattr(drive, m) for m in names])], tau_i,
+                     t, torque, law, initial_state)[0]
+    x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
+    try:
+        with warnings.catch_warnings():  # the simulation above warned already
+            warnings.simplefilter("ignore", SensitivityWarning)
+            sens = sensitivities(drive, t, torque, initial_state=x0)
+    except ValueError as exc:
+        raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
+    cols = [PARAMS.index(m) for m in names]
+    return speeds, (sens[:, 0, cols], sens[:, 1, cols])
+
+
+def _differenced(drive, names, values, h, tau_i, t, torque, law, initial_state):
+    """As :func:`_exact`, by central differences of relative step ``h``."""
+    points = [values]
+    for i in range(len(names)):
+        for sgn in (1.0, -1.0):
+            x = values.copy()
+            x[i] *= 1.0 + sgn * h
+            points.append(x)
+    speeds = _speeds(drive, names, points, tau_i, t, torque, law, initial_state)
+    return speeds[0], tuple(
+        np.column_stack([(speeds[1 + 2 * i][c] - speeds[2 + 2 * i][c]) / (2 * h * values[i])
+                         for i in range(len(names))]) for c in (0, 1))
 
 
 def _speeds(drive, names, points, tau_i, t, torque, law, initial_state
