@@ -4,7 +4,8 @@
 its weighted residuals (:mod:`backlashkit.identify._problem`); :func:`run` calls the
 stages in order: :func:`grid_minima`, :func:`first_window`, :func:`continue_on`,
 :func:`whole_record`, :func:`restart`, :func:`reestimate_noise`, :func:`select_terms`,
-:func:`whiten_noise`, :func:`uncertainty`. The
+:func:`whiten_noise`, :func:`uncertainty`; :func:`locate` groups the first five,
+which :func:`research` runs again where the test adds a term after them. The
 configuration is :mod:`backlashkit.identify.search`'s; ``docs/design/joint-search.md``
 says why each stage exists.
 """
