@@ -31,8 +31,10 @@ RANDOM_RTOL = 1e-7
 #: Near grazing, as in test_sensitivity.py: a change at a relative speed below this
 #: share of the largest amplifies rounding through the jump; such drives are skipped.
 GRAZING = 0.05
-#: Random drives drawn and the least number that must be away from grazing.
-EXAMPLES, N_DRIVES = 120, 100
+#: Random drives drawn and the least number that must be away from grazing. How many
+#: are skipped varies between pytest invocations (79 of 100 in one, 97 of 120 in a
+#: clean CI clone, 134 of 150 here with ``-s``), so the draw leaves a margin.
+EXAMPLES, N_DRIVES = 150, 100
 
 
 def _relative_error(drive, t, u) -> float:
