@@ -211,7 +211,7 @@ def _exact(drive, names, tau_i, t, torque, law, initial_state):
                      t, torque, law, initial_state)[0]
     x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
     try:
-        with warnings.catch_warnings():  # the simulation above warned already
+        with warnings.catch_warnings():  # quiet near grazing, as the differences are
             warnings.simplefilter("ignore", SensitivityWarning)
             sens = sensitivities(drive, t, torque, initial_state=x0)
     except ValueError as exc:
