@@ -309,7 +309,7 @@ def test_encoder_with_friction_and_loop_within_5_percent():
 
 def test_a_loop_found_after_the_search_is_searched_again():
     """The stiff drive's exact angles with friction and a 1 ms loop. The loop joins the
-    model after the search, whose linear parameters have absorbed its lag (J_M +8 %);
+    model after the search, whose linear parameters have absorbed its lag;
     refitted from there, theta stopped 0.47 % off on these noise-free angles (on encoder
     records, tens of the quantisation's standard errors: 0 of 50 intervals covered the
     truth in ``benchmarks/real_drive.py``). Searched again with the loop in it, the fit
