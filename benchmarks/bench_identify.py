@@ -25,10 +25,11 @@
 
 ``--stiffness-grid N`` times ``ThetaGrid(stiffness_points=N)`` in 2. instead.
 
-``--count`` prints instead what one default fit and one ``cramer_rao_bound`` of the
-same records cost in simulations of those records: the samples the compiled kernel
-advanced (every parameter row of every call, counted by wrapping
-``simulate_packed``), divided by the records' samples (issue 24's measure). The bound
+``--count`` prints instead what one default fit, one of paper A's model alone (no
+term tested), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
+seven parameters) of the same records cost in simulations of those records: the
+samples the compiled kernel advanced (every parameter row of every call, counted by
+wrapping ``simulate_packed``), divided by the records' samples (issue 24's measure). The bound
 takes the compiled sensitivities where its model is theirs: their runs are counted
 apart, and the bound's time is also given in times of one simulation of the record
 (medians of 7, measured in the same run).
@@ -123,18 +124,25 @@ def count(recs, prior) -> None:
             print(f"  stage {k}/{total}, {name}: {n - last:.0f} simulations")
             last = n
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
-    n_crb, n_sens, ratio = zip(*(crb_cost(truth, r) for r in recs), strict=True)
     print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
           f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls "
-          f"(issue 24's bar: 250); cramer_rao_bound(estimate=\"all\") of each record "
-          f"costs {sum(n_crb) / 2:.0f} simulations of it and {sum(n_sens) / 2:.0f} "
-          f"sensitivity runs, in the time of {statistics.median([r[0] for r in ratio]):.1f}"
-          f" simulations (bar: 3; by central differences "
-          f"{statistics.median([r[1] for r in ratio]):.1f})")
+          f"(issue 24's bar: 250)")
+    plain = JointIdentifier(prior, workers=1, friction="viscous", actuator=None).fit
+    n_plain, calls = simulations(lambda: plain(recs), samples)
+    print(f"  with paper A's model alone (friction='viscous', actuator=None, no term "
+          f"tested): {n_plain:.0f} simulations in {calls} kernel calls")
+    for estimate in (("theta",), "all"):
+        n_crb, n_sens, ratio = zip(*(crb_cost(truth, r, estimate) for r in recs),
+                                   strict=True)
+        print(f"cramer_rao_bound(estimate={estimate!r}) of each record costs "
+              f"{sum(n_crb) / 2:.0f} simulations of it and {sum(n_sens) / 2:.0f} "
+              f"sensitivity runs, in the time of "
+              f"{statistics.median([r[0] for r in ratio]):.1f} simulations (bar: 3; by "
+              f"central differences {statistics.median([r[1] for r in ratio]):.1f})")
 
 
-def crb_cost(drive, rec, repeats: int = 7) -> tuple[float, int, tuple[float, float]]:
-    """``cramer_rao_bound(estimate="all")`` of one record: simulations, compiled
+def crb_cost(drive, rec, estimate, repeats: int = 7) -> tuple[float, int, tuple[float, float]]:
+    """``cramer_rao_bound(estimate=estimate)`` of one record: simulations, compiled
     sensitivity runs, and its median time over one simulation's, with the compiled
     sensitivities and by central differences."""
     import backlashkit._core as core
@@ -148,7 +156,7 @@ def crb_cost(drive, rec, repeats: int = 7) -> tuple[float, int, tuple[float, flo
         return real(*args)
 
     def bound():
-        return cramer_rao_bound(drive, rec.t, rec.torque, snr_db=40.0, estimate="all")
+        return cramer_rao_bound(drive, rec.t, rec.torque, snr_db=40.0, estimate=estimate)
 
     core.drive_sensitivities = counted
     try:

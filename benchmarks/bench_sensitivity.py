@@ -4,19 +4,23 @@ Workload: paper A's drive (``backlashkit.papers.ravanbod2002``: ``P_TRUE``, ``TH
 under an 8 s record at Ts = 1 ms (8 001 samples): torque ``A1`` = 0.157 N m from rest,
 stepped down to 0 at 4 s, paper law.
 
-Timed in this process, each the median of ``--repeats`` runs after one warm-up, the
-three interleaved (one run of each per round, so that a busy machine's load weighs
-on all three alike) and BLAS held to one thread (the twin's small products gain
-nothing from more):
+Timed in this process, each the median of ``--repeats`` runs after one warm-up, all
+interleaved (one run of each per round, so that a busy machine's load weighs on all
+alike) and BLAS held to one thread (the twin's small products gain nothing from
+more):
 
 * ``compiled sensitivities``: :func:`backlashkit._sensitivity.sensitivities` (the
   kernel simulates the drive once for its contact changes, then integrates the seven
   sensitivities along them);
+* ``compiled, theta alone``: the same for the one parameter ``theta`` (what
+  ``cramer_rao_bound`` computes by default: the kernel carries only the columns
+  asked for);
 * ``numpy twin``: :func:`backlashkit._numpy_sensitivity.sensitivities`, the same
   recurrence in plain NumPy;
-* ``8 simulations``: the compiled simulator at the nominal parameters and at each of
-  the seven perturbed by a relative 1e-6 -- a forward-difference Jacobian, as the
-  estimators difference simulations today.
+* ``1 simulation``: the compiled simulator at the nominal parameters
+  (``TwoMassDrive.simulate``), the unit of issue 24's bars;
+* ``8 simulations``: it and the seven parameters each perturbed by a relative 1e-6 --
+  a forward-difference Jacobian, as the estimators difference simulations today.
 
 Usage::
 
@@ -71,16 +75,20 @@ def main() -> None:
                            for n in PARAMS]
 
     with threadpool_limits(1):
-        (t_fast, t_np, t_fd), (fast, ref, _) = median_times(
-            [lambda: sensitivities(drive, t, u), lambda: numpy_sensitivities(drive, t, u),
+        (t_fast, t_one, t_np, t_sim, t_fd), (fast, _, ref, _, _) = median_times(
+            [lambda: sensitivities(drive, t, u),
+             lambda: sensitivities(drive, t, u, params=("theta",)),
+             lambda: numpy_sensitivities(drive, t, u), lambda: drive.simulate(t, u),
              lambda: [d.simulate(t, u) for d in perturbed]], args.repeats)
 
     n_changes = len(drive.simulate(t, u).contact_events)
     diff = np.max(np.max(np.abs(fast - ref), axis=(0, 1)) / np.max(np.abs(ref), axis=(0, 1)))
     print(f"paper A's drive, {t.size} samples, {n_changes} contact changes, "
           f"median of {args.repeats}")
-    print(f"  compiled sensitivities {1e3 * t_fast:9.2f} ms")
+    print(f"  compiled sensitivities {1e3 * t_fast:9.2f} ms   ({t_fast / t_sim:.2f} simulations)")
+    print(f"  compiled, theta alone  {1e3 * t_one:9.2f} ms   ({t_one / t_sim:.2f} simulations)")
     print(f"  numpy twin             {1e3 * t_np:9.2f} ms   ({t_np / t_fast:.1f}x compiled)")
+    print(f"  1 simulation           {1e3 * t_sim:9.2f} ms")
     print(f"  8 simulations          {1e3 * t_fd:9.2f} ms   ({t_fd / t_fast:.2f}x compiled)")
     print(f"  compiled vs numpy twin: largest relative difference {diff:.1e}")
 

@@ -216,7 +216,9 @@ def test_bad_chain_friction_is_refused():
 # --------------------------------------------------------------------------- random
 
 #: Random stick-slip cases whose bars must be asserted, of 25 drawn (derandomized;
-#: measured: 25 of 25 checked, none ill-conditioned or warned).
+#: ``-s`` prints the counts). Which cases are drawn depends on hypothesis's version:
+#: with 6.170 one (theta at its 1e-4 floor, breakaway equal to Coulomb) makes the scipy
+#: reference stop on "contact chatter", its own limit, counted apart.
 MIN_FRICTION_CHECKED = 22
 #: Smallest half-width drawn (rad): a dead zone of 0 or 1e-12 rad makes each contact
 #: change a crossing of a vanishing gap, whose instant no two simulators agree on (a
@@ -249,14 +251,20 @@ def friction_cases(draw):
 
 
 def test_random_stick_slip_matches_the_reference():
-    counts = {"checked": 0, "warned": 0, "ill-conditioned": 0}
+    counts = {"checked": 0, "warned": 0, "ill-conditioned": 0, "reference chatters": 0}
 
     @settings(max_examples=25, deadline=None, derandomize=True, database=None,
               suppress_health_check=[HealthCheck.too_slow])
     @given(case=friction_cases())
     def one_case(case):
         chain, t, u, law = case
-        cond = check_conditioning(chain, t, u, law=law)
+        try:
+            cond = check_conditioning(chain, t, u, law=law)
+        except RuntimeError as exc:  # the reference's limit, not the kernel's
+            if "contact chatter" not in str(exc):
+                raise
+            counts["reference chatters"] += 1
+            return
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", bk.SensitivityWarning)
             resp = chain.simulate(t, u, law=law)

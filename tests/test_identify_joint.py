@@ -126,8 +126,9 @@ SENS_FD_RTOL, CRB_EXACT_RTOL = 1e-4, 1e-5
 
 @pytest.mark.parametrize("initial_state", [None, "steady-values"])
 def test_crb_from_exact_sensitivities_matches_central_differences(short, initial_state):
-    """Within the compiled sensitivities' scope the bound takes them (one simulation
-    and one sensitivity run); it agrees with the bound of central differences."""
+    """Within the compiled sensitivities' scope the bound takes them (one sensitivity
+    run, whose speeds are the simulator's to rounding); it agrees with the bound of
+    central differences."""
     from backlashkit.identify import crb
 
     t, u, _ = short
@@ -138,7 +139,7 @@ def test_crb_from_exact_sensitivities_matches_central_differences(short, initial
     assert exact is not None
     speeds_fd, fd = crb._differenced(TRUE, names, values, CHECK_STEP, 0.0, t, u, "paper",
                                      x0)
-    np.testing.assert_allclose(speeds, speeds_fd, rtol=0, atol=0)
+    np.testing.assert_allclose(speeds, speeds_fd, rtol=0, atol=1e-10 * np.max(np.abs(speeds_fd)))
     for s_exact, s_fd in zip(exact, fd, strict=True):
         scale = np.max(np.abs(s_fd), axis=0)
         assert np.max(np.abs(s_exact - s_fd) / scale) < SENS_FD_RTOL
@@ -151,6 +152,39 @@ def test_crb_from_exact_sensitivities_matches_central_differences(short, initial
     # outside the scope (Coulomb friction) the bound differences simulations
     rough = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
     assert crb._exact(rough, names, 0.0, t, u, "paper", x0) == (None, None)
+
+
+@pytest.mark.parametrize("ar", [None, [-0.5, 0.1]])
+def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
+    """The uncertainty's Jacobian (weighted residual in log-parameters, whitened with
+    an AR noise model, the prior's rows) from the compiled sensitivities agrees with
+    central differences of the residual; a model outside their scope (Coulomb
+    friction) has none."""
+    from backlashkit.identify._model import rel_std
+    from backlashkit.identify._problem import build_problem
+
+    t, u, clean = short
+    recs = [_noisy(clean, 30, 1), _noisy(clean, 30, 2)]
+    pb, sig = build_problem(TRUE.with_theta(None), recs, rel_std(0.3, LINEAR_PARAMS), None,
+                            JointSearch(), "paper", 1)
+    lags = None if ar is None else np.tile(ar, (len(recs), 2, 1))
+    res = pb.residual(pb.spans, None, sig, lags)
+    z = np.log([getattr(TRUE, n) for n in pb.names])
+    exact = res.exact_jacobian(z)
+    assert exact is not None and exact.shape == (res.n_res, len(pb.names))
+    zz = np.repeat(z[np.newaxis, :], 2 * z.size, axis=0)
+    for i in range(z.size):
+        zz[2 * i, i] += CHECK_STEP
+        zz[2 * i + 1, i] -= CHECK_STEP
+    rr = res(zz)
+    fd = ((rr[0::2] - rr[1::2]) / (2 * CHECK_STEP)).T
+    worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
+    print(f"exact Jacobian of the fit against central differences: {worst:.1e}")
+    assert worst < SENS_FD_RTOL
+    rough = pb.with_params(("fc_M", "fc_L"), {"fc_M": 1e-9, "fc_L": 1e-9},
+                           {"fc_M": 0.01, "fc_L": 0.01})
+    assert rough.residual(rough.spans, None, sig).exact_jacobian(
+        np.r_[z, 1.0, 1.0]) is None
 
 
 @pytest.mark.parametrize(

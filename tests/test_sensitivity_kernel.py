@@ -19,7 +19,7 @@ from _random_drives import LEVELS, LOG_FACTORS, drive_record
 from backlashkit import _core
 from backlashkit._numpy_sensitivity import PARAMS
 from backlashkit._numpy_sensitivity import sensitivities as numpy_sensitivities
-from backlashkit._sensitivity import sensitivities
+from backlashkit._sensitivity import sensitivities, trajectory_and_sensitivities
 from backlashkit.papers.ravanbod2002 import A2, P_TRUE, THETA
 
 #: Agreement asked of the two on paper A's drive (3.2e-10; ``-s`` prints the figures)...
@@ -35,6 +35,8 @@ GRAZING = 0.05
 #: are skipped varies between pytest invocations (79 of 100 in one, 97 of 120 in a
 #: clean CI clone, 133 of 150 here with ``-s``), so the draw leaves a margin.
 EXAMPLES, N_DRIVES = 150, 100
+#: Every parameter, as the kernel indexes them.
+ALL = list(range(len(PARAMS)))
 
 
 def _relative_error(drive, t, u) -> float:
@@ -111,6 +113,19 @@ def test_twist_matches_central_differences():
     print(f"twist against central differences: largest error {worst:.2e}")
 
 
+def test_a_subset_of_parameters_and_the_states():
+    """The columns of some parameters are the full run's to the bit (the kernel carries
+    only those), and the states the simulator's."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+    t = bk.signals.time_grid(3.0, 1e-3)
+    u = bk.signals.step_down(t, A2, t_s=1.5)
+    full = sensitivities(drive, t, u, states=True)
+    x, part = trajectory_and_sensitivities(drive, t, u, params=("theta", "f_M"))
+    np.testing.assert_array_equal(part, full[:, :, [PARAMS.index("theta"),
+                                                    PARAMS.index("f_M")]])
+    np.testing.assert_array_equal(x, drive.simulate(t, u).states)
+
+
 def test_bad_inputs_raise_value_error():
     drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
     t = bk.signals.time_grid(0.1, 1e-3)
@@ -118,16 +133,20 @@ def test_bad_inputs_raise_value_error():
     p = np.array([getattr(drive, n) for n in PARAMS])
     with pytest.raises(ValueError, match=r"J\[0\] must be finite and > 0"):
         _core.drive_sensitivities(np.where(np.arange(7) == 0, -1.0, p), 0.0, 1e-3, u,
-                                  np.zeros(3))
+                                  np.zeros(3), ALL)
     with pytest.raises(ValueError, match="theta must be > 0"):
         _core.drive_sensitivities(np.where(np.arange(7) == 6, 0.0, p), 0.0, 1e-3, u,
-                                  np.zeros(3))
+                                  np.zeros(3), ALL)
     with pytest.raises(ValueError, match="params must have 7 entries, got 6"):
-        _core.drive_sensitivities(p[:6], 0.0, 1e-3, u, np.zeros(3))
+        _core.drive_sensitivities(p[:6], 0.0, 1e-3, u, np.zeros(3), ALL)
     with pytest.raises(ValueError, match="initial state must have 3 entries"):
-        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(2))
+        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(2), ALL)
     with pytest.raises(ValueError, match="sample time must be > 0"):
-        _core.drive_sensitivities(p, 0.0, -1e-3, u, np.zeros(3))
+        _core.drive_sensitivities(p, 0.0, -1e-3, u, np.zeros(3), ALL)
+    with pytest.raises(ValueError, match="distinct and below 7"):
+        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [6, 6])
+    with pytest.raises(ValueError, match="params must be distinct names"):
+        sensitivities(drive, t, u, params=("theta", "k"))
     with pytest.raises(ValueError, match="one sample per time step"):
         sensitivities(drive, t, u[:-1])
     with pytest.raises(ValueError, match="no Coulomb friction"):

@@ -69,10 +69,15 @@ def test_noisy_torque_is_refused_by_every_identifier(step1):
 
 def test_why_the_limit(step1, monkeypatch):
     """With the check lifted: 0.2 mN m of torque noise (0.13 % of the step) leaves the
-    joint fit within a fraction of a standard error of the fit without noise (0.11 of
-    one, numpy 2.4) and its standard error within 10 %; 0.3 mN m (0.19 %) shrinks its
-    standard error 18 times, 1 mN m some 4000 times with the truth thousands of them away (the model
-    rattles on the noise), which is why the limit is 0.05 %."""
+    joint fit within a fraction of a standard error of the fit without noise (0.003 of
+    one) and its standard error within 10 % (9 %); 0.3 mN m (0.19 %) moves theta by
+    0.47 of one and shrinks it by 38 %, 1 mN m some 3000 times with the truth thousands
+    of them away (the model rattles on the noise), which is why the limit is 0.05 %.
+
+    The standard error is from the exact sensitivities' Fisher information. Central
+    differences across the rattling contact changes shrank it further, 4.4 times at
+    0.3 mN m with numpy 2.4.6 (18 times with an earlier numpy): a step that adds or
+    drops a change measures a jump, not a derivative."""
     monkeypatch.setattr(torque_module, "TORQUE_NOISE_LIMIT", 1.0)
     fisher = bk.FisherInterval()
     with warnings.catch_warnings():
@@ -81,9 +86,10 @@ def test_why_the_limit(step1, monkeypatch):
         fine = bk.JointIdentifier(PRIOR, interval=fisher).fit(_noisy(step1, 2e-4))
         shrunk = bk.JointIdentifier(PRIOR, interval=fisher).fit(_noisy(step1, 3e-4))
         broken = bk.JointIdentifier(PRIOR, interval=fisher).fit(_noisy(step1, 1e-3))
-    assert abs(fine.theta_ - clean.theta_) < 0.25 * clean.std_  # 0.11 std with numpy 2.4
-    assert fine.std_ == pytest.approx(clean.std_, rel=0.1)  # 5.7 % with numpy 2.4
-    assert shrunk.std_ < 0.1 * clean.std_
+    assert abs(fine.theta_ - clean.theta_) < 0.25 * clean.std_
+    assert fine.std_ == pytest.approx(clean.std_, rel=0.1)
+    assert abs(shrunk.theta_ - clean.theta_) > 0.3 * clean.std_
+    assert shrunk.std_ < 0.75 * clean.std_
     assert broken.std_ < 1e-3 * clean.std_
     assert abs(broken.theta_ - THETA) > 1000 * broken.std_
 

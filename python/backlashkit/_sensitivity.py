@@ -2,8 +2,9 @@
 
 The compiled twin of :mod:`backlashkit._numpy_sensitivity` (``crates/core``'s
 ``sensitivity`` module): the same recurrence, with the contact changes the compiled
-simulator locates. :func:`backlashkit.identify.cramer_rao_bound` uses them where its
-model is theirs; the fits still difference simulations.
+simulator locates. :func:`backlashkit.identify.cramer_rao_bound` uses them, for its
+estimated parameters only, where its model is theirs; the fits still difference
+simulations.
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ def sensitivities(
     *,
     initial_state: Sequence[float] | np.ndarray | None = None,
     states: bool = False,
+    params: Sequence[str] = PARAMS,
 ) -> np.ndarray:
-    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to :data:`PARAMS`.
+    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to ``params``.
 
     Parameters
     ----------
@@ -45,17 +47,22 @@ def sensitivities(
         sensitivity); default rest.
     states : bool, optional
         Return the twist's sensitivity too; default False.
+    params : sequence of str, optional
+        The parameters, distinct names of :data:`PARAMS` in the order wanted; default
+        all seven. The kernel carries only these (each adds work per sample).
 
     Returns
     -------
     numpy.ndarray
-        ``(len(t), 2, 7)`` (``(len(t), 3, 7)`` with ``states``): ``d x / d p`` in the
-        parameters' SI units, as :func:`backlashkit._numpy_sensitivity.sensitivities`.
+        ``(len(t), 2, len(params))`` (``(len(t), 3, len(params))`` with ``states``):
+        ``d x / d p`` in the parameters' SI units, as
+        :func:`backlashkit._numpy_sensitivity.sensitivities`.
 
     Raises
     ------
     InputError
-        For a drive with Coulomb friction or without ``theta``, or mismatched inputs.
+        For a drive with Coulomb friction or without ``theta``, mismatched inputs, or
+        an unknown or repeated parameter.
     ValueError
         From the kernel: invalid parameters, or a contact change that grazes a flank.
 
@@ -65,6 +72,26 @@ def sensitivities(
         When the run passes close to a grazing contact, as the simulator warns: after
         it the sensitivities are ill-conditioned.
     """
+    out = trajectory_and_sensitivities(drive, t, torque, initial_state=initial_state,
+                                       params=params)[1]
+    return out if states else out[:, :2, :]
+
+
+def trajectory_and_sensitivities(
+    drive: TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    params: Sequence[str] = PARAMS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The states ``(len(t), 3)`` (``w_M``, ``w_L`` in rad/s, the twist in rad) and
+    their sensitivities ``(len(t), 3, len(params))``, from one run.
+
+    The kernel simulates the drive first (it walks along the located contact
+    changes), and these are that simulation's states, so a caller needing both pays
+    for one run. Arguments, errors and warnings as :func:`sensitivities`.
+    """
     from . import _core
 
     if not isinstance(drive, TwoMassDrive):
@@ -72,6 +99,11 @@ def sensitivities(
     if drive.theta is None or drive.fc_M or drive.fc_L:
         raise InputError("the sensitivities need theta set and no Coulomb friction "
                          "(fc_M = fc_L = 0)")
+    names = list(params)
+    unknown = [n for n in names if n not in PARAMS]
+    if unknown or len(set(names)) != len(names):
+        raise InputError(f"params must be distinct names among {', '.join(PARAMS)}, got "
+                         f"{params!r}")
     t_arr, ts = v.time_grid(t)
     u = v.finite_array("torque", torque)
     if u.shape != t_arr.shape:
@@ -80,13 +112,14 @@ def sensitivities(
     x0 = np.zeros(3) if initial_state is None else v.finite_array("initial_state",
                                                                    initial_state)
     p = np.array([getattr(drive, n) for n in PARAMS], float)
-    out, grazes = _core.drive_sensitivities(p, float(t_arr[0]), ts, u,
-                                            np.ascontiguousarray(x0))
+    x, out, grazes = _core.drive_sensitivities(p, float(t_arr[0]), ts, u,
+                                               np.ascontiguousarray(x0),
+                                               [PARAMS.index(n) for n in names])
     if len(grazes):
         time, _, margin = grazes[0]
         warnings.warn(
             f"the run passed within {abs(margin):.3g} (relative) of a grazing contact "
             f"(t = {time:.6g} s; {len(grazes)} such pass(es)): the sensitivities after it "
             "are ill-conditioned (the derivative barely exists there)",
-            SensitivityWarning, stacklevel=2)
-    return out if states else out[:, :2, :]
+            SensitivityWarning, stacklevel=3)
+    return x, out

@@ -6,11 +6,17 @@ use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-/// The sensitivities `(n, 3, 7)` and the near-grazing passes `(G, 3)`.
-type SensitivityOutput<'py> = (Bound<'py, PyArray3<f64>>, Bound<'py, PyArray2<f64>>);
+/// The states `(n, 3)`, the sensitivities `(n, 3, m)` and the near-grazing passes
+/// `(G, 3)`.
+type SensitivityOutput<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray2<f64>>,
+);
 
-/// Sensitivities `dx/dp` of a two-mass drive, shape `(len(u), 3, 7)`: state
-/// `[w_M, w_L, phi]` by parameter `[J_M, J_L, k_sh, f_M, f_L, f_sh, theta]`, on the grid
+/// The states `(len(u), 3)` and sensitivities `dx/dp` of a two-mass drive, shape
+/// `(len(u), 3, len(wanted))`: state `[w_M, w_L, phi]` by parameter, the parameters
+/// `wanted` (indices into `[J_M, J_L, k_sh, f_M, f_L, f_sh, theta]`), on the grid
 /// `t0 + i ts` under the held torque `u`, from `x0` with zero sensitivity (paper A's
 /// law, no Coulomb friction, no current loop); and the run's near-grazing passes
 /// `(G, 3)` = `[time, shaft, margin]` as `simulate_chain` gives them. See
@@ -23,6 +29,7 @@ fn drive_sensitivities<'py>(
     ts: f64,
     u: PyReadonlyArray1<'py, f64>,
     x0: PyReadonlyArray1<'py, f64>,
+    wanted: Vec<usize>,
 ) -> PyResult<SensitivityOutput<'py>> {
     let params = params.as_slice()?;
     let p: [f64; N_PARAMS] = params.try_into().map_err(|_| {
@@ -33,7 +40,7 @@ fn drive_sensitivities<'py>(
     })?;
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);
     let out = py
-        .detach(|| sensitivity::drive_sensitivities(&p, t0, ts, u, x0))
+        .detach(|| sensitivity::drive_sensitivities_of(&p, t0, ts, u, x0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
     let grazes: Vec<f64> = out
@@ -42,7 +49,10 @@ fn drive_sensitivities<'py>(
         .flat_map(|g| [g.time, g.index as f64, g.margin])
         .collect();
     Ok((
-        Array3::from_shape_vec((u.len(), N_STATES, N_PARAMS), out.values)
+        Array2::from_shape_vec((u.len(), N_STATES), out.states)
+            .map_err(shape_err)?
+            .into_pyarray(py),
+        Array3::from_shape_vec((u.len(), N_STATES, wanted.len()), out.values)
             .map_err(shape_err)?
             .into_pyarray(py),
         Array2::from_shape_vec((out.grazes.len(), 3), grazes)

@@ -10,11 +10,13 @@ records. The stages that fit it are :mod:`backlashkit.identify._search`'s.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..errors import SensitivityWarning
 from ..plants import TwoMassDrive
 from ..signals import highpass_noise_std
 from ._lm import LMState, lm
@@ -174,7 +176,12 @@ class Problem:
                   state=state)
 
     def central_jacobian(self, res: Residual, z: np.ndarray) -> np.ndarray:
-        """Central-difference Jacobian of ``res`` at ``z`` (for the uncertainty)."""
+        """Jacobian of ``res`` at ``z`` for the uncertainty: exact
+        (:meth:`Residual.exact_jacobian`) where the compiled sensitivities cover the
+        model, else by central differences."""
+        exact = res.exact_jacobian(z)
+        if exact is not None:
+            return exact
         n, h = len(self.names), self.fd_step
         zz = np.repeat(z[np.newaxis, :], 2 * n, axis=0)
         for i in range(n):
@@ -240,6 +247,41 @@ class Residual:
         n, h = z.size, self.problem.fd_step
         zz = np.repeat(z[np.newaxis, :], n, axis=0) + h * np.eye(n)
         return ((self(zz) - r) / h).T
+
+    def exact_jacobian(self, z: np.ndarray) -> np.ndarray | None:
+        """The Jacobian in log-parameters from the compiled forward sensitivities, one
+        run per span of the estimated parameters alone; None outside their scope (a
+        friction or loop term, a start that moves with the parameters, encoder angles,
+        another contact law) or where a contact change grazes (no derivative there:
+        the caller differences instead)."""
+        pb = self.problem
+        if not (pb.law == "paper" and pb.base.size == len(PACKED)
+                and all(sp.level is None and sp.hold is None and not sp.positions
+                        for sp in self.spans)):
+            return None
+        from .._sensitivity import trajectory_and_sensitivities
+
+        p = pb.base.copy()
+        p[pb.cols] = pb.values(z)
+        drive = TwoMassDrive(**{n: float(x) for n, x in zip(PACKED, p, strict=True)})
+        per_z = pb.values(z)  # d/dz = p d/dp for log-parameters
+        out = np.empty((self.n_res, len(pb.names)))
+        pos = 0
+        for sp, s_, m, end in zip(self.spans, self.sels, self.sizes, self.ends, strict=True):
+            try:
+                with warnings.catch_warnings():  # as quiet near grazing as the differences
+                    warnings.simplefilter("ignore", SensitivityWarning)
+                    _, sens = trajectory_and_sensitivities(
+                        drive, sp.t[:end], sp.torque[:end], params=pb.names)
+            except ValueError:
+                return None
+            for c in (0, 1):  # the residual is data - model: its rows move as -S
+                out[pos : pos + m - self.lag] = self.weigh(sp, c, -(sens[s_, c, :] * per_z).T).T
+                pos += m - self.lag
+        prior = np.nan_to_num(pb.values(z)[1:] / (pb.pen * pb.p_prior))
+        out[pos:] = 0.0
+        out[pos:, 1:] = np.diag(prior)
+        return out
 
     def channels(self, r: np.ndarray):
         """``(k, c, part)``: the part of ``r`` of record ``k``'s channel ``c``, per span."""

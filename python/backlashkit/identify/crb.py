@@ -200,24 +200,23 @@ def _exact(drive, names, tau_i, t, torque, law, initial_state):
     """``((w_M, w_L), (S_M, S_L))`` of the nominal drive, ``S_c`` the exact sensitivities
     ``(samples, len(names))`` of the compiled kernel, where the model is in its scope
     (paper A's law, no Coulomb friction or current loop, a known start); else
-    ``(None, None)``. One simulation and one sensitivity run, against ``2 n + 1``
-    simulations of central differences."""
-    from .._sensitivity import PARAMS, sensitivities
+    ``(None, None)``. One sensitivity run of the estimated parameters alone (the
+    speeds come from the same run), against ``2 n + 1`` simulations of central
+    differences."""
+    from .._sensitivity import PARAMS, trajectory_and_sensitivities
 
     if (law != "paper" or tau_i or drive.fc_M or drive.fc_L or drive.fs_M or drive.fs_L
             or not set(names) <= set(PARAMS) or isinstance(initial_state, str)):
         return None, None
-    speeds = _speeds(drive, names, [np.array([getattr(drive, m) for m in names])], tau_i,
-                     t, torque, law, initial_state)[0]
     x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
     try:
         with warnings.catch_warnings():  # quiet near grazing, as the differences are
             warnings.simplefilter("ignore", SensitivityWarning)
-            sens = sensitivities(drive, t, torque, initial_state=x0)
+            x, sens = trajectory_and_sensitivities(drive, t, torque, initial_state=x0,
+                                                   params=names)
     except ValueError as exc:
         raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
-    cols = [PARAMS.index(m) for m in names]
-    return speeds, (sens[:, 0, cols], sens[:, 1, cols])
+    return (x[:, 0], x[:, 1]), (sens[:, 0, :], sens[:, 1, :])
 
 
 def _differenced(drive, names, values, h, tau_i, t, torque, law, initial_state):

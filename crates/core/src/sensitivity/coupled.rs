@@ -33,13 +33,18 @@ fn scale<const N: usize>(a: &Mat<N>, s: f64) -> Mat<N> {
     a.map(|row| row.map(|v| v * s))
 }
 
-/// The exponentials of `M_j tau` for the couplings `d`, and their integrals.
+/// The exponentials of `M_j tau` for the couplings `d`, and their integrals; only for
+/// the `active` couplings (the others' blocks stay 0: a column nobody asked for costs
+/// nothing).
 pub(super) fn coupled_expm<const N: usize, const P: usize>(
     a: &Mat<N>,
     d: &[Mat<N>; P],
     tau: f64,
+    active: &[bool; P],
 ) -> CoupledExp<N, P> {
     // Each column of M_j sums at most a column of A and one of D_j.
+    // Scaled by every coupling, carried or not: the carried blocks are then the same
+    // to the bit whichever others are carried.
     let nrm = (norm1(a) + d.iter().map(norm1).fold(0.0, f64::max)) * tau.abs();
     let squarings = if nrm > MAX_NORM {
         (nrm / MAX_NORM).log2().ceil() as i32
@@ -47,9 +52,9 @@ pub(super) fn coupled_expm<const N: usize, const P: usize>(
         0
     };
     let t = tau / 2f64.powi(squarings);
-    let mut out = taylor(&scale(a, t), &d.map(|m| scale(&m, t)), t);
+    let mut out = taylor(&scale(a, t), &d.map(|m| scale(&m, t)), t, active);
     for _ in 0..squarings {
-        out = doubled(&out);
+        out = doubled(&out, active);
     }
     out
 }
@@ -60,13 +65,14 @@ fn taylor<const N: usize, const P: usize>(
     at: &Mat<N>,
     dt: &[Mat<N>; P],
     t: f64,
+    active: &[bool; P],
 ) -> CoupledExp<N, P> {
     let id = identity::<N>();
     let (mut e, mut g) = (id, id);
     let (mut ec, mut gc) = ([[[0.0; N]; N]; P], [[[0.0; N]; N]; P]);
     for k in (1..=DEGREE).rev() {
         let (ke, kg) = (1.0 / k as f64, 1.0 / (k + 1) as f64);
-        for j in 0..P {
+        for j in (0..P).filter(|&j| active[j]) {
             ec[j] = scale(&add(&matmul(&dt[j], &e), &matmul(at, &ec[j])), ke);
             gc[j] = scale(&add(&matmul(&dt[j], &g), &matmul(at, &gc[j])), kg);
         }
@@ -83,9 +89,20 @@ fn taylor<const N: usize, const P: usize>(
 
 /// The flow over twice the span: `E' = E E`, `C' = C E + E C`, `F' = F + E F`,
 /// `K' = K + C F + E K`.
-fn doubled<const N: usize, const P: usize>(x: &CoupledExp<N, P>) -> CoupledExp<N, P> {
-    let c = std::array::from_fn(|j| add(&matmul(&x.c[j], &x.e), &matmul(&x.e, &x.c[j])));
+fn doubled<const N: usize, const P: usize>(
+    x: &CoupledExp<N, P>,
+    active: &[bool; P],
+) -> CoupledExp<N, P> {
+    let c = std::array::from_fn(|j| {
+        if !active[j] {
+            return x.c[j];
+        }
+        add(&matmul(&x.c[j], &x.e), &matmul(&x.e, &x.c[j]))
+    });
     let k = std::array::from_fn(|j| {
+        if !active[j] {
+            return x.k[j];
+        }
         let ck = add(&matmul(&x.c[j], &x.f), &matmul(&x.e, &x.k[j]));
         add(&x.k[j], &ck)
     });

@@ -22,6 +22,7 @@ pub(super) struct Augmented {
 /// `x <- e x + xu u + x1`, `s_j <- e s_j + coupling_j x + su_j u + s1_j`.
 #[derive(Clone, Debug)]
 pub(super) struct Flow {
+    active: [bool; N_PARAMS],
     e: Mat<N_STATES>,
     xu: Vector<N_STATES>,
     x1: Vector<N_STATES>,
@@ -34,17 +35,25 @@ impl Flow {
     /// The flow of mode `flank` over `tau`, sensitivities scaled by `scale`: the
     /// exponential of `[[A, 0], [scale_j A_j, A]] tau` and its integral for every `j`
     /// (see `coupled`), applied to the inputs `[b, scale_j b_j]` and `[c, scale_j c_j]`.
-    pub fn new(p: &[f64; N_PARAMS], scale: &[f64; N_PARAMS], flank: i8, tau: f64) -> Self {
+    /// Only the `active` sensitivities are carried (the others stay 0).
+    pub fn new(
+        p: &[f64; N_PARAMS],
+        scale: &[f64; N_PARAMS],
+        flank: i8,
+        tau: f64,
+        active: &[bool; N_PARAMS],
+    ) -> Self {
         let sys = system(p, flank);
         let der: [System; N_PARAMS] =
             std::array::from_fn(|j| system_derivative(p, flank, j).scaled(scale[j]));
-        let ex = coupled_expm(&sys.a, &der.map(|d| d.a), tau);
+        let ex = coupled_expm(&sys.a, &der.map(|d| d.a), tau, active);
         let (fb, fc) = (matvec(&ex.f, &sys.b), matvec(&ex.f, &sys.c));
         let input = |j: usize, v: &Vector<N_STATES>, dv: &Vector<N_STATES>| {
             let (kv, fdv) = (matvec(&ex.k[j], v), matvec(&ex.f, dv));
             std::array::from_fn(|i| kv[i] + fdv[i])
         };
         Flow {
+            active: *active,
             e: ex.e,
             xu: fb,
             x1: fc,
@@ -54,14 +63,22 @@ impl Flow {
         }
     }
 
-    /// `z` advanced by the flow under torque `u`.
-    pub fn apply(&self, z: &Augmented, u: f64) -> Augmented {
-        let ex = matvec(&self.e, &z.x);
-        let x = std::array::from_fn(|i| ex[i] + self.xu[i] * u + self.x1[i]);
-        let s = std::array::from_fn(|j| {
+    /// `z` advanced in place by the flow under torque `u` (the carried sensitivities
+    /// first: they need the state at the span's start).
+    #[inline]
+    pub fn apply(&self, z: &mut Augmented, u: f64) {
+        for j in 0..N_PARAMS {
+            if !self.active[j] {
+                continue;
+            }
             let (es, cx) = (matvec(&self.e, &z.s[j]), matvec(&self.coupling[j], &z.x));
-            std::array::from_fn(|i| es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i])
-        });
-        Augmented { x, s }
+            for i in 0..N_STATES {
+                z.s[j][i] = es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i];
+            }
+        }
+        let ex = matvec(&self.e, &z.x);
+        for i in 0..N_STATES {
+            z.x[i] = ex[i] + self.xu[i] * u + self.x1[i];
+        }
     }
 }

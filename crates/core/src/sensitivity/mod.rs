@@ -24,7 +24,7 @@ mod run;
 #[cfg(test)]
 mod tests;
 
-pub use run::{drive_sensitivities, DriveSensitivities};
+pub use run::{drive_sensitivities, drive_sensitivities_of, DriveSensitivities};
 
 /// The parameters, in the order of a sensitivity row: motor and load inertias, shaft
 /// stiffness, motor and load viscous frictions, shaft damping, backlash half-width.

@@ -9,11 +9,15 @@ use crate::chain::{simulate_chain, ChainParams, Law};
 use crate::hybrid::{Event, Graze};
 use crate::Error;
 
-/// Sensitivities along a run, and the run's near-grazing passes.
+/// Sensitivities along a run, the run's states, and its near-grazing passes.
 #[derive(Clone, Debug, Default)]
 pub struct DriveSensitivities {
-    /// `dx/dp`, row-major `(samples, 3, 7)`: state by parameter.
+    /// `dx/dp`, row-major `(samples, 3, m)`: state by parameter, for the `m`
+    /// parameters asked for (all seven, in the order [`PARAMS`](super::PARAMS), for
+    /// [`drive_sensitivities`]).
     pub values: Vec<f64>,
+    /// The simulator's states `x`, row-major `(samples, 3)`.
+    pub states: Vec<f64>,
     /// The simulator's near-grazing passes (see [`Graze`]): after one, the
     /// sensitivities are ill-conditioned (the derivative barely exists).
     pub grazes: Vec<Graze>,
@@ -37,6 +41,33 @@ pub fn drive_sensitivities(
     u: &[f64],
     x0: &[f64],
 ) -> Result<DriveSensitivities, Error> {
+    let all: [usize; N_PARAMS] = std::array::from_fn(|j| j);
+    drive_sensitivities_of(p, t0, ts, u, x0, &all)
+}
+
+/// As [`drive_sensitivities`], for the parameters `wanted` only (indices into
+/// [`PARAMS`](super::PARAMS), distinct, in the order of the output's last axis): each
+/// column adds two small matrix-vector products per sample, so a bound or a fit that
+/// estimates a few parameters pays for those alone.
+///
+/// Errors: as [`drive_sensitivities`], and an index out of range or repeated.
+pub fn drive_sensitivities_of(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    x0: &[f64],
+    wanted: &[usize],
+) -> Result<DriveSensitivities, Error> {
+    let mut active = [false; N_PARAMS];
+    for &j in wanted {
+        if j >= N_PARAMS || active[j] {
+            return Err(Error::InvalidArgument(format!(
+                "parameter indices must be distinct and below {N_PARAMS}, got {wanted:?}"
+            )));
+        }
+        active[j] = true;
+    }
     let chain = chain_params(p)?;
     if !t0.is_finite() {
         return Err(Error::InvalidArgument(format!(
@@ -59,6 +90,9 @@ pub fn drive_sensitivities(
     let mut walk = Walk {
         p,
         scale,
+        unscale: scale.map(|v| 1.0 / v),
+        active,
+        wanted,
         flank: first_mode,
         z,
         full: [None, None, None],
@@ -66,6 +100,7 @@ pub fn drive_sensitivities(
     let values = walk.run(t0, ts, u, &run.events)?;
     Ok(DriveSensitivities {
         values,
+        states: run.states,
         grazes: run.grazes,
     })
 }
@@ -94,6 +129,11 @@ fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
 struct Walk<'a> {
     p: &'a [f64; N_PARAMS],
     scale: [f64; N_PARAMS],
+    /// `1 / scale`: the written sensitivities are in the parameters' units.
+    unscale: [f64; N_PARAMS],
+    /// The sensitivities carried, and the order they are written in.
+    active: [bool; N_PARAMS],
+    wanted: &'a [usize],
     /// Current contact mode: 0 the gap, +-1 a flank.
     flank: i8,
     z: Augmented,
@@ -102,12 +142,13 @@ struct Walk<'a> {
 }
 
 impl Walk<'_> {
+    /// The sensitivities at every sample.
     fn run(&mut self, t0: f64, ts: f64, u: &[f64], events: &[Event]) -> Result<Vec<f64>, Error> {
-        let n = u.len();
-        let mut out = vec![0.0; n * N_STATES * N_PARAMS];
+        let (n, row) = (u.len(), N_STATES * self.wanted.len());
+        let mut out = vec![0.0; n * row];
         let mut next_event = 0;
         for k in 0..n {
-            self.write(&mut out[k * N_STATES * N_PARAMS..(k + 1) * N_STATES * N_PARAMS]);
+            self.write(&mut out[k * row..(k + 1) * row]);
             if k + 1 == n {
                 break;
             }
@@ -121,9 +162,10 @@ impl Walk<'_> {
             }
             if t_now == t_start {
                 let slot = (self.flank + 1) as usize;
-                let (p, scale, flank) = (self.p, &self.scale, self.flank);
-                let flow = self.full[slot].get_or_insert_with(|| Flow::new(p, scale, flank, ts));
-                self.z = flow.apply(&self.z, u[k]);
+                let (p, scale, flank, active) = (self.p, &self.scale, self.flank, &self.active);
+                let flow =
+                    self.full[slot].get_or_insert_with(|| Flow::new(p, scale, flank, ts, active));
+                flow.apply(&mut self.z, u[k]);
             } else {
                 self.advance(u[k], t_end - t_now);
             }
@@ -131,11 +173,12 @@ impl Walk<'_> {
         Ok(out)
     }
 
-    /// Rows `state x parameter` of `dx/dp` into `row`.
+    /// Rows `state x wanted parameter` of `dx/dp` into `row`.
     fn write(&self, row: &mut [f64]) {
+        let m = self.wanted.len();
         for i in 0..N_STATES {
-            for j in 0..N_PARAMS {
-                row[i * N_PARAMS + j] = self.z.s[j][i] / self.scale[j];
+            for (c, &j) in self.wanted.iter().enumerate() {
+                row[i * m + c] = self.z.s[j][i] * self.unscale[j];
             }
         }
     }
@@ -143,7 +186,8 @@ impl Walk<'_> {
     /// Advance by `tau` in the current mode (nothing for `tau <= 0`).
     fn advance(&mut self, u: f64, tau: f64) {
         if tau > 0.0 {
-            self.z = Flow::new(self.p, &self.scale, self.flank, tau).apply(&self.z, u);
+            let flow = Flow::new(self.p, &self.scale, self.flank, tau, &self.active);
+            flow.apply(&mut self.z, u);
         }
     }
 
@@ -156,7 +200,7 @@ impl Walk<'_> {
         let f_plus = system(self.p, ev.to).field(&self.z.x, u);
         // dg/dx = [0, 0, 1]: the guard's rate is the twist rate w_M - w_L.
         let rate = f_minus[2];
-        for j in 0..N_PARAMS {
+        for j in (0..N_PARAMS).filter(|&j| self.active[j]) {
             let dg_dp = if j == THETA {
                 -side * self.scale[j]
             } else {

@@ -229,7 +229,7 @@ fn coupled_exponential_matches_the_dense_one() {
             .map(|r| r.map(|v| v * PAPER[j]))
     });
     for tau in [TS, 3.7e-6] {
-        let ex = super::coupled::coupled_expm(&a, &d, tau);
+        let ex = super::coupled::coupled_expm(&a, &d, tau, &[true; N_PARAMS]);
         for j in 0..N_PARAMS {
             let mut m = [[0.0; 6]; 6];
             for r in 0..3 {
@@ -255,5 +255,40 @@ fn coupled_exponential_matches_the_dense_one() {
                 }
             }
         }
+    }
+}
+
+#[test]
+fn a_subset_of_parameters_gives_their_columns_and_the_states() {
+    // The columns of a subset are the full run's to the bit, and the states the
+    // simulator's.
+    let u = step_down(4.0, LEVEL);
+    let full = drive_sensitivities(&PAPER, 0.0, TS, &u, &[0.0; 3]).unwrap();
+    let sim = simulate(&PAPER, &u);
+    assert!(full.states == sim.states);
+    for wanted in [vec![THETA], vec![F_M, J_M], vec![]] {
+        let part = drive_sensitivities_of(&PAPER, 0.0, TS, &u, &[0.0; 3], &wanted).unwrap();
+        assert!(part.states == full.states, "states of {wanted:?}");
+        let m = wanted.len();
+        assert_eq!(part.values.len(), u.len() * N_STATES * m);
+        for (c, &j) in wanted.iter().enumerate() {
+            let col = |k: usize, i: usize| full.values[(k * N_STATES + i) * N_PARAMS + j];
+            for k in 0..u.len() {
+                for i in 0..N_STATES {
+                    let got = part.values[(k * N_STATES + i) * m + c];
+                    assert!(
+                        got == col(k, i),
+                        "p{j} state {i} sample {k}: {got} vs {}",
+                        col(k, i)
+                    );
+                }
+            }
+        }
+    }
+    for bad in [vec![N_PARAMS], vec![THETA, THETA]] {
+        assert!(matches!(
+            drive_sensitivities_of(&PAPER, 0.0, TS, &u, &[0.0; 3], &bad),
+            Err(Error::InvalidArgument(_))
+        ));
     }
 }
