@@ -5,9 +5,9 @@ under an 8 s record at Ts = 1 ms (8 001 samples): torque ``A1`` = 0.157 N m from
 stepped down to 0 at 4 s, paper law.
 
 Timed in this process, each the median of ``--repeats`` runs after one warm-up, all
-interleaved (one run of each per round, so that a busy machine's load weighs on all
-alike) and BLAS held to one thread (the twin's small products gain nothing from
-more):
+interleaved (one run of each per round) and BLAS held to one thread (the twin's small
+products gain nothing from more), in CPU time of the process (a busy machine's other
+jobs then weigh on none of them):
 
 * ``compiled sensitivities``: :func:`backlashkit._sensitivity.sensitivities` (the
   kernel simulates the drive once for its contact changes, then integrates the seven
@@ -50,15 +50,15 @@ FD_STEP = 1e-6
 
 
 def median_times(fns, repeats: int) -> tuple[list[float], list[object]]:
-    """Median wall times of ``repeats`` rounds of one call of each of ``fns``, after one
+    """Median CPU times of ``repeats`` rounds of one call of each of ``fns``, after one
     warm-up round, and their last results."""
     outs = [fn() for fn in fns]
     times: list[list[float]] = [[] for _ in fns]
     for _ in range(repeats):
         for i, fn in enumerate(fns):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             outs[i] = fn()
-            times[i].append(time.perf_counter() - t0)
+            times[i].append(time.process_time() - t0)
     return [statistics.median(ts) for ts in times], outs
 
 

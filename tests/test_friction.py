@@ -217,8 +217,9 @@ def test_bad_chain_friction_is_refused():
 
 #: Random stick-slip cases whose bars must be asserted, of 25 drawn (derandomized;
 #: ``-s`` prints the counts). Which cases are drawn depends on hypothesis's version:
-#: with 6.170 one (theta at its 1e-4 floor, breakaway equal to Coulomb) makes the scipy
-#: reference stop on "contact chatter", its own limit, counted apart.
+#: with 6.170, 2 of the 25 make the scipy reference stop on "contact chatter" (one
+#: shrinks to theta at its 1e-4 floor with breakaway equal to Coulomb), its own limit,
+#: counted apart; 23 are checked.
 MIN_FRICTION_CHECKED = 22
 #: Smallest half-width drawn (rad): a dead zone of 0 or 1e-12 rad makes each contact
 #: change a crossing of a vanishing gap, whose instant no two simulators agree on (a

@@ -3,7 +3,8 @@
 The compiled twin of :mod:`backlashkit._numpy_sensitivity` (``crates/core``'s
 ``sensitivity`` module): the same recurrence, with the contact changes the compiled
 simulator locates. :func:`backlashkit.identify.cramer_rao_bound` uses them, for its
-estimated parameters only, where its model is theirs; the fits still difference
+estimated parameters only, where its model is theirs, and so does the joint fit's
+uncertainty (its Fisher information); the fit's iterations still difference
 simulations.
 """
 
