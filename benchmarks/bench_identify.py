@@ -140,12 +140,20 @@ def count(recs, prior) -> None:
               f"sensitivity runs, in the time of "
               f"{statistics.median([r[0] for r in ratio]):.1f} simulations (bar: 3; by "
               f"central differences {statistics.median([r[1] for r in ratio]):.1f})")
+    sim_s = statistics.median(r[2] for r in ratio)
+    print(f"  one simulation (drive.simulate) of a record: {1e3 * sim_s:.2f} ms, "
+          f"{1e9 * sim_s / recs[0].t.size:.0f} ns a sample")
 
 
-def crb_cost(drive, rec, estimate, repeats: int = 7) -> tuple[float, int, tuple[float, float]]:
+#: Pause before each timed call of the bound, in s (see ``crb_cost``).
+SETTLE_S = 0.02
+
+
+def crb_cost(drive, rec, estimate, repeats: int = 7
+             ) -> tuple[float, int, tuple[float, float, float]]:
     """``cramer_rao_bound(estimate=estimate)`` of one record: simulations, compiled
     sensitivity runs, and its median time over one simulation's, with the compiled
-    sensitivities and by central differences."""
+    sensitivities and by central differences, and one simulation's median time in s."""
     import backlashkit._core as core
 
     from backlashkit.identify import crb
@@ -168,13 +176,15 @@ def crb_cost(drive, rec, estimate, repeats: int = 7) -> tuple[float, int, tuple[
     times: dict[str, list[float]] = {"exact": [], "differences": [], "simulation": []}
     # CPU time of the process (all its threads; BLAS held to one): a few milliseconds
     # of wall time on a machine busy with other jobs measure their time slices more
-    # than the bound
+    # than the bound. Each call waits SETTLE_S first, as the kernel's worker threads
+    # spin for a while after the differences' parallel batch, in the process's time.
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in range(repeats):  # interleaved
             for name, fn in (("exact", bound), ("differences", bound),
                              ("simulation", lambda: drive.simulate(rec.t, rec.torque))):
                 crb._exact = exact if name == "exact" else lambda *a: (None, None)
                 try:
+                    time.sleep(SETTLE_S)
                     t0 = time.process_time()
                     fn()
                     times[name].append(time.process_time() - t0)
@@ -182,7 +192,7 @@ def crb_cost(drive, rec, estimate, repeats: int = 7) -> tuple[float, int, tuple[
                     crb._exact = exact
     med = {k: statistics.median(x) for k, x in times.items()}
     return n_sim, runs[0], (med["exact"] / med["simulation"],
-                            med["differences"] / med["simulation"])
+                            med["differences"] / med["simulation"], med["simulation"])
 
 
 def main() -> None:

@@ -22,9 +22,9 @@ from backlashkit._numpy_sensitivity import sensitivities as numpy_sensitivities
 from backlashkit._sensitivity import sensitivities, trajectory_and_sensitivities
 from backlashkit.papers.ravanbod2002 import A2, P_TRUE, THETA
 
-#: Agreement asked of the two on paper A's drive (3.2e-10; ``-s`` prints the figures)...
+#: Agreement asked of the two on paper A's drive (1.8e-10; ``-s`` prints the figures)...
 RTOL = 1e-8
-#: ... and on random drives: a median of 6e-10, but up to 3.2e-8: the jumps at changes
+#: ... and on random drives: a median of 3e-10, but up to 1.4e-8: the jumps at changes
 #: of low relative speed amplify the two exponentials' differing rounding (``-s``
 #: prints the figures).
 RANDOM_RTOL = 1e-7

@@ -77,7 +77,8 @@ def test_why_the_limit(step1, monkeypatch):
     The standard error is from the exact sensitivities' Fisher information. Central
     differences across the rattling contact changes shrank it further, 4.4 times at
     0.3 mN m with numpy 2.4.6 (18 times with an earlier numpy): a step that adds or
-    drops a change measures a jump, not a derivative."""
+    drops a change measures a jump, not a derivative. ``python -m pytest
+    tests/test_torque.py -k why_the_limit -s`` prints the figures."""
     monkeypatch.setattr(torque_module, "TORQUE_NOISE_LIMIT", 1.0)
     fisher = bk.FisherInterval()
     with warnings.catch_warnings():
@@ -86,6 +87,9 @@ def test_why_the_limit(step1, monkeypatch):
         fine = bk.JointIdentifier(PRIOR, interval=fisher).fit(_noisy(step1, 2e-4))
         shrunk = bk.JointIdentifier(PRIOR, interval=fisher).fit(_noisy(step1, 3e-4))
         broken = bk.JointIdentifier(PRIOR, interval=fisher).fit(_noisy(step1, 1e-3))
+    for name, fit in (("0.2 mN m", fine), ("0.3 mN m", shrunk), ("1 mN m", broken)):
+        print(f"\n{name}: theta moved {(fit.theta_ - clean.theta_) / clean.std_:+.3f} "
+              f"standard errors, standard error x{fit.std_ / clean.std_:.4g}")
     assert abs(fine.theta_ - clean.theta_) < 0.25 * clean.std_
     assert fine.std_ == pytest.approx(clean.std_, rel=0.1)
     assert abs(shrunk.theta_ - clean.theta_) > 0.3 * clean.std_

@@ -22,7 +22,8 @@ pub(super) struct Augmented {
 /// `x <- e x + xu u + x1`, `s_j <- e s_j + coupling_j x + su_j u + s1_j`.
 #[derive(Clone, Debug)]
 pub(super) struct Flow {
-    active: [bool; N_PARAMS],
+    /// Whether column `j`'s coupling block is nonzero.
+    coupled: [bool; N_PARAMS],
     e: Mat<N_STATES>,
     xu: Vector<N_STATES>,
     x1: Vector<N_STATES>,
@@ -53,7 +54,7 @@ impl Flow {
             std::array::from_fn(|i| kv[i] + fdv[i])
         };
         Flow {
-            active: *active,
+            coupled: std::array::from_fn(|j| ex.c[j].iter().flatten().any(|&v| v != 0.0)),
             e: ex.e,
             xu: fb,
             x1: fc,
@@ -63,22 +64,68 @@ impl Flow {
         }
     }
 
-    /// `z` advanced in place by the flow under torque `u` (the carried sensitivities
-    /// first: they need the state at the span's start).
+    /// Column `j`'s sensitivity `s` advanced in place by the flow under torque `u`
+    /// from the state `x` at the span's start. A column whose coupling is zero
+    /// (`theta`'s: `A` does not depend on it) skips that product.
+    #[inline(always)]
+    fn step_column(&self, j: usize, s: &mut Vector<N_STATES>, x: &Vector<N_STATES>, u: f64) {
+        let es = matvec(&self.e, s);
+        let cx = if self.coupled[j] {
+            matvec(&self.coupling[j], x)
+        } else {
+            [0.0; N_STATES]
+        };
+        for i in 0..N_STATES {
+            s[i] = es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i];
+        }
+    }
+
+    /// The columns `cols` of `z` carried over whole samples, one per torque of `u`,
+    /// along the simulator's states `x` (one row of 3 per sample's start); each
+    /// sample's start is written, times `unscale`, to its row of `out` (rows of
+    /// `3 x cols.len()`, state by column). The columns' recurrences are independent,
+    /// so the processor overlaps them.
     #[inline]
-    pub fn apply(&self, z: &mut Augmented, u: f64) {
-        for j in 0..N_PARAMS {
-            if !self.active[j] {
-                continue;
-            }
-            let (es, cx) = (matvec(&self.e, &z.s[j]), matvec(&self.coupling[j], &z.x));
-            for i in 0..N_STATES {
-                z.s[j][i] = es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i];
+    pub fn stream(
+        &self,
+        s: &mut [Vector<N_STATES>; N_PARAMS],
+        cols: &[usize],
+        unscale: &[f64; N_PARAMS],
+        u: &[f64],
+        x: &[f64],
+        out: &mut [f64],
+    ) {
+        let m = cols.len();
+        let rows = out
+            .chunks_exact_mut(N_STATES * m)
+            .zip(x.chunks_exact(N_STATES));
+        for ((row, xi), &ui) in rows.zip(u) {
+            let xi = [xi[0], xi[1], xi[2]];
+            for (c, &j) in cols.iter().enumerate() {
+                for r in 0..N_STATES {
+                    row[r * m + c] = s[j][r] * unscale[j];
+                }
+                self.step_column(j, &mut s[j], &xi, ui);
             }
         }
+    }
+
+    /// The state of `z` advanced in place by the flow under torque `u`.
+    #[inline]
+    fn apply_state(&self, z: &mut Augmented, u: f64) {
         let ex = matvec(&self.e, &z.x);
         for i in 0..N_STATES {
             z.x[i] = ex[i] + self.xu[i] * u + self.x1[i];
         }
+    }
+
+    /// `z` advanced in place by the flow under torque `u`: the carried sensitivities
+    /// `cols` first (they need the state at the span's start), then the state.
+    #[inline]
+    pub fn apply(&self, z: &mut Augmented, u: f64, cols: &[usize]) {
+        for &j in cols {
+            self.step_column(j, &mut z.s[j], &z.x, u);
+        }
+        self.apply_state(z, u);
     }
 }

@@ -97,7 +97,7 @@ pub fn drive_sensitivities_of(
         z,
         full: [None, None, None],
     };
-    let values = walk.run(t0, ts, u, &run.events)?;
+    let values = walk.run(t0, ts, u, &run.states, &run.events)?;
     Ok(DriveSensitivities {
         values,
         states: run.states,
@@ -142,35 +142,71 @@ struct Walk<'a> {
 }
 
 impl Walk<'_> {
-    /// The sensitivities at every sample.
-    fn run(&mut self, t0: f64, ts: f64, u: &[f64], events: &[Event]) -> Result<Vec<f64>, Error> {
+    /// The sensitivities at every sample, along the simulator's `states` (row-major
+    /// `(u.len(), 3)`). Between the samples that hold contact changes the mode is
+    /// fixed, and each column is streamed over those whole samples by itself (see
+    /// [`Flow::stream_column`]); a sample holding changes is split at them.
+    fn run(
+        &mut self,
+        t0: f64,
+        ts: f64,
+        u: &[f64],
+        states: &[f64],
+        events: &[Event],
+    ) -> Result<Vec<f64>, Error> {
         let (n, row) = (u.len(), N_STATES * self.wanted.len());
         let mut out = vec![0.0; n * row];
-        let mut next_event = 0;
-        for k in 0..n {
-            self.write(&mut out[k * row..(k + 1) * row]);
-            if k + 1 == n {
-                break;
+        let (mut k, mut next_event) = (0, 0);
+        loop {
+            // Changes up to a sample's end, inclusive, belong to that sample.
+            let next_time = events.get(next_event).map_or(f64::INFINITY, |e| e.time);
+            let split = (k..n - 1)
+                .find(|&i| t0 + (i + 1) as f64 * ts >= next_time)
+                .unwrap_or(n - 1);
+            self.steady(ts, k, split, u, states, &mut out[k * row..]);
+            self.z.x = std::array::from_fn(|i| states[split * N_STATES + i]);
+            self.write(&mut out[split * row..(split + 1) * row]);
+            if split + 1 == n {
+                return Ok(out);
             }
-            let (t_start, t_end) = (t0 + k as f64 * ts, t0 + (k + 1) as f64 * ts);
+            let (t_start, t_end) = (t0 + split as f64 * ts, t0 + (split + 1) as f64 * ts);
             let mut t_now = t_start;
-            // Changes up to the sample's end, inclusive, belong to this sample.
             while let Some(ev) = events.get(next_event).filter(|e| e.time <= t_end) {
-                self.advance(u[k], ev.time - t_now);
-                self.jump(ev, u[k])?;
+                self.advance(u[split], ev.time - t_now);
+                self.jump(ev, u[split])?;
                 (t_now, next_event) = (ev.time, next_event + 1);
             }
-            if t_now == t_start {
-                let slot = (self.flank + 1) as usize;
-                let (p, scale, flank, active) = (self.p, &self.scale, self.flank, &self.active);
-                let flow =
-                    self.full[slot].get_or_insert_with(|| Flow::new(p, scale, flank, ts, active));
-                flow.apply(&mut self.z, u[k]);
-            } else {
-                self.advance(u[k], t_end - t_now);
-            }
+            self.advance(u[split], t_end - t_now);
+            k = split + 1;
         }
-        Ok(out)
+    }
+
+    /// Rows `k..end` of `out` (which starts at row `k`) over the whole samples `k..end`
+    /// in the current mode, leaving the carried columns at sample `end`'s start.
+    fn steady(
+        &mut self,
+        ts: f64,
+        k: usize,
+        end: usize,
+        u: &[f64],
+        states: &[f64],
+        out: &mut [f64],
+    ) {
+        if end == k || self.wanted.is_empty() {
+            return;
+        }
+        let slot = (self.flank + 1) as usize;
+        let (p, scale, flank, active) = (self.p, &self.scale, self.flank, &self.active);
+        let flow = self.full[slot].get_or_insert_with(|| Flow::new(p, scale, flank, ts, active));
+        let x = &states[k * N_STATES..end * N_STATES];
+        flow.stream(
+            &mut self.z.s,
+            self.wanted,
+            &self.unscale,
+            &u[k..end],
+            x,
+            out,
+        );
     }
 
     /// Rows `state x wanted parameter` of `dx/dp` into `row`.
@@ -187,7 +223,7 @@ impl Walk<'_> {
     fn advance(&mut self, u: f64, tau: f64) {
         if tau > 0.0 {
             let flow = Flow::new(self.p, &self.scale, self.flank, tau, &self.active);
-            flow.apply(&mut self.z, u);
+            flow.apply(&mut self.z, u, self.wanted);
         }
     }
 
