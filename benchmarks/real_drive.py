@@ -28,7 +28,8 @@
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
-[--speed --repeats 3] [--crb] [--offsets]``.
+[--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial ``K``
+alone (the study prints its trial of largest error).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ import numpy as np
 import backlashkit as bk
 from backlashkit.identify.crb import LINEAR_PARAMS, cramer_rao_bound
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA, protocol_records
-from backlashkit.parallel import ProgressBar, map_tasks
+from backlashkit.parallel import ProgressBar, map_tasks, task_seeds
 from backlashkit.verify import reference_angles, reference_simulate
 
 T_END, T_STEP, TS, SNR = 8.0, 2.0, 1e-3, 40.0
@@ -157,6 +158,10 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     clean = clean_records(linear, theta, fc, tau, counts)
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau)
+    if args.trial is not None:  # the trial's own seed, as in the whole study's
+        r = one_trial((linear, theta, clean, counts), task_seeds(seed, args.trial + 1)[-1])
+        print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(r, theta)}", flush=True)
+        return
     bar = ProgressBar(f"{dname}, {ename}", quiet=False)
     res = map_tasks(one_trial, [(linear, theta, clean, counts)] * args.trials,
                     jobs=args.jobs, seed=seed, progress=bar)
@@ -185,10 +190,23 @@ def _print_row(dname, ename, theta, res, crb, seconds) -> None:
           f"{cover:>6.1%} "
           f"{f'{0.95 - band:.1%}-{0.95 + band:.1%}':>14} {kept['friction']:>8.1%} "
           f"{kept['actuator']:>9.1%} {rise:>9.3g} {shift:>6.2f} {seconds:>6.0f}", flush=True)
+    if err:  # the trial to rerun alone with --trial
+        k = max(range(len(res)), key=lambda i: abs(res[i].get("theta", theta) / theta - 1))
+        print(f"  largest error in trial {k}: {_trial_line(res[k], theta)}", flush=True)
     for r in res:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)
             break
+
+
+def _trial_line(r, theta) -> str:
+    """One trial's result in words."""
+    if "error" in r:
+        return f"refused: {r['error']}"
+    lo, hi = r["ci95"]
+    kept = ", ".join(term for term, k in r["kept"].items() if k) or "no term"
+    return (f"theta {r['theta']:.6g} rad ({100 * (r['theta'] / theta - 1):+.2f} %), "
+            f"95 % interval [{lo:.6g}, {hi:.6g}], kept {kept}")
 
 
 def offsets(args) -> None:
@@ -255,6 +273,8 @@ def main(argv=None) -> int:
     p.add_argument("--effects", default=",".join(EFFECTS),
                    help=f"comma-separated scenarios (default: {', '.join(EFFECTS)}; "
                         f"'extended': {', '.join(EXTENDED)})")
+    p.add_argument("--trial", type=int, default=None,
+                   help="run only this trial (from 0) of each scenario, as in the study")
     p.add_argument("--speed", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--crb", action="store_true",
