@@ -133,9 +133,8 @@ def one_trial(task, seed):
 
 
 def coverage(args) -> None:
-    print(f"{'drive':<7} {'has':<15} {'answered':>8} {'|err| med %':>11} {'max %':>7} "
-          f"{'CRB %':>6} {'beyond':>6} {'cover':>6} {'2-sigma band':>14} {'fc kept':>8} "
-          f"{'loop kept':>9} {'loop rise':>9} {'shift':>6} {'s':>6}")
+    if args.trial is None:  # one trial alone prints a line, not a table
+        _print_header()
     root = np.random.SeedSequence(args.seed)
     for i, ((dname, (linear, theta)), ss) in enumerate(zip(DRIVES.items(), root.spawn(2),
                                                           strict=True)):
@@ -149,6 +148,12 @@ def coverage(args) -> None:
             for (ename, effect), ss2 in zip(table.items(), seeds, strict=True):
                 if ename in args.effects:
                     _scenario(args, dname, linear, theta, ename, effect, ss2)
+
+
+def _print_header() -> None:
+    print(f"{'drive':<7} {'has':<15} {'answered':>8} {'|err| med %':>11} {'max %':>7} "
+          f"{'CRB %':>6} {'beyond':>6} {'cover':>6} {'2-sigma band':>14} {'fc kept':>8} "
+          f"{'loop kept':>9} {'loop rise':>9} {'shift':>6} {'s':>6}")
 
 
 def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:

@@ -24,12 +24,12 @@ pub(super) struct Augmented {
 pub(super) struct Flow {
     /// Whether column `j`'s coupling block is nonzero.
     coupled: [bool; N_PARAMS],
-    e: Mat<N_STATES>,
+    pub(super) e: Mat<N_STATES>,
     xu: Vector<N_STATES>,
     x1: Vector<N_STATES>,
-    coupling: [Mat<N_STATES>; N_PARAMS],
-    su: [Vector<N_STATES>; N_PARAMS],
-    s1: [Vector<N_STATES>; N_PARAMS],
+    pub(super) coupling: [Mat<N_STATES>; N_PARAMS],
+    pub(super) su: [Vector<N_STATES>; N_PARAMS],
+    pub(super) s1: [Vector<N_STATES>; N_PARAMS],
 }
 
 impl Flow {
@@ -77,36 +77,6 @@ impl Flow {
         };
         for i in 0..N_STATES {
             s[i] = es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i];
-        }
-    }
-
-    /// The columns `cols` of `z` carried over whole samples, one per torque of `u`,
-    /// along the simulator's states `x` (one row of 3 per sample's start); each
-    /// sample's start is written, times `unscale`, to its row of `out` (rows of
-    /// `3 x cols.len()`, state by column). The columns' recurrences are independent,
-    /// so the processor overlaps them.
-    #[inline]
-    pub fn stream(
-        &self,
-        s: &mut [Vector<N_STATES>; N_PARAMS],
-        cols: &[usize],
-        unscale: &[f64; N_PARAMS],
-        u: &[f64],
-        x: &[f64],
-        out: &mut [f64],
-    ) {
-        let m = cols.len();
-        let rows = out
-            .chunks_exact_mut(N_STATES * m)
-            .zip(x.chunks_exact(N_STATES));
-        for ((row, xi), &ui) in rows.zip(u) {
-            let xi = [xi[0], xi[1], xi[2]];
-            for (c, &j) in cols.iter().enumerate() {
-                for r in 0..N_STATES {
-                    row[r * m + c] = s[j][r] * unscale[j];
-                }
-                self.step_column(j, &mut s[j], &xi, ui);
-            }
         }
     }
 

@@ -19,6 +19,7 @@
 
 mod coupled;
 mod flow;
+mod lanes;
 mod mode;
 mod run;
 #[cfg(test)]

@@ -3,6 +3,7 @@
 
 use super::flow::{Augmented, Flow};
 use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
+use super::lanes::{groups, Group};
 use super::mode::system;
 use super::{N_PARAMS, N_STATES};
 use crate::chain::{simulate_chain, ChainParams, Law};
@@ -137,15 +138,16 @@ struct Walk<'a> {
     /// Current contact mode: 0 the gap, +-1 a flank.
     flank: i8,
     z: Augmented,
-    /// Whole-sample flows of the modes -1, 0, +1, built when first needed.
-    full: [Option<Flow>; 3],
+    /// Whole-sample flows of the modes -1, 0, +1 in groups of columns, built when
+    /// first needed.
+    full: [Option<Vec<Group>>; 3],
 }
 
 impl Walk<'_> {
     /// The sensitivities at every sample, along the simulator's `states` (row-major
     /// `(u.len(), 3)`). Between the samples that hold contact changes the mode is
-    /// fixed, and each column is streamed over those whole samples by itself (see
-    /// [`Flow::stream_column`]); a sample holding changes is split at them.
+    /// fixed, and the columns advance over those whole samples side by side (see
+    /// `lanes`); a sample holding changes is split at them.
     fn run(
         &mut self,
         t0: f64,
@@ -197,16 +199,14 @@ impl Walk<'_> {
         }
         let slot = (self.flank + 1) as usize;
         let (p, scale, flank, active) = (self.p, &self.scale, self.flank, &self.active);
-        let flow = self.full[slot].get_or_insert_with(|| Flow::new(p, scale, flank, ts, active));
+        let (wanted, unscale) = (self.wanted, &self.unscale);
+        let groups = self.full[slot].get_or_insert_with(|| {
+            groups(&Flow::new(p, scale, flank, ts, active), wanted, unscale)
+        });
         let x = &states[k * N_STATES..end * N_STATES];
-        flow.stream(
-            &mut self.z.s,
-            self.wanted,
-            &self.unscale,
-            &u[k..end],
-            x,
-            out,
-        );
+        for group in groups.iter() {
+            group.stream(&mut self.z.s, wanted.len(), &u[k..end], x, out);
+        }
     }
 
     /// Rows `state x wanted parameter` of `dx/dp` into `row`.
