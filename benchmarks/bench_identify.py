@@ -88,9 +88,17 @@ STAGE_NAMES = ("starts (theta grid)", "first window", "continuation", "whole rec
                "noise levels", "model terms (friction, loop)", "uncertainty and interval")
 
 
-def simulations(fn, samples: int, done=None) -> tuple[float, int]:
+#: Kernel calls over fewer samples than this are the search's windows (2-3 s at 1 ms
+#: on paper A's records: the first window and the continuation), the others its whole
+#: spans (60-80 s): the two are timed apart (``--count``).
+WINDOW_SAMPLES = 10_000
+
+
+def simulations(fn, samples: int, done=None, kernel=None) -> tuple[float, int]:
     """What ``fn()`` costs in simulations of ``samples`` samples, and the kernel's
-    calls; ``done`` (a list ``[samples, calls]``) counts as it goes."""
+    calls; ``done`` (a list ``[samples, calls]``) counts as it goes; ``kernel`` (a dict
+    ``{"windows": [s, rows x samples], "whole": [...]}``) adds up the kernel's wall time
+    and work in calls shorter than :data:`WINDOW_SAMPLES` and the others."""
     import backlashkit.identify._model as model
     import backlashkit.simulate as sim
 
@@ -98,9 +106,16 @@ def simulations(fn, samples: int, done=None) -> tuple[float, int]:
     real = sim.simulate_packed
 
     def counted(n, p, t0, ts, u, x0, **kw):
-        done[0] += np.shape(p)[0] * np.shape(u)[1]
+        work = np.shape(p)[0] * np.shape(u)[1]
+        done[0] += work
         done[1] += 1
-        return real(n, p, t0, ts, u, x0, **kw)
+        start = time.perf_counter()
+        out = real(n, p, t0, ts, u, x0, **kw)
+        if kernel is not None:
+            part = kernel["windows" if np.shape(u)[1] < WINDOW_SAMPLES else "whole"]
+            part[0] += time.perf_counter() - start
+            part[1] += work
+        return out
 
     model.simulate_packed = sim.simulate_packed = counted
     try:
@@ -111,19 +126,26 @@ def simulations(fn, samples: int, done=None) -> tuple[float, int]:
 
 
 def count(recs, prior) -> None:
-    """Issue 24's measure: one fit and one bound in simulations of the records."""
+    """Issue 24's measure: one fit and one bound in simulations of the records, and
+    where the fit's wall time goes."""
     samples = sum(r.t.size for r in recs)
-    done = [0, 0]
-    marks = []
+    done, kernel = [0, 0], {"windows": [0.0, 0], "whole": [0.0, 0]}
+    marks = [(0, 0, 0.0, time.perf_counter())]
     fit = JointIdentifier(prior, workers=1, progress=lambda k, total: marks.append(
-        (k, total, done[0] / samples))).fit
-    n_fit, calls = simulations(lambda: fit(recs), samples, done)
-    last = 0.0
-    for k, total, n in marks:
+        (k, total, done[0] / samples, time.perf_counter()))).fit
+    start = time.perf_counter()
+    n_fit, calls = simulations(lambda: fit(recs), samples, done, kernel)
+    wall = time.perf_counter() - start
+    for (_, _, n0, t0), (k, total, n, t) in zip(marks, marks[1:], strict=False):
         if k > 0:  # stage k ended (a misfit restart repeats the stages)
             name = STAGE_NAMES[(k - 1) % len(STAGE_NAMES)]
-            print(f"  stage {k}/{total}, {name}: {n - last:.0f} simulations")
-            last = n
+            print(f"  stage {k}/{total}, {name}: {n - n0:.0f} simulations, {t - t0:.2f} s")
+    for part, (sec, work) in kernel.items():
+        print(f"  the kernel in the {part} (calls of {'<' if part == 'windows' else '>='} "
+              f"{WINDOW_SAMPLES} samples): {sec:.2f} s, {1e9 * sec / max(work, 1):.0f} ns "
+              f"per sample and parameter row")
+    print(f"  one fit's wall time: {wall:.2f} s, the kernel "
+          f"{sum(sec for sec, _ in kernel.values()):.2f} s of it")
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
     print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
           f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls "

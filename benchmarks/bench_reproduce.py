@@ -8,7 +8,15 @@ columns). The scaling efficiency of 2 workers over 1 is ``T1 / (2 T2)`` on the m
 the timings and the worker count; checked). The
 machine's load average is printed before and after.
 
-Run: ``python benchmarks/bench_reproduce.py [--runs 3] [--seed 2002] [--repeats 1]``.
+``--against CHECKOUT`` measures a change instead (issue 24): the same reproduction
+with ``--jobs 2``, by this checkout's package and by an older one's (``CHECKOUT/python``
+first on ``PYTHONPATH``, its compiled extension built there), interleaved
+``--repeats`` times; the ratio of their median wall times, and how far the estimates
+moved (``compare_reproduce.in_std``: per ``Err_p`` and method, in standard deviations
+and standard errors of the old runs). ``--keep DIR`` keeps both JSON documents.
+
+Run: ``python benchmarks/bench_reproduce.py [--runs 3] [--seed 2002] [--repeats 1]
+[--against CHECKOUT [--keep DIR]]``.
 """
 
 from __future__ import annotations
@@ -37,17 +45,49 @@ def results(node):
     return node
 
 
-def run(runs: int, seed: int, jobs: int) -> tuple[float, str]:
-    """Wall time of one reproduction and its results (as JSON text)."""
+def run(runs: int, seed: int, jobs: int, package: Path | None = None,
+        keep: Path | None = None) -> tuple[float, str]:
+    """Wall time of one reproduction and its results (as JSON text); ``package``: the
+    folder holding the ``backlashkit`` to run (None: the installed one); ``keep``: where
+    to copy the JSON document."""
+    env = dict(os.environ)
+    if package is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(package), env.get("PYTHONPATH", "")])
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "out.json"
         cmd = [sys.executable, "-m", "backlashkit", "reproduce", "ravanbod2002", "--runs",
                str(runs), "--seed", str(seed), "--jobs", str(jobs), "--quiet",
                "--json-out", str(out)]
         start = time.perf_counter()
-        subprocess.run(cmd, capture_output=True, text=True, check=True)
+        subprocess.run(cmd, capture_output=True, text=True, check=True, env=env)
         sec = time.perf_counter() - start
+        if keep is not None:
+            keep.write_text(out.read_text())
         return sec, json.dumps(results(json.loads(out.read_text())), sort_keys=True)
+
+
+def against(args) -> None:
+    """This package against an older checkout's, interleaved (issue 24's measure)."""
+    from compare_reproduce import in_std
+
+    old_pkg = Path(args.against) / "python"
+    if not (old_pkg / "backlashkit").is_dir():
+        raise SystemExit(f"--against {args.against}: no python/backlashkit in it; give "
+                         "the root of a checkout whose extension is built")
+    keep = Path(args.keep or tempfile.mkdtemp())
+    keep.mkdir(parents=True, exist_ok=True)
+    times: dict[str, list[float]] = {"old": [], "new": []}
+    for _ in range(args.repeats):
+        for name, pkg in (("old", old_pkg), ("new", None)):
+            sec, _ = run(args.runs, args.seed, 2, pkg, keep / f"{name}.json")
+            times[name].append(sec)
+            print(f"{name}: {sec:.1f} s", flush=True)
+    t_old, t_new = (statistics.median(times[k]) for k in ("old", "new"))
+    print(f"reproduce ravanbod2002 --runs {args.runs} --jobs 2, median of {args.repeats}: "
+          f"{args.against} {t_old:.1f} s, this checkout {t_new:.1f} s: "
+          f"{t_old / t_new:.2f}x faster (issue 24's bar: 3x)")
+    in_std(*(json.loads((keep / f"{k}.json").read_text()) for k in ("old", "new")))
+    print(f"load average after: {os.getloadavg()}")
 
 
 def main() -> None:
@@ -55,8 +95,14 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=3, help="runs per noise level")
     ap.add_argument("--seed", type=int, default=2002)
     ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--against", metavar="CHECKOUT",
+                    help="an older checkout (its extension built) to time against")
+    ap.add_argument("--keep", metavar="DIR", help="with --against: keep both JSON documents")
     args = ap.parse_args()
     print(f"load average before: {os.getloadavg()}")
+    if args.against:
+        against(args)
+        return
     times: dict[int, list[float]] = {1: [], 2: []}
     outputs = set()
     for _ in range(args.repeats):

@@ -18,6 +18,7 @@ import pytest
 import backlashkit as bk
 from backlashkit.cli.main import main as cli_main
 from backlashkit.errors import InputError, PriorMismatchWarning
+from backlashkit.identify.terms import SCREEN_DROP
 from backlashkit.io import write_csv
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA
 from backlashkit.verify import reference_angles, reference_simulate
@@ -389,6 +390,53 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     assert not floor.kept and floor.other_ci95 is None
     assert "spans the other model's too" in TermChoice.decide(
         "actuator", 5.0, 6.63, 3.0, True, cis).reason()
+
+
+def _loop_fitted_and_scored(recs, monkeypatch):
+    """Fit with the loop's score screen off, so the loop is always fitted: the score
+    test's prediction and the fitted test's choice of the loop."""
+    import backlashkit.identify._score as score_mod
+    import backlashkit.identify._search as search_mod
+
+    seen = {}
+    real = search_mod.score_test
+
+    def scored(*args):
+        seen["score"] = real(*args)
+        return seen["score"]
+
+    monkeypatch.setattr(score_mod, "SCREEN_DROP", -np.inf)
+    monkeypatch.setattr(search_mod, "score_test", scored)
+    fit = _fit(recs, P_TRUE)
+    monkeypatch.undo()
+    return seen["score"], {c.term: c for c in fit.choices_}["actuator"], fit
+
+
+def test_score_test_predicts_the_fit_with_the_loop(monkeypatch):
+    """Where the drive has a 1 ms loop, the score test at the fit without it predicts
+    what the fit with it finds: the fall of -2 log L and the loop's time constant to
+    within a fourth (benchmarks/score_screen.py: fall / rise 0.86-1.11, the medians
+    of its scenarios), far above the screen, so the loop is fitted and kept."""
+    score, choice, fit = _loop_fitted_and_scored(
+        _records(P_TRUE, THETA, tau_i=1e-3, seed=5), monkeypatch)
+    assert choice.kept and not score.screened
+    assert score.drop == pytest.approx(choice.rise, rel=0.25)
+    assert score.value == pytest.approx(fit.tau_i_, rel=0.25)
+
+
+def test_ideal_records_drop_the_loop_unfitted_as_the_fit_would(monkeypatch):
+    """On an ideal drive the score test predicts too small a fall to pin a loop down,
+    so the loop is dropped without fitting it, and the same fit with the loop fitted
+    drops it too, without widening the interval: the screen changes no answer."""
+    recs = _records(P_TRUE, THETA, seed=3)
+    fit = _fit(recs, P_TRUE)
+    loop = {c.term: c for c in fit.choices_}["actuator"]
+    assert loop.screened and not loop.kept and loop.rise < SCREEN_DROP
+    assert "current loop dropped without fitting it" in loop.reason()
+    score, fitted, slow = _loop_fitted_and_scored(recs, monkeypatch)
+    assert score.drop == loop.rise and not fitted.screened
+    assert not fitted.kept and fitted.other_ci95 is None
+    assert (slow.theta_, slow.ci95_) == (fit.theta_, fit.ci95_)
 
 
 #: The fitted model's Fisher standard error of theta at its estimate, with the noise

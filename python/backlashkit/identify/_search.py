@@ -26,6 +26,7 @@ from ._lm import LMState
 from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
 from ._quantised import log_theta_draws, quantised
+from ._score import score_test
 from .intervals import Z_95, IntervalInputs, ThetaInterval, quantisation_interval
 from .noise import sample_noise
 from .record import Record
@@ -370,10 +371,11 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
                  terms: Sequence[Term], recs: list[Record], max_iter: int
                  ) -> tuple[Problem, LMState, list[TermChoice]]:
     """Likelihood-ratio tests of the ``"auto"`` terms, in order. A term in the search
-    is removed and the nested model refitted from ``best``; one outside it is added
-    (each start of :meth:`Term.start_grid` refitted, the lowest going on) and the
-    larger model refitted. The term is kept where ``-2 log L`` is lower with it by more
-    than its threshold, or where removing it moves ``theta`` (:meth:`TermChoice.decide`)."""
+    is removed and the nested model refitted from ``best``; one outside it is first
+    screened by its score test (:mod:`._score`), then added (each start of
+    :meth:`Term.start_grid` refitted, the lowest going on) and the larger model
+    refitted. The term is kept where ``-2 log L`` is lower with it by more than its
+    threshold, or where removing it moves ``theta`` (:meth:`TermChoice.decide`)."""
     choices = []
     for term in terms:
         if term.mode != "auto":
@@ -383,13 +385,20 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             res = other.residual(other.final_spans(final_h), final_h, sig)
             st = other.refine(res, best.z[keep], max_iter)
             (small, st_small), st_big = (other, st), best
+            std_small = estimate_std(small, st_small, sig, final_h)
         else:
             other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
             res = other.residual(other.final_spans(final_h), final_h, sig)
+            rows = pb.residual(pb.final_spans(final_h), final_h, sig)
+            score = score_test(pb, best, other, res, rows, term, recs)
+            if score.screened:
+                choices.append(TermChoice(term.name, False, score.drop, term.threshold,
+                                          score.shift, screened=True))
+                continue
             st = added_term_fit(other, res, best.z, best.cost, term, recs, max_iter)
             (small, st_small), st_big = (pb, best), st
+            std_small = score.std
         rise = st_small.cost - st_big.cost
-        std_small = estimate_std(small, st_small, sig, final_h)
         big = pb if term.searched else other
         std_big = estimate_std(big, st_big, sig, final_h)
         choice = TermChoice.decide(

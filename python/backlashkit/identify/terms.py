@@ -43,8 +43,8 @@ from .record import Record
 from .step import find_step_down
 
 __all__ = [
-    "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "Term", "TermChoice", "actuator_term",
-    "friction_term",
+    "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "SCREEN_DROP", "Term", "TermChoice",
+    "actuator_term", "friction_term",
 ]
 
 #: Confidence of the likelihood-ratio test that keeps a term: at 0.99 a term the data
@@ -63,6 +63,14 @@ KEEP_LEVEL = 0.99
 #: in 33 % of the trials. Where the drive has no loop, a loop on its floor moves
 #: ``theta`` by a median of 0.73-0.80 standard errors (``docs/validation/real-drives.md``).
 KEEP_SHIFT = 1.0
+#: A term added after the search (the current loop) whose score test at the fit
+#: without it predicts a fall of ``-2 log L`` below this (chi-square units) is dropped
+#: unfitted (:mod:`backlashkit.identify._score`). Linearised, the fitted term's standard
+#: error in logarithms is ``1 / sqrt(fall)``, so below a fall of 1 it is not pinned down
+#: and the test drops it whatever the fit finds: a screen at 1 would change no choice
+#: if the linearisation were exact. Half of that leaves a factor 2 for the loop's lag,
+#: which is not quite linear in its time constant.
+SCREEN_DROP = 0.5
 #: Values of ``friction``.
 FRICTION_CHOICES = ("auto", "viscous", "coulomb")
 #: Start of each fitted Coulomb torque when the held levels show none, as a fraction
@@ -232,6 +240,9 @@ class TermChoice:
         ``-2 log L``, but by no more than the threshold): the Fisher 95 % interval of
         ``theta`` in rad of the model not chosen, which the estimate's interval is
         widened to cover. None otherwise.
+    screened : bool
+        Whether the term was dropped unfitted by its score test (:data:`SCREEN_DROP`);
+        ``rise`` and ``shift`` are then the test's linearised predictions.
     """
 
     term: str
@@ -240,6 +251,7 @@ class TermChoice:
     threshold: float
     shift: float = 0.0
     other_ci95: tuple[float, float] | None = None
+    screened: bool = False
 
     @classmethod
     def decide(cls, term: str, rise: float, threshold: float, shift: float,
@@ -293,6 +305,10 @@ class TermChoice:
         test = f"likelihood-ratio test at {KEEP_LEVEL:.0%}"
         both = ("; the data cannot tell, so the 95 % interval spans the other model's too"
                 if self.other_ci95 is not None else "")
+        if self.screened:
+            return (f"{name} dropped without fitting it: at the fit without it, a score "
+                    f"test predicts it would lower -2 log L by {self.rise:.2g}, less than "
+                    f"{SCREEN_DROP} (too little to pin it down): the data do not call for it")
         if self.rise <= 0:
             # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
             # torques of 0), so a fit with the term ending higher found no better point

@@ -1,0 +1,100 @@
+"""The score test of a term added after the search, before it is fitted.
+
+A term the joint search leaves out (the current loop) is tested by fitting the larger
+model from several starts (:func:`backlashkit.identify._search.added_term_fit`), which
+costs hundreds of simulations of the records. Most drives do not call for it, and the
+fit without the term already tells, to first order, what the fit with it would find:
+at its point ``z`` the residual is ``r0``, its Jacobian ``J``, and the term's column
+``j`` (the residual's change per unit of the term from 0, by one simulation at the
+term's floor). Linearised, the larger model's residual is ``r0 + J d + j x`` with
+``x >= 0``, whose least squares give the term's value ``x*``, the fall of
+``-2 log L``
+
+    D = (j'.r0)^2 / (j'.j')   where j' = j - J (J^T J)^-1 J^T j, if x* > 0 (else 0),
+
+and the move of ``theta``. The fitted term's standard error in logarithms is then
+``1 / sqrt(D)``, so a term with ``D <= 1`` is not pinned down by the data, and the
+likelihood-ratio test (:meth:`backlashkit.identify.terms.TermChoice.decide`) drops it
+without widening the interval. The term is fitted only where ``D`` is at least
+:data:`backlashkit.identify.terms.SCREEN_DROP`, below that limit by a margin for the
+linearisation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._lm import LMState
+from ._problem import Problem, Residual
+from .record import Record
+from .terms import SCREEN_DROP, Term
+
+__all__ = ["Score", "score_test"]
+
+
+@dataclass(frozen=True)
+class Score:
+    """What the score test predicts of the fit with one added term.
+
+    Parameters
+    ----------
+    drop : float
+        Fall of ``-2 log L`` (chi-square units) with the term; 0 where its best value
+        is at or below 0.
+    value : float
+        The term's best value in its units (0 where the fall is 0).
+    shift : float
+        How far ``theta`` moves with the term, in standard errors of ``theta`` in the
+        model without it.
+    std : numpy.ndarray
+        The standard errors of the log-parameters of the model without the term (inf
+        where its information is singular).
+    """
+
+    drop: float
+    value: float
+    shift: float
+    std: np.ndarray
+
+    @property
+    def screened(self) -> bool:
+        """Whether the term is dropped without being fitted."""
+        return self.drop < SCREEN_DROP
+
+
+def score_test(small: Problem, best: LMState, big: Problem, big_rows: Residual,
+               small_rows: Residual, term: Term, recs: Sequence[Record]) -> Score:
+    """The score test of the one-parameter ``term`` that ``big`` adds to ``small``.
+
+    ``best`` is ``small``'s fit, ``small_rows`` and ``big_rows`` the two models'
+    residuals on the same spans. Costs one simulation more than a forward-difference
+    Jacobian of ``small``.
+    """
+    (name,) = term.params
+    r0 = small_rows.at(best.z)
+    jac = small_rows.forward_jacobian(best.z, r0)
+    info = jac.T @ jac
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return Score(math.inf, math.nan, math.inf, np.full(best.z.size, math.inf))
+    std = np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf)
+    step = term.floors(recs)[name]
+    r1 = big_rows.at(np.r_[best.z, big.z_of([name], [step])])
+    data = r0.size - len(small.free)  # the prior's rows do not move with the term
+    if r1.size < data or not np.all(np.isfinite(r1[:data])):
+        return Score(math.inf, math.nan, math.inf, std)  # no column: fit the term
+    col = np.zeros(r0.size)
+    col[:data] = (r1[:data] - r0[:data]) / step
+    along = cov @ (jac.T @ col)  # the model's own move per unit of the term
+    col_out = col - jac @ along
+    norm = float(col_out @ col_out)
+    value = -float(col_out @ r0) / norm if norm > 0 else 0.0
+    if not value > 0:
+        return Score(0.0, 0.0, 0.0, std)
+    drop = value * value * norm
+    return Score(drop, value, abs(float(along[0])) * value / std[0], std)
