@@ -33,7 +33,41 @@ from ._problem import Problem, Residual
 from .record import Record
 from .terms import SCREEN_DROP, Term
 
-__all__ = ["Score", "score_test"]
+__all__ = ["Linearised", "Score", "linearise", "score_test"]
+
+
+@dataclass(frozen=True)
+class Linearised:
+    """A residual linearised at a point: the tests' Gauss-Newton information.
+
+    Parameters
+    ----------
+    r : numpy.ndarray
+        The residual at the point.
+    jac : numpy.ndarray
+        Its forward-difference Jacobian there (they only scale and qualify a test).
+    cov : numpy.ndarray or None
+        The inverse of ``jac.T @ jac``; None where it is singular.
+    std : numpy.ndarray
+        The standard errors of the estimated values (inf where singular).
+    """
+
+    r: np.ndarray
+    jac: np.ndarray
+    cov: np.ndarray | None
+    std: np.ndarray
+
+
+def linearise(rows: Residual, z: np.ndarray) -> Linearised:
+    """The residual ``rows`` linearised at ``z`` (``z.size + 1`` simulations)."""
+    r = rows.at(z)
+    jac = rows.forward_jacobian(z, r)
+    try:
+        cov = np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return Linearised(r, jac, None, np.full(z.size, math.inf))
+    return Linearised(r, jac, cov,
+                      np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf))
 
 
 @dataclass(frozen=True)
@@ -66,23 +100,18 @@ class Score:
         return self.drop < SCREEN_DROP
 
 
-def score_test(small: Problem, best: LMState, big: Problem, big_rows: Residual,
-               small_rows: Residual, term: Term, recs: Sequence[Record]) -> Score:
+def score_test(small: Problem, best: LMState, at: Linearised, big: Problem,
+               big_rows: Residual, term: Term, recs: Sequence[Record]) -> Score:
     """The score test of the one-parameter ``term`` that ``big`` adds to ``small``.
 
-    ``best`` is ``small``'s fit, ``small_rows`` and ``big_rows`` the two models'
-    residuals on the same spans. Costs one simulation more than a forward-difference
-    Jacobian of ``small``.
+    ``best`` is ``small``'s fit and ``at`` its residual linearised there
+    (:func:`linearise`); ``big_rows`` is ``big``'s residual on the same spans. Costs
+    one simulation.
     """
     (name,) = term.params
-    r0 = small_rows.at(best.z)
-    jac = small_rows.forward_jacobian(best.z, r0)
-    info = jac.T @ jac
-    try:
-        cov = np.linalg.inv(info)
-    except np.linalg.LinAlgError:
-        return Score(math.inf, math.nan, math.inf, np.full(best.z.size, math.inf))
-    std = np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf)
+    r0, jac, cov, std = at.r, at.jac, at.cov, at.std
+    if cov is None:
+        return Score(math.inf, math.nan, math.inf, std)
     step = term.floors(recs)[name]
     r1 = big_rows.at(np.r_[best.z, big.z_of([name], [step])])
     data = r0.size - len(small.free)  # the prior's rows do not move with the term

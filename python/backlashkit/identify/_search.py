@@ -26,7 +26,7 @@ from ._lm import LMState
 from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
 from ._quantised import log_theta_draws, quantised
-from ._score import score_test
+from ._score import Linearised, linearise, score_test
 from .intervals import Z_95, IntervalInputs, ThetaInterval, quantisation_interval
 from .noise import sample_noise
 from .record import Record
@@ -377,6 +377,7 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
     refitted. The term is kept where ``-2 log L`` is lower with it by more than its
     threshold, or where removing it moves ``theta`` (:meth:`TermChoice.decide`)."""
     choices = []
+    seen: dict[tuple[int, bytes], tuple[Problem, Linearised]] = {}
     for term in terms:
         if term.mode != "auto":
             continue
@@ -385,12 +386,12 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             res = other.residual(other.final_spans(final_h), final_h, sig)
             st = other.refine(res, best.z[keep], max_iter)
             (small, st_small), st_big = (other, st), best
-            std_small = estimate_std(small, st_small, sig, final_h)
+            std_small = linearised(seen, small, st_small, sig, final_h).std
         else:
             other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
             res = other.residual(other.final_spans(final_h), final_h, sig)
-            rows = pb.residual(pb.final_spans(final_h), final_h, sig)
-            score = score_test(pb, best, other, res, rows, term, recs)
+            score = score_test(pb, best, linearised(seen, pb, best, sig, final_h), other, res,
+                               term, recs)
             if score.screened:
                 choices.append(TermChoice(term.name, False, score.drop, term.threshold,
                                           score.shift, screened=True))
@@ -400,7 +401,7 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             std_small = score.std
         rise = st_small.cost - st_big.cost
         big = pb if term.searched else other
-        std_big = estimate_std(big, st_big, sig, final_h)
+        std_big = linearised(seen, big, st_big, sig, final_h).std
         choice = TermChoice.decide(
             term.name, rise, term.threshold, abs(st_big.z[0] - st_small.z[0]) / std_small[0],
             determined(big, st_big.z, std_big, [big.names.index(n) for n in term.params]),
@@ -425,18 +426,16 @@ def added_term_fit(pb: Problem, res: Residual, z: np.ndarray, cost: float, term:
                else screened, key=lambda st: st.cost)
 
 
-def estimate_std(pb: Problem, st: LMState, sig: np.ndarray, final_h: float | None
-                 ) -> np.ndarray:
-    """Standard errors of the estimated values at ``st`` from the Gauss-Newton
-    information of the whole-record residual (forward differences: they only scale
-    and qualify a test); inf where the information is singular."""
-    res = pb.residual(pb.final_spans(final_h), final_h, sig)
-    jac = res.forward_jacobian(st.z, res.at(st.z))
-    try:
-        cov = np.linalg.inv(jac.T @ jac)
-    except np.linalg.LinAlgError:
-        return np.full(st.z.size, math.inf)
-    return np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf)
+def linearised(seen: dict, pb: Problem, st: LMState, sig: np.ndarray,
+               final_h: float | None) -> Linearised:
+    """The whole-record residual of ``pb`` linearised at ``st`` (:func:`._score.linearise`:
+    forward differences, as they only scale and qualify a test), once per model and
+    point: the model the friction test keeps is the one the loop's test starts from.
+    ``seen`` holds those already made."""
+    key = (id(pb), st.z.tobytes())
+    if key not in seen or seen[key][0] is not pb:
+        seen[key] = (pb, linearise(pb.residual(pb.final_spans(final_h), final_h, sig), st.z))
+    return seen[key][1]
 
 
 def fisher_ci95(z: np.ndarray, std: np.ndarray) -> tuple[float, float]:
