@@ -106,9 +106,25 @@ def clean_records(linear, theta, fc, tau_i, counts=0):
 
 
 def one_trial(task, seed):
-    """One trial of a scenario: the fit's theta, interval and choices. Analogue speeds
-    get their noise; encoders start at a uniformly random angle within a count."""
-    linear, theta, clean, counts = task
+    """One trial of a scenario: the fit's theta, interval and choices."""
+    linear = task[0]
+    recs = trial_records(task, seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            fit = bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1).fit(recs)
+        except bk.InputError as exc:
+            return {"error": str(exc)}
+    return {"theta": fit.theta_, "ci95": fit.ci95_,
+            "kept": {c.term: c.kept for c in fit.choices_},
+            "rise": {c.term: c.rise for c in fit.choices_},
+            "shift": {c.term: c.shift for c in fit.choices_}}
+
+
+def trial_records(task, seed) -> list:
+    """The records of one trial of a scenario: analogue speeds get their noise;
+    encoders start at a uniformly random angle within a count."""
+    _, _, clean, counts = task
     recs = []
     for (t, u, y_m, y_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
         s_m, s_l = ss.spawn(2)
@@ -120,16 +136,7 @@ def one_trial(task, seed):
             w_m, w_l = (bk.signals.add_noise(y_m, SNR, rng=s_m),
                         bk.signals.add_noise(y_l, SNR, rng=s_l))
         recs.append(bk.Record(t, u, w_m, w_l))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            fit = bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1).fit(recs)
-        except bk.InputError as exc:
-            return {"error": str(exc)}
-    return {"theta": fit.theta_, "ci95": fit.ci95_,
-            "kept": {c.term: c.kept for c in fit.choices_},
-            "rise": {c.term: c.rise for c in fit.choices_},
-            "shift": {c.term: c.shift for c in fit.choices_}}
+    return recs
 
 
 def coverage(args) -> None:

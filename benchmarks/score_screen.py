@@ -88,14 +88,8 @@ def protocol_trial(task, seed):
 
 
 def drive_trial(task, seed):
-    """One trial of a ``real_drive.py`` scenario (its noise drawn the same way)."""
-    linear, theta, clean, counts = task
-    recs = []
-    for (t, u, y_m, y_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
-        s_m, s_l = ss.spawn(2)
-        recs.append(bk.Record(t, u, bk.signals.add_noise(y_m, rd.SNR, rng=s_m),
-                              bk.signals.add_noise(y_l, rd.SNR, rng=s_l)))
-    return fit_both_ways(recs, bk.TwoMassDrive(**linear))
+    """One trial of a ``real_drive.py`` scenario (its records drawn the same way)."""
+    return fit_both_ways(rd.trial_records(task, seed), bk.TwoMassDrive(**task[0]))
 
 
 def row(name: str, res: list[dict]) -> None:
