@@ -88,17 +88,20 @@ STAGE_NAMES = ("starts (theta grid)", "first window", "continuation", "whole rec
                "noise levels", "model terms (friction, loop)", "uncertainty and interval")
 
 
-#: Kernel calls over fewer samples than this are the search's windows (2-3 s at 1 ms
-#: on paper A's records: the first window and the continuation), the others its whole
-#: spans (60-80 s): the two are timed apart (``--count``).
+#: Kernel calls over fewer of the records' samples than this are the search's windows
+#: (2-3 s at 1 ms on paper A's records: the first window and the continuation), the
+#: others its whole spans (60-80 s): the two are timed apart (``--count``), and apart
+#: from the holds the windows start after.
 WINDOW_SAMPLES = 10_000
 
 
 def simulations(fn, samples: int, done=None, kernel=None) -> tuple[float, int]:
     """What ``fn()`` costs in simulations of ``samples`` samples, and the kernel's
     calls; ``done`` (a list ``[samples, calls]``) counts as it goes; ``kernel`` (a dict
-    ``{"windows": [s, rows x samples], "whole": [...]}``) adds up the kernel's wall time
-    and work in calls shorter than :data:`WINDOW_SAMPLES` and the others."""
+    ``{"holds": [s, rows x samples], "windows": [...], "whole": [...]}``) adds up the
+    kernel's wall time and work in the calls through a held torque on a coarse grid
+    (another sample time than the records': ``identify._model.HOLD_STEP``), in the
+    other calls shorter than :data:`WINDOW_SAMPLES` and in the rest."""
     import backlashkit.identify._model as model
     import backlashkit.simulate as sim
 
@@ -112,7 +115,8 @@ def simulations(fn, samples: int, done=None, kernel=None) -> tuple[float, int]:
         start = time.perf_counter()
         out = real(n, p, t0, ts, u, x0, **kw)
         if kernel is not None:
-            part = kernel["windows" if np.shape(u)[1] < WINDOW_SAMPLES else "whole"]
+            part = kernel["holds" if not np.isclose(ts, TS, rtol=1e-6, atol=0.0) else
+                          "windows" if np.shape(u)[1] < WINDOW_SAMPLES else "whole"]
             part[0] += time.perf_counter() - start
             part[1] += work
         return out
@@ -129,7 +133,7 @@ def count(recs, prior) -> None:
     """Issue 24's measure: one fit and one bound in simulations of the records, and
     where the fit's wall time goes."""
     samples = sum(r.t.size for r in recs)
-    done, kernel = [0, 0], {"windows": [0.0, 0], "whole": [0.0, 0]}
+    done, kernel = [0, 0], {"holds": [0.0, 0], "windows": [0.0, 0], "whole": [0.0, 0]}
     marks = [(0, 0, 0.0, time.perf_counter())]
     fit = JointIdentifier(prior, workers=1, progress=lambda k, total: marks.append(
         (k, total, done[0] / samples, time.perf_counter()))).fit
@@ -140,10 +144,12 @@ def count(recs, prior) -> None:
         if k > 0:  # stage k ended (a misfit restart repeats the stages)
             name = STAGE_NAMES[(k - 1) % len(STAGE_NAMES)]
             print(f"  stage {k}/{total}, {name}: {n - n0:.0f} simulations, {t - t0:.2f} s")
+    what = {"holds": "through the held torque on a coarse grid",
+            "windows": f"of the records' samples, calls of < {WINDOW_SAMPLES}",
+            "whole": f"of the records' samples, calls of >= {WINDOW_SAMPLES}"}
     for part, (sec, work) in kernel.items():
-        print(f"  the kernel in the {part} (calls of {'<' if part == 'windows' else '>='} "
-              f"{WINDOW_SAMPLES} samples): {sec:.2f} s, {1e9 * sec / max(work, 1):.0f} ns "
-              f"per sample and parameter row")
+        print(f"  the kernel in the {part} ({what[part]}): {sec:.2f} s, "
+              f"{1e9 * sec / max(work, 1):.0f} ns per sample and parameter row")
     print(f"  one fit's wall time: {wall:.2f} s, the kernel "
           f"{sum(sec for sec, _ in kernel.values()):.2f} s of it")
     truth = TwoMassDrive(**P_TRUE, theta=THETA)

@@ -170,7 +170,9 @@ def screen_spans(spans_: list[Span]) -> list[Span]:
     step-down on, whose initial state is simulated through the hold on a coarse grid
     (steps of at most :data:`HOLD_STEP`): the engine's flow is exact for a held torque
     whatever the step, and it locates the contact changes inside a step, so only the
-    samples nobody looks at are skipped.
+    samples nobody looks at are skipped. Once the start's contact changes are over the
+    engine proves that no other can follow and runs the flow alone (it settles,
+    ``docs/simulator.md``), so a hold costs little more than its first seconds.
     """
     out = []
     for sp in spans_:

@@ -219,7 +219,12 @@ class Residual:
                                     strict=True):
             model = model_angles(x) if sp.positions else (x[:, :, 0], x[:, :, 1])
             for c, y in enumerate(y2):  # w_M (or phi_M), then w_L (or phi_L)
-                out[:, pos : pos + m - lag] = self.weigh(sp, c, y - model[c][:, s_])
+                dst = out[:, pos : pos + m - lag]
+                if sp.positions or self.ar is not None:
+                    dst[...] = self.weigh(sp, c, y - model[c][:, s_])
+                else:  # weigh's arithmetic in place: the longest spans' rows are large
+                    np.subtract(y, model[c][:, s_], out=dst)
+                    np.divide(dst, self.sig[sp.k, c], out=dst)
                 pos += m - lag
         p = pb.values(z_rows)[:, 1:]
         with np.errstate(invalid="ignore"):  # inf / inf: no penalty on an overflow

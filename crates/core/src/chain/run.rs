@@ -1,6 +1,9 @@
 //! Running chains: one run, or a parallel batch into shared buffers.
 
+use std::sync::{Arc, Mutex};
+
 use rayon::prelude::*;
+use rayon::{ThreadPool, ThreadPoolBuilder};
 
 use super::{ChainModel, ChainParams, Law, MAX_INERTIAS};
 use crate::hybrid::{Engine, Event, Graze, Trajectory};
@@ -146,8 +149,8 @@ pub fn simulate_chain(
 /// Simulate many chains of the same size in parallel into one pair of buffers:
 /// `states` holds `B x n x (2N - 1)` and `modes` `B x n x (N - 1)` values (row-major).
 /// `u` holds one input row shared by all chains, or one row per chain; `x0` one
-/// initial state per chain. `workers == 0` uses rayon's global pool (all cores). The
-/// result does not depend on the number of workers.
+/// initial state per chain. `workers == 0` uses rayon's global pool (all cores), `1` the
+/// caller's thread. The result does not depend on the number of workers.
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_chain_batch_into(
     params: &[ChainParams],
@@ -190,30 +193,54 @@ pub fn simulate_chain_batch_into(
     if n_samples == 0 {
         return Ok(vec![(Vec::new(), Vec::new()); b]);
     }
-    let mut job = move || -> Result<Vec<RunEvents>, Error> {
+    let run = |i: usize, st: &mut [f64], md: &mut [i8]| {
+        let ui = if shared {
+            u
+        } else {
+            &u[i * n_samples..(i + 1) * n_samples]
+        };
+        simulate_chain_into(&params[i], law, t0, ts, ui, &x0[i * s..(i + 1) * s], st, md)
+    };
+    if workers == 1 {
+        // One worker runs on the caller's thread: a pool's hand-off would cost more
+        // than the short windows an estimator simulates.
+        return states
+            .chunks_mut(n_samples * s)
+            .zip(modes.chunks_mut(n_samples * m))
+            .enumerate()
+            .map(|(i, (st, md))| run(i, st, md))
+            .collect();
+    }
+    let mut job = || {
         states
             .par_chunks_mut(n_samples * s)
             .zip(modes.par_chunks_mut(n_samples * m))
             .enumerate()
-            .map(|(i, (st, md))| {
-                let ui = if shared {
-                    u
-                } else {
-                    &u[i * n_samples..(i + 1) * n_samples]
-                };
-                simulate_chain_into(&params[i], law, t0, ts, ui, &x0[i * s..(i + 1) * s], st, md)
-            })
+            .map(|(i, (st, md))| run(i, st, md))
             .collect()
     };
-    if workers == 0 {
-        job()
-    } else {
-        rayon::ThreadPoolBuilder::new()
+    match workers {
+        0 => job(),
+        _ => pool(workers)?.install(job),
+    }
+}
+
+/// The pool of `workers` threads, built once per size and kept: building one costs
+/// a few hundred microseconds, more than a short batch.
+fn pool(workers: usize) -> Result<Arc<ThreadPool>, Error> {
+    static POOLS: Mutex<Vec<(usize, Arc<ThreadPool>)>> = Mutex::new(Vec::new());
+    let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(w, _)| *w == workers) {
+        return Ok(p.clone());
+    }
+    let p = Arc::new(
+        ThreadPoolBuilder::new()
             .num_threads(workers)
             .build()
             .map_err(|e| {
                 Error::InvalidArgument(format!("cannot start {workers} worker threads: {e}"))
-            })?
-            .install(job)
-    }
+            })?,
+    );
+    pools.push((workers, p.clone()));
+    Ok(p)
 }

@@ -1,4 +1,5 @@
 use super::*;
+use crate::hybrid::{Engine, Event};
 
 fn paper_drive(theta: f64) -> ChainParams {
     ChainParams::new(
@@ -154,11 +155,15 @@ fn batch_matches_single_runs_for_any_worker_count() {
         .unwrap();
         (st, md, ev)
     };
+    // One worker runs on the caller's thread, 0 on the global pool, 2 on a kept pool
+    // (the second call reuses it).
     let (one, two) = (run(1), run(2));
+    assert_eq!((run(0), run(2)), (one.clone(), two.clone()));
     for (i, p) in params.iter().enumerate() {
         let single = simulate_chain(p, Law::Paper, 0.0, 1e-3, &u, &[0.0; 3]).unwrap();
         assert_eq!(single.states[..], one.0[i * n * 3..(i + 1) * n * 3]);
         assert_eq!(single.states[..], two.0[i * n * 3..(i + 1) * n * 3]);
+        assert_eq!(single.events, one.2[i].0);
         assert_eq!(single.modes[..], two.1[i * n..(i + 1) * n]);
         assert_eq!(single.events, two.2[i].0);
     }
@@ -262,4 +267,90 @@ fn friction_and_loop_parameters_are_checked() {
     p.tau_i = f64::NAN;
     let err = simulate_chain(&p, Law::Paper, 0.0, 1e-3, &[0.0; 10], &[0.0; 3]).unwrap_err();
     assert!(err.to_string().contains("tau_i must be finite"), "{err}");
+}
+
+/// The paper drive's variants: as is, with Coulomb friction and breakaway, with a
+/// current loop.
+fn settling_drives() -> Vec<ChainParams> {
+    let mut coulomb = paper_drive(3.49e-2);
+    (coulomb.fc, coulomb.fs) = (vec![0.01, 0.02], vec![0.012, 0.025]);
+    let mut current_loop = paper_drive(3.49e-2);
+    current_loop.tau_i = 1e-3;
+    vec![
+        paper_drive(3.49e-2),
+        paper_drive(0.0),
+        coulomb,
+        current_loop,
+    ]
+}
+
+/// States, modes and events of `p` under `u` cut into runs of `piece` samples, each
+/// started from the last state of the one before.
+fn in_pieces(p: &ChainParams, ts: f64, u: &[f64], piece: usize) -> (Vec<f64>, Vec<i8>, Vec<Event>) {
+    let s = p.n_states();
+    let (mut states, mut modes, mut events) = (vec![0.0; s], vec![], vec![]);
+    let mut k = 0;
+    while k + 1 < u.len() {
+        let end = (k + piece).min(u.len() - 1);
+        let last = states[states.len() - s..].to_vec();
+        let part = simulate_chain(p, Law::Paper, k as f64 * ts, ts, &u[k..=end], &last).unwrap();
+        if modes.is_empty() {
+            modes.extend_from_slice(&part.modes[..p.n_switches()]);
+        }
+        states.extend_from_slice(&part.states[s..]);
+        modes.extend_from_slice(&part.modes[p.n_switches()..]);
+        events.extend(part.events);
+        k = end;
+    }
+    (states, modes, events)
+}
+
+#[test]
+fn settling_through_a_hold_changes_no_bit() {
+    // Paper A's 80 s step-down record in one run (which settles in the first hold),
+    // and cut into pieces too short to settle: the same states and modes to the bit,
+    // and the same events. At 1 ms the drive takes one internal step a sample (more
+    // with the current loop), at 20 ms several.
+    for (ts, piece) in [(1e-3, 1000), (0.02, 100)] {
+        let u = paper_input(ts);
+        for p in settling_drives() {
+            let x0 = vec![0.0; p.n_states()];
+            let whole = simulate_chain(&p, Law::Paper, 0.0, ts, &u, &x0).unwrap();
+            let (states, modes, events) = in_pieces(&p, ts, &u, piece);
+            assert!(whole.states == states, "states differ at {ts} s: {p:?}");
+            assert!(whole.modes == modes, "modes differ at {ts} s: {p:?}");
+            // Event times are summed from each piece's own start: the same to rounding.
+            assert_eq!(whole.events.len(), events.len());
+            for (a, b) in whole.events.iter().zip(&events) {
+                assert_eq!((a.index, a.from, a.to), (b.index, b.from, b.to));
+                assert!((a.time - b.time).abs() < 1e-12, "{a:?} {b:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_hold_settles_once_its_contact_changes_are_over() {
+    // The torque held from rest: the engine stops checking guards within the first
+    // 10 of the 40 s, and never where the input keeps changing or the run is short.
+    let ts = 1e-3;
+    let model = ChainModel::<3>::new(paper_drive(3.49e-2), Law::Paper, ts).unwrap();
+    let mut engine = Engine::<3, 4, _>::new(&model, ts).unwrap();
+    let held = vec![0.157; 40_001];
+    engine.run(0.0, &held, &[0.0; 3]).unwrap();
+    assert!(
+        engine.settled_samples() > 30_000,
+        "{}",
+        engine.settled_samples()
+    );
+    // Paper A's record: the hold settles, the held zero torque ends on a flank
+    engine.run(0.0, &paper_input(ts), &[0.0; 3]).unwrap();
+    assert!((30_000..40_000).contains(&engine.settled_samples()));
+    let wavy: Vec<f64> = (0..40_001)
+        .map(|i| 0.157 + 0.01 * (i as f64 * 1e-3).sin())
+        .collect();
+    engine.run(0.0, &wavy, &[0.0; 3]).unwrap();
+    assert_eq!(engine.settled_samples(), 0);
+    engine.run(0.0, &held[..3000], &[0.0; 3]).unwrap();
+    assert_eq!(engine.settled_samples(), 0);
 }

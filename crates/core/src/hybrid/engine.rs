@@ -4,6 +4,7 @@
 
 use super::locate::{find_crossing, Taylor};
 use super::mode::{encode, ModeCache, ModeData, MODE_CODES};
+use super::settle::Modal;
 use super::{Event, Graze, HybridModel, Trajectory, GRAZE_RTOL};
 use crate::linalg::{dot, spectral_radius_estimate, Mat, Vector};
 use crate::Error;
@@ -14,6 +15,13 @@ const MAX_RHO_H: f64 = 0.5;
 const MAX_EVENTS_PER_STEP: usize = 64;
 /// Most switches of a model: mode codes are packed in base `MODE_CODES` into a `usize`.
 const MAX_SWITCHES: usize = 26;
+/// A run tries to settle (module `settle`) only with at least this many internal steps
+/// of held input left: a mode's first try computes its eigenvectors, which the checks
+/// saved (a few nanoseconds a step) repay only over thousands of steps.
+const SETTLE_MIN_STEPS: usize = 4096;
+/// Internal steps between tries to settle: a failed try costs a few products of the
+/// state's size, against the checks of this many steps saved by an earlier success.
+const SETTLE_EVERY: usize = 512;
 
 /// Where a run writes: borrowed output buffers and growing event lists.
 struct Sink<'a> {
@@ -34,6 +42,8 @@ pub struct Engine<'m, const S: usize, const W: usize, M: HybridModel<S>> {
     substeps: usize,
     /// Modes built so far, by code (only the few visited ones are ever built).
     cache: ModeCache<S, W>,
+    /// Samples of the last run computed by the flow alone (module `settle`).
+    settled: usize,
 }
 
 impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> {
@@ -74,7 +84,14 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             h: ts / substeps as f64,
             substeps,
             cache: ModeCache::new(model.mode_codes().saturating_pow(model.n_switches() as u32)),
+            settled: 0,
         })
+    }
+
+    /// How many samples of the last run were the mode's flow alone, without a guard
+    /// checked, where the engine proved that none could fire while the input was held.
+    pub fn settled_samples(&self) -> usize {
+        self.settled
     }
 
     fn mode(&mut self, modes: &[i8]) -> usize {
@@ -142,15 +159,52 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         // Position: internal step `sub` of sample `k`. Grid modes from `filled` on are
         // not written yet; they equal `modes` up to the current sample.
         let (mut k, mut sub, mut filled) = (0usize, 0usize, 1usize);
+        // Where the input is held long enough the run tries to settle, every `every`
+        // samples at a sample's start; `stretch` is the current run of equal inputs.
+        let every = (SETTLE_EVERY / self.substeps).max(1);
+        let (mut try_at, mut stretch) = (0usize, 0..0);
+        self.settled = 0;
         while k + 1 < n {
+            if k >= try_at {
+                if !stretch.contains(&k) {
+                    stretch = k..held_until(u, k);
+                }
+                let end = stretch.end;
+                try_at = if sub != 0 {
+                    k + 1
+                } else if (end - k) * self.substeps < SETTLE_MIN_STEPS {
+                    end // too short to pay, and only shorter later
+                } else if self.settles(id, &x, u[k]) {
+                    self.coast(id, &mut x, u[k], k..end, out.states);
+                    self.settled += end - k;
+                    k = end;
+                    self.refresh(id, &x, &mut cur);
+                    end
+                } else {
+                    k + every
+                };
+                if k + 1 >= n {
+                    break;
+                }
+            }
+            // Run to the end, or to the sample of the next try.
+            let stop = if try_at < n { try_at + 1 } else { n };
             let md = self.mode_data(id);
             let fired = if self.substeps == 1 {
-                self.fast_run_blocks(md, &mut x, u, &mut k, out.states)
+                self.fast_run_blocks(md, &mut x, &u[..stop], &mut k, out.states)
             } else {
-                self.fast_run(md, &mut x, &mut cur, u, &mut k, &mut sub, out.states)
+                self.fast_run(
+                    md,
+                    &mut x,
+                    &mut cur,
+                    &u[..stop],
+                    &mut k,
+                    &mut sub,
+                    out.states,
+                )
             };
             if !fired {
-                break;
+                continue;
             }
             // A guard may fire inside internal step `sub` of sample `k`: redo it closely.
             fill_modes(out.modes, &modes, filled, k + 1);
@@ -174,6 +228,37 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             });
         }
         Ok((out.events, out.grazes))
+    }
+
+    /// Whether no guard of mode `id` can fire from `x` while the input stays `u`.
+    fn settles(&self, id: usize, x: &Vector<S>, u: f64) -> bool {
+        let md = self.mode_data(id);
+        md.modal
+            .get_or_init(|| Modal::new(md))
+            .as_ref()
+            .is_some_and(|m| m.stays(md, x, u))
+    }
+
+    /// The samples after `held.start` up to `held.end` in mode `id` under the held input
+    /// `u`, without checking a guard: the checked path's arithmetic, internal step by
+    /// internal step, so the same states to the bit. (Composing a sample's steps into
+    /// one map would be cheaper, but its rounding moved fits on rattling records that
+    /// sit between two minima: `test_cli_notes_an_ambiguous_fit`.)
+    fn coast(
+        &self,
+        id: usize,
+        x: &mut Vector<S>,
+        u: f64,
+        held: std::ops::Range<usize>,
+        states: &mut [f64],
+    ) {
+        let md = self.mode_data(id);
+        for j in held.start + 1..=held.end {
+            for _ in 0..self.substeps {
+                *x = flow(&md.e, &md.fb, &md.fc, x, u);
+            }
+            states[j * S..(j + 1) * S].copy_from_slice(x);
+        }
     }
 
     /// Per guard function of the mode at `x`: its value, and the input-free part of its
@@ -297,6 +382,16 @@ fn crossed(positive: u64, lanes: &[u64]) -> bool {
         any |= positive & l == l; // all lanes of this guard are set
     }
     any
+}
+
+/// The end of the run of inputs equal to `u[k]` from `k` (exclusive): the samples up to
+/// it follow that input. The last value, which no step uses, is not part of a run.
+fn held_until(u: &[f64], k: usize) -> usize {
+    let steps = &u[..u.len() - 1];
+    steps[k..]
+        .iter()
+        .position(|&v| v != steps[k])
+        .map_or(steps.len(), |i| k + i)
 }
 
 /// Write `modes` into grid rows `from..to` of the row-major mode output.

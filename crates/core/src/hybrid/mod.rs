@@ -21,13 +21,16 @@
 //!
 //! The pieces: `model`, what a model gives the engine and what a run returns; `mode`, a
 //! mode built for the engine; `engine`, the run and its per-sample check; `blocks`, the
-//! block-wise fast path; `locate`, the close look inside one internal step.
+//! block-wise fast path; `locate`, the close look inside one internal step; `settle`,
+//! the proof that a run stays in its mode through the rest of a held input, after
+//! which it runs the flow alone.
 
 mod blocks;
 mod engine;
 mod locate;
 mod mode;
 mod model;
+mod settle;
 #[cfg(test)]
 mod tests;
 

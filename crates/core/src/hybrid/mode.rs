@@ -2,8 +2,10 @@
 //! normalised and with their slopes, the same in fixed-width lanes for the per-sample
 //! check, and the cache of the modes built so far.
 
+use std::cell::OnceCell;
 use std::collections::HashMap;
 
+use super::settle::Modal;
 use super::HybridModel;
 use crate::linalg::{dot, expm_and_integral, matvec, vecmat, Mat, Vector};
 
@@ -39,6 +41,8 @@ pub(super) struct ModeData<const S: usize, const W: usize> {
     pub(super) funcs: Vec<FuncData<S>>,
     pub(super) guards: Vec<GuardData>,
     pub(super) fast: FastGuards<S, W>,
+    /// The modal form for settling (`settle`), built on the first try.
+    pub(super) modal: OnceCell<Option<Modal<S>>>,
 }
 
 impl<const S: usize, const W: usize> ModeData<S, W> {
@@ -81,6 +85,7 @@ impl<const S: usize, const W: usize> ModeData<S, W> {
             funcs,
             guards,
             fast,
+            modal: OnceCell::new(),
         }
     }
 }

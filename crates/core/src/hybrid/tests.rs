@@ -260,3 +260,81 @@ fn a_guard_on_the_held_input_fires_at_the_sample_start() {
         out.events
     );
 }
+
+/// `dx/dt = -x / tau + u / tau`: first-order approach to the held input; mode 0 leaves
+/// when `x - level` becomes positive.
+struct Approach {
+    tau: f64,
+    level: f64,
+}
+
+impl HybridModel<1> for Approach {
+    fn n_switches(&self) -> usize {
+        1
+    }
+    fn dynamics(&self, _modes: &[i8]) -> (Mat<1>, Vector<1>, Vector<1>) {
+        ([[-1.0 / self.tau]], [1.0 / self.tau], [0.0])
+    }
+    fn guards(&self, modes: &[i8]) -> Vec<GuardSpec<1>> {
+        if modes[0] == 1 {
+            return Vec::new();
+        }
+        vec![GuardSpec {
+            funcs: vec![GuardFn {
+                h: [1.0],
+                hu: 0.0,
+                d: -self.level,
+                scale: self.level,
+            }],
+            index: 0,
+            target: 1,
+        }]
+    }
+    fn classify(&self, x: &Vector<1>, _u: f64) -> Vec<i8> {
+        vec![(x[0] > self.level) as i8]
+    }
+    fn extreme_modes(&self) -> Vec<Vec<i8>> {
+        vec![vec![0]]
+    }
+}
+
+#[test]
+fn settling_waits_for_a_late_crossing() {
+    // From 0 towards 2 with tau = 100 s, the level 1.5 is crossed at 100 ln 4 s, late in
+    // a 200 s hold: the engine must not settle before it (the equilibrium lies beyond
+    // the level), and settles after it (no guard left). Towards 1 the level is never
+    // reached: it settles once twice the distance to the equilibrium (the bound and its
+    // safety factor) clears the level, `x > 0.751` at `t = 139 s`, within a try (512
+    // samples) of it.
+    let model = Approach {
+        tau: 100.0,
+        level: 1.5,
+    };
+    let ts = 0.01;
+    let mut engine = Engine::<1, 4, _>::new(&model, ts).unwrap();
+    let out = engine.run(0.0, &[2.0; 20_001], &[0.0]).unwrap();
+    assert_eq!(out.events.len(), 1);
+    let exact = 100.0 * 4f64.ln();
+    assert!(
+        (out.events[0].time - exact).abs() < 1e-9,
+        "{:?}",
+        out.events
+    );
+    let after = 20_000 - (exact / ts).ceil() as usize;
+    assert!(
+        engine.settled_samples() > after - 600,
+        "{}",
+        engine.settled_samples()
+    );
+    assert!(engine.settled_samples() <= after);
+    let towards_one = engine.run(0.0, &[1.0; 20_001], &[0.0]).unwrap();
+    let clear = 20_000 - (-100.0 * (0.249f64).ln() / ts) as usize;
+    assert!((clear - 512..=clear).contains(&engine.settled_samples()));
+    let end = towards_one.states[20_000];
+    assert!((end - (1.0 - (-2.0f64).exp())).abs() < 1e-12, "{end}");
+    let last = out.states[20_000];
+    assert!(
+        (last - (2.0 - 2.0 * (-200.0f64 / 100.0).exp())).abs() < 1e-12,
+        "{last}"
+    );
+}
