@@ -10,9 +10,10 @@
 //! A guard function `g = h.x + hu u + d` therefore stays within
 //! `g(x_eq) +- sum_j |h . r_j| |l_j . v|` for all `t >= 0` (every `|exp(lambda_j t)| <= 1`).
 //! Where every guard of the mode has a function kept below `-MARGIN` by that bound, no
-//! guard can fire until the input changes, and the samples are the flow alone:
-//! `x_eq + exp(A ts)^k v`. On a long hold (paper A's records hold a torque for 40 s)
-//! this skips checking thousands of steps once the start's contact changes are over.
+//! guard can fire until the input changes, and the engine runs the mode's flow alone,
+//! the same arithmetic as its checked path (so the same states to the bit). On a long
+//! hold (paper A's records hold a torque for 40 s) this skips checking thousands of
+//! steps once the start's contact changes are over.
 //!
 //! The modal form is computed once per mode, the bound at each try in `O(S^2)`.
 
