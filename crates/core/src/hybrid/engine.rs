@@ -17,7 +17,7 @@ const MAX_EVENTS_PER_STEP: usize = 64;
 const MAX_SWITCHES: usize = 26;
 /// A run tries to settle (module `settle`) only with at least this many internal steps
 /// of held input left: a mode's first try computes its eigenvectors, which the checks
-/// saved (a few nanoseconds a step) repay only over thousands of steps.
+/// saved repay only over many steps.
 const SETTLE_MIN_STEPS: usize = 4096;
 /// Internal steps between tries to settle: a failed try costs a few products of the
 /// state's size, against the checks of this many steps saved by an earlier success.
