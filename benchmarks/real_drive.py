@@ -16,7 +16,9 @@
    rise of ``-2 log L`` and shift of ``theta`` (in its standard errors) without the
    current loop (``TermChoice``). The Cramér-Rao bound of theta for the model with the
    scenario's terms (``CRB %``, analogue speeds only) and the number of fits beyond
-   max(5 %, 3 CRB) (``beyond``). ``--effects extended`` runs the extended scenarios:
+   max(5 %, 3 CRB) (``beyond``). Below the row: its trial of largest error, and the
+   standard deviation of ``theta`` over the trials beside the median ``std_`` the fits
+   report. ``--effects extended`` runs the extended scenarios:
    half and three times the Coulomb torques, loops of 0.5 and 2 ms, encoders of 4 096
    and 65 536 counts.
 2. ``--offsets``: one record pair of encoder angles read from ``--trials`` random
@@ -29,7 +31,9 @@
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
 [--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial ``K``
-alone (the study prints its trial of largest error).
+alone (the study prints its trial of largest error), and on analogue records of a drive
+with a current loop refits them with the loop's lag held at its true value: a check of
+the profile interval (:func:`held_loop_check`).
 """
 
 from __future__ import annotations
@@ -107,18 +111,51 @@ def clean_records(linear, theta, fc, tau_i, counts=0):
 
 def one_trial(task, seed):
     """One trial of a scenario: the fit's theta, interval and choices."""
-    linear = task[0]
-    recs = trial_records(task, seed)
+    return _summary(_fit(task[0], trial_records(task, seed)))
+
+
+def _fit(linear, recs, **kw):
+    """The joint fit of ``recs`` from the true linear parameters (default options
+    unless ``kw``), or the refusal's message."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            fit = bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1).fit(recs)
+            return bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1, **kw).fit(recs)
         except bk.InputError as exc:
-            return {"error": str(exc)}
-    return {"theta": fit.theta_, "ci95": fit.ci95_,
+            return str(exc)
+
+
+def _summary(fit) -> dict:
+    if isinstance(fit, str):
+        return {"error": fit}
+    return {"theta": fit.theta_, "ci95": fit.ci95_, "std": fit.std_,
             "kept": {c.term: c.kept for c in fit.choices_},
             "rise": {c.term: c.rise for c in fit.choices_},
             "shift": {c.term: c.shift for c in fit.choices_}}
+
+
+def concentrated_m2ll(fit) -> float:
+    """``-2 log L`` (less its constant) of a fit with white noise of unknown level in
+    every channel: ``sum n log(SSE / n)`` over its residuals."""
+    return sum(e.size * math.log(float(np.mean(e ** 2)))
+               for pair in fit.residuals_ for e in pair)
+
+
+def held_loop_check(linear, theta, recs, fit, tau_i) -> str:
+    """The records refitted with Coulomb friction and the loop's lag held at its true
+    value. The profile of ``theta`` at that fit's ``theta`` lies at most its rise of
+    ``-2 log L`` above the estimate (it minimises over the lag too), so where the rise
+    is below 3.84 and that ``theta`` is outside the interval, the profile's refits
+    missed a lower valley."""
+    held = _fit(linear, recs, friction="coulomb", actuator=bk.CurrentLoop(tau_i=tau_i))
+    if isinstance(held, str) or isinstance(fit, str) or fit.noise_ar_ is not None:
+        return "  (no check: a refusal or coloured noise)"
+    rise = concentrated_m2ll(held) - concentrated_m2ll(fit)
+    lo, hi = fit.ci95_
+    return (f"  the loop's lag held at {1e3 * tau_i:g} ms: theta {held.theta_:.6g} rad "
+            f"({100 * (held.theta_ / theta - 1):+.2f} %), -2 log L {rise:+.3g} from the "
+            f"estimate's (white noise of fitted level), "
+            f"{'inside' if lo <= held.theta_ <= hi else 'outside'} its 95 % interval")
 
 
 def trial_records(task, seed) -> list:
@@ -171,8 +208,13 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau)
     if args.trial is not None:  # the trial's own seed, as in the whole study's
-        r = one_trial((linear, theta, clean, counts), task_seeds(seed, args.trial + 1)[-1])
-        print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(r, theta)}", flush=True)
+        recs = trial_records((linear, theta, clean, counts),
+                             task_seeds(seed, args.trial + 1)[-1])
+        fit = _fit(linear, recs)
+        print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(_summary(fit), theta)}",
+              flush=True)
+        if tau and not counts:
+            print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
         return
     bar = ProgressBar(f"{dname}, {ename}", quiet=False)
     res = map_tasks(one_trial, [(linear, theta, clean, counts)] * args.trials,
@@ -205,6 +247,10 @@ def _print_row(dname, ename, theta, res, crb, seconds) -> None:
     if err:  # the trial to rerun alone with --trial
         k = max(range(len(res)), key=lambda i: abs(res[i].get("theta", theta) / theta - 1))
         print(f"  largest error in trial {k}: {_trial_line(res[k], theta)}", flush=True)
+        if n > 1:  # does the interval's width match the estimates' spread?
+            print(f"  theta's standard deviation over the trials "
+                  f"{statistics.stdev(r['theta'] for r in ok):.3g} rad, median std_ "
+                  f"{statistics.median(r['std'] for r in ok):.3g} rad", flush=True)
     for r in res:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)

@@ -34,7 +34,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from ..actuator import CurrentLoop
 from ..errors import InputError
@@ -137,7 +137,8 @@ class Term:
     @property
     def threshold(self) -> float:
         """Rise of ``-2 log L`` (chi-square units) without the term that keeps it."""
-        return float(chi2.ppf(KEEP_LEVEL, len(self.params)))
+        # chdtri is chi2.ppf's upper tail; scipy.stats alone takes most of a second to import
+        return float(chdtri(len(self.params), 1.0 - KEEP_LEVEL))
 
     def starts(self, recs: Sequence[Record], prior: TwoMassDrive) -> dict[str, float]:
         """Starting values of the parameters of a term in the whole search (friction;
