@@ -134,6 +134,14 @@ def _summary(fit) -> dict:
             "shift": {c.term: c.shift for c in fit.choices_}}
 
 
+def _fitted_line(fit, linear, fc, tau) -> str:
+    """The fitted parameters against the truth: linear ones in % off, the rest in SI."""
+    off = ", ".join(f"{n} {100 * (fit.params_[n] / x - 1):+.1f} %" for n, x in linear.items())
+    return (f"  fitted: {off}; fc_M {fit.fc_M_:.4g} N m (true {fc[0]:g}), fc_L "
+            f"{fit.fc_L_:.4g} N m (true {fc[1]:g}), tau_i {1e3 * fit.tau_i_:.3g} ms "
+            f"(true {1e3 * tau:g})")
+
+
 def concentrated_m2ll(fit) -> float:
     """``-2 log L`` (less its constant) of a fit with white noise of unknown level in
     every channel: ``sum n log(SSE / n)`` over its residuals."""
@@ -213,6 +221,10 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
         fit = _fit(linear, recs)
         print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(_summary(fit), theta)}",
               flush=True)
+        if not isinstance(fit, str):
+            print(_fitted_line(fit, linear, fc, tau), flush=True)
+            for c in fit.choices_:
+                print(f"  {c.reason()}", flush=True)
         if tau and not counts:
             print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
         return

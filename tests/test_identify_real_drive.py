@@ -388,6 +388,9 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     assert TermChoice.decide("actuator", 9.0, 6.63, 3.0, True, cis).other_ci95 is None
     floor = TermChoice.decide("actuator", 5.0, 6.63, 3.0, False, cis)
     assert not floor.kept and floor.other_ci95 is None
+    # the reason names why a shift beyond KEEP_SHIFT did not keep it
+    assert "do not pin its value down" in floor.reason() and not floor.determined
+    assert "pin" not in small.reason()
     assert "spans the other model's too" in TermChoice.decide(
         "actuator", 5.0, 6.63, 3.0, True, cis).reason()
 

@@ -244,6 +244,9 @@ class TermChoice:
     screened : bool
         Whether the term was dropped unfitted by its score test (:data:`SCREEN_DROP`);
         ``rise`` and ``shift`` are then the test's linearised predictions.
+    determined : bool
+        Whether the data pin the term's values down (see :meth:`decide`); a term that
+        is not is neither kept for its ``shift`` nor widens the interval.
     """
 
     term: str
@@ -253,6 +256,7 @@ class TermChoice:
     shift: float = 0.0
     other_ci95: tuple[float, float] | None = None
     screened: bool = False
+    determined: bool = True
 
     @classmethod
     def decide(cls, term: str, rise: float, threshold: float, shift: float,
@@ -292,7 +296,8 @@ class TermChoice:
         other = None
         if estimated and rise <= threshold and ci95s is not None:
             other = tuple(float(x) for x in ci95s[1 if kept else 0])
-        return cls(term, bool(kept), float(rise), float(threshold), float(shift), other)
+        return cls(term, bool(kept), float(rise), float(threshold), float(shift), other,
+                   determined=bool(determined))
 
     def reason(self) -> str:
         """Say what was chosen and why.
@@ -322,6 +327,10 @@ class TermChoice:
                     f"{moves} (> {KEEP_SHIFT}){both}")
         if self.kept:
             return f"{name} kept: {gain} > {self.threshold:.3g} ({test}); {moves}"
+        if not self.determined and self.shift > KEEP_SHIFT:
+            return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}); "
+                    f"{moves}, but the data do not pin its value down (a standard error "
+                    "beyond a factor e), so that shift does not keep it")
         return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}), and "
                 f"{moves}{both}")
 
