@@ -126,6 +126,7 @@ def _fit(linear, recs, **kw):
 
 
 def _summary(fit) -> dict:
+    """What the study keeps of a fit (or of its refusal's message)."""
     if isinstance(fit, str):
         return {"error": fit}
     return {"theta": fit.theta_, "ci95": fit.ci95_, "std": fit.std_,
