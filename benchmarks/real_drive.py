@@ -31,9 +31,10 @@
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
 [--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial ``K``
-alone (the study prints its trial of largest error), and on analogue records of a drive
-with a current loop refits them with the loop's lag held at its true value: a check of
-the profile interval (:func:`held_loop_check`).
+alone (the study prints its trial of largest error) and prints its fitted parameters
+against the truth and each term test's reason; on analogue records of a drive with a
+current loop it also refits them with the loop's lag held at its true value, a check
+of the profile interval (:func:`held_loop_check`).
 """
 
 from __future__ import annotations
