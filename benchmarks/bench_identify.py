@@ -29,9 +29,10 @@
 term tested), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
 seven parameters) of the same records cost in simulations of those records: the
 samples the compiled kernel advanced (every parameter row of every call, counted by
-wrapping ``simulate_packed``), divided by the records' samples (issue 24's measure). The bound
-takes the compiled sensitivities where its model is theirs: their runs are counted
-apart, and the bound's time is also given in times of one simulation of the record
+wrapping ``simulate_packed``), divided by the records' samples (issue 24's measure). The fit
+and the bound take the compiled sensitivities where their model is theirs: those runs
+are counted apart, the fit's weighed by their time at its simulations' rate on whole
+spans, and the bound's time is also given in times of one simulation of the record
 (medians of 7, interleaved, in CPU time of the process, all its threads: other
 jobs' time slices do not count).
 
@@ -95,18 +96,31 @@ STAGE_NAMES = ("starts (theta grid)", "first window", "continuation", "whole rec
 WINDOW_SAMPLES = 10_000
 
 
-def simulations(fn, samples: int, done=None, kernel=None) -> tuple[float, int]:
+def simulations(fn, samples: int, done=None, kernel=None, sens=None) -> tuple[float, int]:
     """What ``fn()`` costs in simulations of ``samples`` samples, and the kernel's
     calls; ``done`` (a list ``[samples, calls]``) counts as it goes; ``kernel`` (a dict
     ``{"holds": [s, rows x samples], "windows": [...], "whole": [...]}``) adds up the
     kernel's wall time and work in the calls through a held torque on a coarse grid
     (another sample time than the records': ``identify._model.HOLD_STEP``), in the
-    other calls shorter than :data:`WINDOW_SAMPLES` and in the rest."""
+    other calls shorter than :data:`WINDOW_SAMPLES` and in the rest. ``sens`` (a list
+    ``[runs, samples, s]``) adds up the compiled sensitivity runs apart: they are not
+    simulations, and :func:`count` weighs them by their time."""
+    import backlashkit._core as core
+
     import backlashkit.identify._model as model
     import backlashkit.simulate as sim
 
     done = [0, 0] if done is None else done
-    real = sim.simulate_packed
+    sens = [0, 0, 0.0] if sens is None else sens
+    real, real_sens = sim.simulate_packed, core.drive_sensitivities
+
+    def counted_sens(p, t0, ts, u, *rest):
+        start = time.perf_counter()
+        out = real_sens(p, t0, ts, u, *rest)
+        sens[0] += 1
+        sens[1] += np.size(u)
+        sens[2] += time.perf_counter() - start
+        return out
 
     def counted(n, p, t0, ts, u, x0, **kw):
         work = np.shape(p)[0] * np.shape(u)[1]
@@ -122,10 +136,12 @@ def simulations(fn, samples: int, done=None, kernel=None) -> tuple[float, int]:
         return out
 
     model.simulate_packed = sim.simulate_packed = counted
+    core.drive_sensitivities = counted_sens
     try:
         fn()
     finally:
         model.simulate_packed = sim.simulate_packed = real
+        core.drive_sensitivities = real_sens
     return done[0] / samples, done[1]
 
 
@@ -134,32 +150,42 @@ def count(recs, prior) -> None:
     where the fit's wall time goes."""
     samples = sum(r.t.size for r in recs)
     done, kernel = [0, 0], {"holds": [0.0, 0], "windows": [0.0, 0], "whole": [0.0, 0]}
-    marks = [(0, 0, 0.0, time.perf_counter())]
+    sens = [0, 0, 0.0]
+    marks = [(0, 0, 0.0, 0, time.perf_counter())]
     fit = JointIdentifier(prior, workers=1, progress=lambda k, total: marks.append(
-        (k, total, done[0] / samples, time.perf_counter()))).fit
+        (k, total, done[0] / samples, sens[0], time.perf_counter()))).fit
     start = time.perf_counter()
-    n_fit, calls = simulations(lambda: fit(recs), samples, done, kernel)
+    n_fit, calls = simulations(lambda: fit(recs), samples, done, kernel, sens)
     wall = time.perf_counter() - start
-    for (_, _, n0, t0), (k, total, n, t) in zip(marks, marks[1:], strict=False):
+    for (_, _, n0, s0, t0), (k, total, n, s, t) in zip(marks, marks[1:], strict=False):
         if k > 0:  # stage k ended (a misfit restart repeats the stages)
             name = STAGE_NAMES[(k - 1) % len(STAGE_NAMES)]
-            print(f"  stage {k}/{total}, {name}: {n - n0:.0f} simulations, {t - t0:.2f} s")
+            print(f"  stage {k}/{total}, {name}: {n - n0:.0f} simulations, "
+                  f"{s - s0} sensitivity runs, {t - t0:.2f} s")
     what = {"holds": "through the held torque on a coarse grid",
             "windows": f"of the records' samples, calls of < {WINDOW_SAMPLES}",
             "whole": f"of the records' samples, calls of >= {WINDOW_SAMPLES}"}
     for part, (sec, work) in kernel.items():
         print(f"  the kernel in the {part} ({what[part]}): {sec:.2f} s, "
               f"{1e9 * sec / max(work, 1):.0f} ns per sample and parameter row")
+    print(f"  the sensitivity runs: {sens[2]:.2f} s")
     print(f"  one fit's wall time: {wall:.2f} s, the kernel "
-          f"{sum(sec for sec, _ in kernel.values()):.2f} s of it")
+          f"{sum(sec for sec, _ in kernel.values()) + sens[2]:.2f} s of it")
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
+    # a sensitivity run weighed by its time, at the simulations' rate on whole spans
+    whole_sec, whole_work = kernel["whole"]
+    n_sens = sens[2] / (whole_sec / max(whole_work, 1)) / samples if whole_sec else 0.0
     print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
-          f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls "
-          f"(issue 24's bar: 250)")
+          f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls, "
+          f"and {sens[0]} sensitivity runs over {sens[1] / samples:.0f} times the records' "
+          f"samples in the time of {n_sens:.0f} simulations (at the whole spans' rate): "
+          f"{n_fit + n_sens:.0f} in all (issue 24's bar: 250)")
     plain = JointIdentifier(prior, workers=1, friction="viscous", actuator=None).fit
-    n_plain, calls = simulations(lambda: plain(recs), samples)
+    sens_plain = [0, 0, 0.0]
+    n_plain, calls = simulations(lambda: plain(recs), samples, sens=sens_plain)
     print(f"  with paper A's model alone (friction='viscous', actuator=None, no term "
-          f"tested): {n_plain:.0f} simulations in {calls} kernel calls")
+          f"tested): {n_plain:.0f} simulations in {calls} kernel calls, and "
+          f"{sens_plain[0]} sensitivity runs")
     for estimate in (("theta",), "all"):
         n_crb, n_sens, ratio = zip(*(crb_cost(truth, r, estimate) for r in recs),
                                    strict=True)

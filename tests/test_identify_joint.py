@@ -181,10 +181,14 @@ def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
     print(f"exact Jacobian of the fit against central differences: {worst:.1e}")
     assert worst < SENS_FD_RTOL
+    # the iterations (Problem.refine, the profile's refits) take the same Jacobian
+    assert np.array_equal(res.jacobian(z, res.at(z)), exact)
     rough = pb.with_params(("fc_M", "fc_L"), {"fc_M": 1e-9, "fc_L": 1e-9},
                            {"fc_M": 0.01, "fc_L": 0.01})
-    assert rough.residual(rough.spans, None, sig).exact_jacobian(
-        np.r_[z, 1.0, 1.0]) is None
+    rough_res, zr = rough.residual(rough.spans, None, sig), np.r_[z, 1.0, 1.0]
+    assert rough_res.exact_jacobian(zr) is None
+    r = rough_res.at(zr)
+    assert np.array_equal(rough_res.jacobian(zr, r), rough_res.forward_jacobian(zr, r))
 
 
 @pytest.mark.parametrize(

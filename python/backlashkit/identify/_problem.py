@@ -171,9 +171,8 @@ class Problem:
 
     def refine(self, res: Residual, z0: np.ndarray, max_iter: int, bounds=None,
                state: LMState | None = None) -> LMState:
-        """Levenberg-Marquardt on ``res`` from ``z0`` (forward-difference Jacobian)."""
-        return lm(res.at, res.forward_jacobian, z0, max_iter=max_iter, bounds=bounds,
-                  state=state)
+        """Levenberg-Marquardt on ``res`` from ``z0`` (:meth:`Residual.jacobian`)."""
+        return lm(res.at, res.jacobian, z0, max_iter=max_iter, bounds=bounds, state=state)
 
     def central_jacobian(self, res: Residual, z: np.ndarray) -> np.ndarray:
         """Jacobian of ``res`` at ``z`` for the uncertainty: exact
@@ -246,6 +245,13 @@ class Residual:
             return self(z[np.newaxis, :])[0]
         except ValueError:  # e.g. a step to a mode too fast for the sample time
             return np.full(1, np.inf)
+
+    def jacobian(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """The Jacobian while iterating: exact (:meth:`exact_jacobian`, one sensitivity
+        run per span) where the compiled sensitivities cover the model, else forward
+        differences (:meth:`forward_jacobian`, one simulation per parameter)."""
+        exact = self.exact_jacobian(z)
+        return self.forward_jacobian(z, r) if exact is None else exact
 
     def forward_jacobian(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
         """Forward differences (half the simulations of central ones) while iterating."""

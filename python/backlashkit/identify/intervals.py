@@ -60,7 +60,10 @@ class IntervalInputs:
     weighted residual rows of log-parameter rows, ``resample(rng)`` one record set
     simulated from the estimate with noise drawn from ``rng``, and ``refit(records)``
     the ``theta`` of the same fit on it (a picklable callable, so that the refits can
-    run in other processes).
+    run in other processes). ``jacobian(z)``, where given, is the exact Jacobian of
+    ``residual`` at one point (rows by log-parameter, from the compiled sensitivities),
+    or None where it does not exist there; the profile's refits then difference
+    ``residual`` instead.
     """
 
     theta: float
@@ -72,6 +75,7 @@ class IntervalInputs:
     fd_step: float
     resample: Callable[[np.random.Generator], list]
     refit: Callable[[list], float]
+    jacobian: Callable[[np.ndarray], np.ndarray | None] | None = None
 
 
 @dataclass
@@ -116,7 +120,8 @@ class ProfileLikelihood:
     """95 % interval of ``theta`` from its profile likelihood.
 
     For a held ``theta`` the other estimated parameters are refitted
-    (Levenberg-Marquardt from the estimate shifted along the Fisher covariance); the
+    (Levenberg-Marquardt from the estimate shifted along the Fisher covariance, its
+    Jacobians from the compiled sensitivities where they cover the model); the
     interval ends are the ``theta`` on either side where that refit costs
     ``3.84`` (chi-square units, i.e. ``-2 log`` likelihood ratio) more than the
     estimate. The search starts at the Fisher ends ``theta_ exp(-+1.96 s)`` (``s`` the
@@ -205,6 +210,12 @@ class _HeldTheta:
             return np.full(1, np.inf)
 
     def _jacobian(self, zt: float, w: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """The other log-parameters' columns: exact where the fit gives them (one
+        sensitivity run against ``w.size`` simulations), else forward differences."""
+        if self.fit.jacobian is not None:
+            exact = self.fit.jacobian(np.r_[zt, w])
+            if exact is not None:
+                return exact[:, 1:]
         m, h = w.size, self.fit.fd_step
         ww = np.repeat(np.r_[zt, w][np.newaxis, :], m, axis=0)
         ww[:, 1:] += h * np.eye(m)
