@@ -695,6 +695,12 @@ def test_cli_notes_an_ambiguous_fit(tmp_path, capsys):
     assert "note: the search ended in distinct minima of nearly equal cost" in out
 
 
+#: How far apart two fits of the same records may stop when their iterations take
+#: different Jacobians, in standard errors: the Levenberg-Marquardt stops at a gain
+#: under 1e-3 chi-square units, about 0.03 standard errors at most.
+LM_STOP_STDS = 0.03
+
+
 def test_final_horizon(short):
     """A final horizon longer than the record is the whole record (fitted through the
     coarse hold simulation instead of sample by sample); a short one fits less data:
@@ -705,7 +711,10 @@ def test_final_horizon(short):
     whole = JointIdentifier(prior).fit(rec)
     assert not whole.ambiguous_  # paper A's drive: the continuation paths agree
     long = JointIdentifier(prior, search=JointSearch(final_horizon=10.0)).fit(rec)
-    assert long.theta_ == pytest.approx(whole.theta_, rel=1e-6)
+    # the whole record's iterations take the exact Jacobian, the held span's (out of the
+    # sensitivities' scope) differences: they stop apart by the Levenberg-Marquardt
+    # tolerance (a gain under 1e-3 chi-square units), a few thousandths of std_
+    assert long.theta_ == pytest.approx(whole.theta_, abs=LM_STOP_STDS * whole.std_)
     assert long.std_ == pytest.approx(whole.std_, rel=1e-4)
     np.testing.assert_allclose(long.noise_std_, whole.noise_std_, rtol=1e-6)
     with warnings.catch_warnings():  # only the fitted samples count for the whiteness
