@@ -10,6 +10,7 @@ do, and are stepped down to 0 (issue 20's records, shortened to 8 s).
 from __future__ import annotations
 
 import json
+import math
 import warnings
 
 import numpy as np
@@ -324,6 +325,37 @@ def test_a_loop_found_after_the_search_is_searched_again():
     assert fit.params_["J_M"] == pytest.approx(OTHER["J_M"], rel=1e-4)
 
 
+def test_a_kept_loop_is_searched_again_from_each_of_its_starts():
+    """The search again with a kept loop starts at the prior's point with each of the
+    lag's starts (TAU_START_SAMPLES), not at the lag the test fitted, which comes from
+    linear parameters that absorbed it (docs/validation/real-drives.md, trial 157); a
+    term searched already keeps the fitted value."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from backlashkit.identify._model import LINEAR_PARAMS, rel_std
+    from backlashkit.identify._problem import build_problem
+    from backlashkit.identify._search import research_anchors
+    from backlashkit.identify.search import JointSearch
+    from backlashkit.identify.terms import TAU_START_SAMPLES, actuator_term
+
+    recs = _records(P_TRUE, THETA, tau_i=1e-3, seed=5)
+    pb, _ = build_problem(bk.TwoMassDrive(**P_TRUE), recs, rel_std(0.3, LINEAR_PARAMS),
+                          None, JointSearch(), "paper", 1)
+    loop = actuator_term("auto")
+    big = pb.with_params(loop.params, loop.floors(recs), loop.scales(recs))
+    anchor = {n: math.log(P_TRUE[n]) for n in pb.free}
+    fitted = SimpleNamespace(z=np.r_[math.log(THETA), [anchor[n] + 0.1 for n in pb.free],
+                                     math.log(0.3e-3)])
+    starts = research_anchors(big, fitted, anchor, [loop], recs)
+    assert len(starts) == len(TAU_START_SAMPLES)
+    for z, x in zip(starts, TAU_START_SAMPLES, strict=True):
+        assert z[:-1].tolist() == [anchor[n] for n in pb.free]
+        assert z[-1] == pytest.approx(math.log(x * TS))
+    again = research_anchors(big, fitted, anchor, [replace(loop, searched=True)], recs)
+    assert len(again) == 1 and again[0][-1] == fitted.z[-1]
+
+
 def test_one_quantised_speed_is_noted(encoder, coulomb):
     """A record with one encoder speed and one analogue speed is not fitted as
     angles; the warning says so and what to give instead."""
@@ -386,8 +418,16 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     assert TermChoice.decide("actuator", 5.0, 6.63, 3.0, True, cis).other_ci95 == cis[1]
     assert TermChoice.decide("actuator", 5.0, 6.63, 0.5, True, cis).other_ci95 == cis[0]
     assert TermChoice.decide("actuator", 9.0, 6.63, 3.0, True, cis).other_ci95 is None
-    floor = TermChoice.decide("actuator", 5.0, 6.63, 3.0, False, cis)
+    floor = TermChoice.decide("actuator", 3.0, 6.63, 3.0, False, cis)
     assert not floor.kept and floor.other_ci95 is None
+    # a fall beyond ESTIMATED_FALL of the threshold pins the term down whatever its
+    # Fisher check says (trial 135 of the second drive's loop row: 4.47, 1.8 SE)
+    fell = TermChoice.decide("actuator", 4.5, 6.63, 1.8, False, cis)
+    assert fell.kept and fell.determined and fell.other_ci95 == cis[1]
+    # a Fisher interval reaching 0 or infinity bounds nothing: the interval is not spanned
+    for unbounded in ((-821.0, 821.0), (-np.inf, np.inf), (0.03, np.inf)):
+        assert TermChoice.decide("actuator", 4.5, 6.63, 0.5, True,
+                                 (unbounded, cis[1])).other_ci95 is None
     # the reason names why a shift beyond KEEP_SHIFT did not keep it
     assert "do not pin its value down" in floor.reason() and not floor.determined
     assert "pin" not in small.reason()
