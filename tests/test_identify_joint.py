@@ -181,8 +181,12 @@ def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
     print(f"exact Jacobian of the fit against central differences: {worst:.1e}")
     assert worst < SENS_FD_RTOL
-    # the iterations (Problem.refine, the profile's refits) take the same Jacobian
+    # the iterations (Problem.refine) take the same Jacobian, and the profile's
+    # held-theta refits the same without theta's column, from runs without it
     assert np.array_equal(res.jacobian(z, res.at(z)), exact)
+    held = res.exact_jacobian(z, with_theta=False)
+    assert held.shape == (res.n_res, len(pb.names) - 1)
+    assert np.array_equal(held, exact[:, 1:])
     rough = pb.with_params(("fc_M", "fc_L"), {"fc_M": 1e-9, "fc_L": 1e-9},
                            {"fc_M": 0.01, "fc_L": 0.01})
     rough_res, zr = rough.residual(rough.spans, None, sig), np.r_[z, 1.0, 1.0]

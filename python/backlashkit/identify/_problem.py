@@ -259,12 +259,13 @@ class Residual:
         zz = np.repeat(z[np.newaxis, :], n, axis=0) + h * np.eye(n)
         return ((self(zz) - r) / h).T
 
-    def exact_jacobian(self, z: np.ndarray) -> np.ndarray | None:
+    def exact_jacobian(self, z: np.ndarray, *, with_theta: bool = True) -> np.ndarray | None:
         """The Jacobian in log-parameters from the compiled forward sensitivities, one
-        run per span of the estimated parameters alone; None outside their scope (a
-        friction or loop term, a start that moves with the parameters, encoder angles,
-        another contact law) or where a contact change grazes (no derivative there:
-        the caller differences instead)."""
+        run per span of the estimated parameters alone (without ``theta``'s column
+        where ``with_theta`` is false: a refit that holds it); None outside their scope
+        (a friction or loop term, a start that moves with the parameters, encoder
+        angles, another contact law) or where a contact change grazes (no derivative
+        there: the caller differences instead)."""
         pb = self.problem
         if not (pb.law == "paper" and pb.base.size == len(PACKED)
                 and all(sp.level is None and sp.hold is None and not sp.positions
@@ -275,15 +276,17 @@ class Residual:
         p = pb.base.copy()
         p[pb.cols] = pb.values(z)
         drive = TwoMassDrive(**{n: float(x) for n, x in zip(PACKED, p, strict=True)})
-        per_z = pb.values(z)  # d/dz = p d/dp for log-parameters
-        out = np.empty((self.n_res, len(pb.names)))
+        first = 0 if with_theta else 1
+        names = pb.names[first:]
+        per_z = pb.values(z)[first:]  # d/dz = p d/dp for log-parameters
+        out = np.empty((self.n_res, len(names)))
         pos = 0
         for sp, s_, m, end in zip(self.spans, self.sels, self.sizes, self.ends, strict=True):
             try:
                 with warnings.catch_warnings():  # as quiet near grazing as the differences
                     warnings.simplefilter("ignore", SensitivityWarning)
                     _, sens = trajectory_and_sensitivities(
-                        drive, sp.t[:end], sp.torque[:end], params=pb.names)
+                        drive, sp.t[:end], sp.torque[:end], params=names)
             except ValueError:
                 return None
             for c in (0, 1):  # the residual is data - model: its rows move as -S
@@ -291,7 +294,7 @@ class Residual:
                 pos += m - self.lag
         prior = np.nan_to_num(pb.values(z)[1:] / (pb.pen * pb.p_prior))
         out[pos:] = 0.0
-        out[pos:, 1:] = np.diag(prior)
+        out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
         return out
 
     def channels(self, r: np.ndarray):

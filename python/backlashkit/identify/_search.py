@@ -303,7 +303,8 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         found = interval._interval(IntervalInputs(
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
-            pb.fd_step, partial(draw, z), refit, rows_unc.exact_jacobian))
+            pb.fd_step, partial(draw, z), refit,
+            partial(rows_unc.exact_jacobian, with_theta=False)))
         if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
             break
         st = pb.refine(rows_unc, found.lowest_z, max_iter)

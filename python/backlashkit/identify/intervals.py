@@ -61,8 +61,9 @@ class IntervalInputs:
     simulated from the estimate with noise drawn from ``rng``, and ``refit(records)``
     the ``theta`` of the same fit on it (a picklable callable, so that the refits can
     run in other processes). ``jacobian(z)``, where given, is the exact Jacobian of
-    ``residual`` at one point (rows by log-parameter, from the compiled sensitivities),
-    or None where it does not exist there; the profile's refits then difference
+    ``residual`` at one point in the log-parameters other than ``theta``'s, which a
+    profile refit holds (rows by log-parameter, from the compiled sensitivities), or
+    None where it does not exist there; the profile's refits then difference
     ``residual`` instead.
     """
 
@@ -215,7 +216,7 @@ class _HeldTheta:
         if self.fit.jacobian is not None:
             exact = self.fit.jacobian(np.r_[zt, w])
             if exact is not None:
-                return exact[:, 1:]
+                return exact
         m, h = w.size, self.fit.fd_step
         ww = np.repeat(np.r_[zt, w][np.newaxis, :], m, axis=0)
         ww[:, 1:] += h * np.eye(m)
