@@ -606,8 +606,8 @@ def research(pb: Problem, best: LMState, sig: np.ndarray, search: JointSearch,
     crawls along a narrow valley and stops short of the truth even on noise-free
     records, while the search with the term in it lands on it
     (``test_a_loop_found_after_the_search_is_searched_again``). The first answer is
-    kept where it is lower. Each start costs a search: a fit that keeps a loop
-    searches four times after the first search (once before; ``terms.TAU_START_SAMPLES``)."""
+    kept where it is lower. Each start costs a search: a fit that keeps a loop searches
+    once more per start of its lag (four, ``terms.TAU_START_SAMPLES``)."""
     final_h = search.final_horizon
     rows = pb.residual(pb.final_spans(final_h), final_h, sig)
     again, sig2, cost = best, sig, best.cost
