@@ -421,7 +421,8 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     floor = TermChoice.decide("actuator", 3.0, 6.63, 3.0, False, cis)
     assert not floor.kept and floor.other_ci95 is None
     # a fall beyond ESTIMATED_FALL of the threshold pins the term down whatever its
-    # Fisher check says (trial 135 of the second drive's loop row: 4.47, 1.8 SE)
+    # Fisher check says (trial 135 of the second drive with friction and the loop:
+    # 4.47, 1.8 SE)
     fell = TermChoice.decide("actuator", 4.5, 6.63, 1.8, False, cis)
     assert fell.kept and fell.determined and fell.other_ci95 == cis[1]
     # a Fisher interval reaching 0 or infinity bounds nothing: the interval is not spanned
