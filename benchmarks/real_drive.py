@@ -54,6 +54,8 @@ from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA, protocol_reco
 from backlashkit.parallel import ProgressBar, map_tasks, task_seeds
 from backlashkit.verify import reference_angles, reference_simulate
 
+#: Records' length, step-down time, sample time (s); the speeds' default SNR (dB,
+#: ``--snr``: issue 20 asks for 30-40 dB).
 T_END, T_STEP, TS, SNR = 8.0, 2.0, 1e-3, 40.0
 #: A second drive: stiffer, a lighter load, a smaller backlash.
 OTHER = ({"J_M": 2.0e-3, "J_L": 2.5e-2, "k_sh": 150.0, "f_M": 3e-3, "f_L": 4e-3,
@@ -80,15 +82,15 @@ EXTENDED_STREAM = 1
 DRIVES = {"paper": (P_TRUE, THETA), "other": OTHER}
 
 
-def crb_theta(linear, theta, fc, tau_i) -> float:
-    """Cramér-Rao bound (rad) of theta from both records at the study's SNR, for the
+def crb_theta(linear, theta, fc, tau_i, snr=SNR) -> float:
+    """Cramér-Rao bound (rad) of theta from both records at ``snr`` dB, for the
     model with the scenario's terms estimated: theta, the six linear parameters, the
     Coulomb torques where the drive has them and the loop's lag where it has one."""
     drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
     names = ["theta", *LINEAR_PARAMS] + (["fc_M", "fc_L"] if fc[0] else []) + (
         ["tau_i"] if tau_i else [])
     t = bk.signals.time_grid(T_END, TS)
-    bounds = [cramer_rao_bound(drive, t, bk.signals.step_down(t, a, t_s=T_STEP), snr_db=SNR,
+    bounds = [cramer_rao_bound(drive, t, bk.signals.step_down(t, a, t_s=T_STEP), snr_db=snr,
                                estimate=names, initial_state="steady", tau_i=tau_i)
               for a in (A1, A2)]
     return (bounds[0] + bounds[1]).theta_std
@@ -171,7 +173,7 @@ def held_loop_check(linear, theta, recs, fit, tau_i) -> str:
 def trial_records(task, seed) -> list:
     """The records of one trial of a scenario: analogue speeds get their noise;
     encoders start at a uniformly random angle within a count."""
-    _, _, clean, counts = task
+    _, _, clean, counts, snr = task
     recs = []
     for (t, u, y_m, y_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
         s_m, s_l = ss.spawn(2)
@@ -180,8 +182,8 @@ def trial_records(task, seed) -> list:
             w_m, w_l = (enc.measure(t, y + enc.resolution * np.random.default_rng(s_).uniform())
                         .speed for y, s_ in ((y_m, s_m), (y_l, s_l)))
         else:
-            w_m, w_l = (bk.signals.add_noise(y_m, SNR, rng=s_m),
-                        bk.signals.add_noise(y_l, SNR, rng=s_l))
+            w_m, w_l = (bk.signals.add_noise(y_m, snr, rng=s_m),
+                        bk.signals.add_noise(y_l, snr, rng=s_l))
         recs.append(bk.Record(t, u, w_m, w_l))
     return recs
 
@@ -216,9 +218,9 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     t0 = time.perf_counter()
     clean = clean_records(linear, theta, fc, tau, counts)
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
-    crb = math.nan if counts else crb_theta(linear, theta, fc, tau)
+    crb = math.nan if counts else crb_theta(linear, theta, fc, tau, args.snr)
     if args.trial is not None:  # the trial's own seed, as in the whole study's
-        recs = trial_records((linear, theta, clean, counts),
+        recs = trial_records((linear, theta, clean, counts, args.snr),
                              task_seeds(seed, args.trial + 1)[-1])
         fit = _fit(linear, recs)
         print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(_summary(fit), theta)}",
@@ -231,7 +233,7 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
             print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
         return
     bar = ProgressBar(f"{dname}, {ename}", quiet=False)
-    res = map_tasks(one_trial, [(linear, theta, clean, counts)] * args.trials,
+    res = map_tasks(one_trial, [(linear, theta, clean, counts, args.snr)] * args.trials,
                     jobs=args.jobs, seed=seed, progress=bar)
     bar.close()
     _print_row(dname, ename, theta, res, crb, time.perf_counter() - t0)
@@ -340,6 +342,8 @@ def main(argv=None) -> int:
     p.add_argument("--trials", type=int, default=200)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--seed", type=int, default=2020)
+    p.add_argument("--snr", type=float, default=SNR,
+                   help=f"the analogue speeds' SNR in dB (default {SNR:g})")
     p.add_argument("--drives", default="paper,other",
                    help="comma-separated drives of the coverage study (paper, other)")
     p.add_argument("--effects", default=",".join(EFFECTS),
@@ -369,7 +373,7 @@ def bounds(args) -> None:
     for dname, (linear, theta) in DRIVES.items():
         for ename, (fc, tau, counts) in {**EFFECTS, **EXTENDED}.items():
             if dname in args.drives and ename in args.effects and not counts:
-                crb = crb_theta(linear, theta, fc, tau) / theta
+                crb = crb_theta(linear, theta, fc, tau, args.snr) / theta
                 print(f"{dname:<7} {ename:<15} {100 * crb:6.2f} "
                       f"{100 * max(ERR_FLOOR, CRB_FACTOR * crb):8.2f}")
 

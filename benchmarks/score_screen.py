@@ -127,7 +127,7 @@ def main(argv=None) -> int:
             fc, tau, _ = rd.EFFECTS[ename]
             clean = rd.clean_records(linear, theta, fc, tau)
             bar = ProgressBar(f"{dname}, {ename}", quiet=False)
-            res = map_tasks(drive_trial, [(linear, theta, clean, 0)] * args.trials,
+            res = map_tasks(drive_trial, [(linear, theta, clean, 0, rd.SNR)] * args.trials,
                             jobs=args.jobs, seed=seeds[k], progress=bar)
             bar.close()
             row(f"{dname}, {ename}", res)
