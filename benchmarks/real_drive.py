@@ -34,17 +34,28 @@ Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper
 alone (the study prints its trial of largest error) and prints its fitted parameters
 against the truth and each term test's reason; on analogue records of a drive with a
 current loop it also refits them with the loop's lag held at its true value, a check
-of the profile interval (:func:`held_loop_check`).
+of the profile interval (:func:`held_loop_check`). ``--snr DB`` sets the analogue
+speeds' noise (default 40 dB).
+
+A row too long for one run is measured in slices, each of one scenario (one
+``--drives`` and one ``--effects``): ``--slice A:B --save FILE`` runs trials ``A`` to
+``B - 1`` of ``--trials`` with the seeds the whole row gives them and writes their
+results with the git trees of ``python/`` and ``crates/`` they ran (it refuses
+uncommitted code there); ``--merge FILE ...`` prints the row from slices that tile the
+trials with one seed, SNR and code.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
+import subprocess
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -232,14 +243,83 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
         if tau and not counts:
             print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
         return
+    first, stop = args.slice or (0, args.trials)
+    task = (linear, theta, clean, counts, args.snr)
     bar = ProgressBar(f"{dname}, {ename}", quiet=False)
-    res = map_tasks(one_trial, [(linear, theta, clean, counts, args.snr)] * args.trials,
-                    jobs=args.jobs, seed=seed, progress=bar)
+    # trial i's seed is child i of the scenario's, whatever the slice
+    res = map_tasks(seeded_trial, [(task, s) for s in task_seeds(seed, stop)[first:]],
+                    jobs=args.jobs, progress=bar)
     bar.close()
-    _print_row(dname, ename, theta, res, crb, time.perf_counter() - t0)
+    seconds = time.perf_counter() - t0
+    if args.save:
+        save_slice(args, {"drive": dname, "effect": ename, "first": first, "crb": crb,
+                          "seconds": seconds, "results": res})
+    _print_row(dname, ename, theta, res, crb, seconds, first)
 
 
-def _print_row(dname, ename, theta, res, crb, seconds) -> None:
+def seeded_trial(pair):
+    """:func:`one_trial` of a ``(task, seed)`` pair."""
+    return one_trial(*pair)
+
+
+#: What must agree between the slices of one row (``--merge``).
+SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code")
+
+
+def code_version() -> str:
+    """The git trees of ``python/`` and ``crates/`` (the code the fits run), or an
+    error where either holds uncommitted changes: a slice must name the code it ran."""
+    root = Path(__file__).resolve().parents[1]
+
+    def git(*cmd: str) -> str:
+        return subprocess.run(["git", *cmd], cwd=root, capture_output=True, text=True,
+                              check=True).stdout
+
+    if git("status", "--porcelain", "python", "crates").strip():
+        raise SystemExit("real_drive.py: --save needs python/ and crates/ committed (a "
+                         "slice names the code it ran by their git trees)")
+    py, rs = git("rev-parse", "HEAD:python", "HEAD:crates").split()
+    return f"python {py[:12]}, crates {rs[:12]}"
+
+
+def save_slice(args, row: dict) -> None:
+    """Write one scenario's slice of trials, with what its merge checks."""
+    path = Path(args.save)
+    if path.exists():
+        raise SystemExit(f"real_drive.py: {path} exists: choose another --save file")
+    doc = {"snr": args.snr, "seed": args.seed, "trials": args.trials,
+           "code": code_version(), **row}
+    # numpy scalars (a choice's kept flag) as Python values
+    path.write_text(json.dumps(doc, indent=1, default=lambda x: x.item()) + "\n")
+    print(f"wrote {path} (trials {row['first']} to {row['first'] + len(row['results']) - 1})",
+          file=sys.stderr)
+
+
+def merge(args) -> None:
+    """One scenario's row from its saved slices (``--merge``): they must be of one
+    scenario, seed and code, and tile its trials."""
+    docs = sorted((json.loads(Path(f).read_text()) for f in args.merge),
+                  key=lambda d: d["first"])
+    for key in SLICE_KEYS:
+        if len({str(d[key]) for d in docs}) > 1:
+            raise SystemExit(f"real_drive.py: the slices differ in {key}: "
+                             f"{sorted({str(d[key]) for d in docs})}")
+    starts = [d["first"] for d in docs]
+    ends = [d["first"] + len(d["results"]) for d in docs]
+    if starts[0] != 0 or ends[-1] != docs[0]["trials"] or starts[1:] != ends[:-1]:
+        raise SystemExit("real_drive.py: the slices do not tile the trials: "
+                         f"{list(zip(starts, ends, strict=True))} of {docs[0]['trials']}")
+    theta = DRIVES[docs[0]["drive"]][1]
+    res = [r for d in docs for r in d["results"]]
+    print(f"{docs[0]['drive']}, {docs[0]['effect']}: {len(docs)} slices, code "
+          f"{docs[0]['code']}, SNR {docs[0]['snr']:g} dB, seed {docs[0]['seed']}")
+    _print_header()
+    _print_row(docs[0]["drive"], docs[0]["effect"], theta, res, docs[0]["crb"],
+               sum(d["seconds"] for d in docs))
+
+
+def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
+    """One scenario's row from its trials' results (trial ``first`` the first)."""
     ok = [r for r in res if "theta" in r]
     err = [abs(r["theta"] / theta - 1) * 100 for r in ok]
     n = len(ok)
@@ -262,7 +342,8 @@ def _print_row(dname, ename, theta, res, crb, seconds) -> None:
           f"{kept['actuator']:>9.1%} {rise:>9.3g} {shift:>6.2f} {seconds:>6.0f}", flush=True)
     if err:  # the trial to rerun alone with --trial
         k = max(range(len(res)), key=lambda i: abs(res[i].get("theta", theta) / theta - 1))
-        print(f"  largest error in trial {k}: {_trial_line(res[k], theta)}", flush=True)
+        print(f"  largest error in trial {first + k}: {_trial_line(res[k], theta)}",
+              flush=True)
         if n > 1:  # does the interval's width match the estimates' spread?
             print(f"  theta's standard deviation over the trials "
                   f"{statistics.stdev(r['theta'] for r in ok):.3g} rad, median std_ "
@@ -357,13 +438,34 @@ def main(argv=None) -> int:
                    help="print only each scenario's Cramér-Rao bound and error limit")
     p.add_argument("--offsets", action="store_true",
                    help="the spread over --trials encoder offsets of one record pair")
+    p.add_argument("--slice", type=_slice, default=None, metavar="A:B",
+                   help="run only trials A to B-1 of --trials (with --save)")
+    p.add_argument("--save", default=None, metavar="FILE",
+                   help="write the trials' results to FILE (JSON), for --merge")
+    p.add_argument("--merge", nargs="+", default=None, metavar="FILE",
+                   help="print the row of one scenario from its saved slices")
     args = p.parse_args(argv)
     args.drives = args.drives.split(",")
     args.effects = [e for name in args.effects.split(",")
                     for e in (EXTENDED if name == "extended" else [name])]
-    (speed if args.speed else bounds if args.crb else offsets if args.offsets
-     else coverage)(args)
+    if args.save and len(args.drives) * len(args.effects) != 1:
+        p.error("--save takes one scenario: one --drives and one --effects")
+    if args.slice and args.slice[1] > args.trials:
+        p.error(f"--slice ends at trial {args.slice[1] - 1}, beyond --trials {args.trials}")
+    (merge if args.merge else speed if args.speed else bounds if args.crb
+     else offsets if args.offsets else coverage)(args)
     return 0
+
+
+def _slice(text: str) -> tuple[int, int]:
+    """``A:B`` as trials ``(A, B)``, ``0 <= A < B``."""
+    try:
+        first, stop = (int(x) for x in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected A:B (two integers), got {text!r}") from None
+    if not 0 <= first < stop:
+        raise argparse.ArgumentTypeError(f"expected 0 <= A < B, got {text!r}")
+    return first, stop
 
 
 def bounds(args) -> None:
