@@ -40,9 +40,9 @@ speeds' noise (default 40 dB).
 A row too long for one run is measured in slices, each of one scenario (one
 ``--drives`` and one ``--effects``): ``--slice A:B --save FILE`` runs trials ``A`` to
 ``B - 1`` of ``--trials`` with the seeds the whole row gives them and writes their
-results with the git trees of ``python/`` and ``crates/`` they ran (it refuses
-uncommitted code there); ``--merge FILE ...`` prints the row from slices that tile the
-trials with one seed, SNR and code.
+results with the git objects of the code they ran (``python/``, ``crates/`` and this
+script; it refuses uncommitted changes there); ``--merge FILE ...`` prints the row
+from slices that tile the trials with one seed, SNR and code.
 """
 
 from __future__ import annotations
@@ -266,20 +266,25 @@ def seeded_trial(pair):
 SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code")
 
 
+#: What a slice ran, as paths of the repository: the package, the compiled core and
+#: this script (its scenarios).
+CODE = ("python", "crates", "benchmarks/real_drive.py")
+
+
 def code_version() -> str:
-    """The git trees of ``python/`` and ``crates/`` (the code the fits run), or an
-    error where either holds uncommitted changes: a slice must name the code it ran."""
+    """The git objects of :data:`CODE` at ``HEAD``, or an error where any holds
+    uncommitted changes: a slice must name the code it ran."""
     root = Path(__file__).resolve().parents[1]
 
     def git(*cmd: str) -> str:
         return subprocess.run(["git", *cmd], cwd=root, capture_output=True, text=True,
                               check=True).stdout
 
-    if git("status", "--porcelain", "python", "crates").strip():
-        raise SystemExit("real_drive.py: --save needs python/ and crates/ committed (a "
-                         "slice names the code it ran by their git trees)")
-    py, rs = git("rev-parse", "HEAD:python", "HEAD:crates").split()
-    return f"python {py[:12]}, crates {rs[:12]}"
+    if git("status", "--porcelain", *CODE).strip():
+        raise SystemExit(f"real_drive.py: --save needs {', '.join(CODE)} committed (a "
+                         "slice names the code it ran by their git objects)")
+    ids = git("rev-parse", *(f"HEAD:{c}" for c in CODE)).split()
+    return ", ".join(f"{c} {i[:12]}" for c, i in zip(CODE, ids, strict=True))
 
 
 def save_slice(args, row: dict) -> None:
