@@ -421,7 +421,11 @@ class JointIdentifier:
                  for n, x in term.starts(recs, prior).items()}
         if anchor_extra:
             extra.update({n: x for n, x in anchor_extra.items() if n in extra and x > 0})
-        z_anchor = pb.z_of(pb.free, [getattr(start, n) if n in LINEAR_PARAMS else extra[n]
+        # a friction that a first fit drove to 0 (its logarithm underflowed) starts the
+        # misfit's search again from the prior's value: the search runs in logarithms
+        linear = {n: getattr(start, n) if getattr(start, n) > 0 else getattr(prior, n)
+                  for n in LINEAR_PARAMS}
+        z_anchor = pb.z_of(pb.free, [linear[n] if n in LINEAR_PARAMS else extra[n]
                                      for n in pb.free])
         out = _search.run(
             pb, search, sigma, recs, start_drive=start.with_theta(None), z_anchor=z_anchor,
