@@ -601,7 +601,7 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
         states.sort(key=lambda st: st.cost)
         extra = distinct(states, cont.ambiguity_starts, math.inf, taken=cands)
         ends += continue_on(pb, paths[0], extra, windows, sigma, max_iter)
-    if paths[0]:
+    if cont.direct and paths[0]:
         ends += distinct(direct_path(pb, paths[0], z_starts[0], windows, max_iter,
                                      trail[0]), 1, math.inf, taken=ends)
     stage(3)

@@ -223,12 +223,17 @@ class Continuation(_Config):
     ambiguity_starts : int, optional
         When the paths end in distinct minima of nearly equal cost (``ambiguous_``),
         up to this many more first-window solutions are continued (default 4; 0: off).
+    direct : bool, optional
+        Also follow the grid's best start on the main path's windows without the first
+        window, where on the path's first window it ends below and apart from every
+        candidate (default True; ``docs/design/joint-search.md``).
     """
 
     horizons: Sequence[float] = (0.4, 1.0, 3.0)
     fine_horizons: Sequence[float] = (0.25, 0.6, 1.6)
     candidates: int = 3
     ambiguity_starts: int = 4
+    direct: bool = True
 
     def __post_init__(self) -> None:
         hs = _shifts("Continuation", "horizons", self.horizons)
@@ -239,6 +244,7 @@ class Continuation(_Config):
                                            self.fine_horizons))
         v.integer("Continuation.candidates", self.candidates, 1)
         v.integer("Continuation.ambiguity_starts", self.ambiguity_starts, 0)
+        self._set("direct", _flag("Continuation", "direct", self.direct))
 
     def paths(self, first: float) -> list[list[float]]:
         """The continuation paths after a first window of ``first`` s.
