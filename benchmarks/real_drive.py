@@ -161,8 +161,12 @@ def _fitted_line(fit, linear, fc, tau) -> str:
 def concentrated_m2ll(fit) -> float:
     """``-2 log L`` (less its constant) of a fit with white noise of unknown level in
     every channel: ``sum n log(SSE / n)`` over its residuals."""
-    return sum(e.size * math.log(float(np.mean(e ** 2)))
-               for pair in fit.residuals_ for e in pair)
+    return residuals_m2ll(e for pair in fit.residuals_ for e in pair)
+
+
+def residuals_m2ll(residuals) -> float:
+    """``sum n log(SSE / n)`` over residual arrays, one per channel."""
+    return sum(e.size * math.log(float(np.mean(e ** 2))) for e in residuals)
 
 
 def truth_line(linear, theta, fc, tau_i, recs, fit) -> str:
@@ -171,13 +175,11 @@ def truth_line(linear, theta, fc, tau_i, recs, fit) -> str:
     short of the maximum; above it, the noise favours the estimate."""
     drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
     loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
-    m2ll = 0.0
-    for r in recs:
-        sim = drive.simulate(r.t, r.torque, actuator=loop,
-                             initial_state=drive.steady_state(r.torque[0]))
-        m2ll += sum(e.size * math.log(float(np.mean(e ** 2)))
-                    for e in (r.w_motor - sim.w_motor, r.w_load - sim.w_load))
-    rise = m2ll - concentrated_m2ll(fit)
+    sims = [drive.simulate(r.t, r.torque, actuator=loop,
+                           initial_state=drive.steady_state(r.torque[0])) for r in recs]
+    rise = residuals_m2ll(e for r, sim in zip(recs, sims, strict=True)
+                          for e in (r.w_motor - sim.w_motor, r.w_load - sim.w_load)
+                          ) - concentrated_m2ll(fit)
     return (f"  the truth: -2 log L {rise:+.4g} from the estimate's (white noise of fitted "
             f"level; {'below: the search stopped short' if rise < 0 else 'above it'})")
 
