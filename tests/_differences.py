@@ -51,15 +51,19 @@ def near_grazing(res: bk.DriveResponse) -> bool:
     """Whether a contact change of ``res`` is at a relative speed below
     :data:`GRAZING` of its largest."""
     rel = res.w_motor - res.w_load
-    return min(abs(np.interp(e.time, res.t, rel)) for e in res.contact_events) < (
-        GRAZING * np.max(np.abs(rel)))
+    return any(abs(np.interp(e.time, res.t, rel)) < GRAZING * np.max(np.abs(rel))
+               for e in res.contact_events)
+
+
+def _changes(res: bk.DriveResponse) -> tuple[np.ndarray, list[str]]:
+    """The times and kinds of ``res``'s contact changes."""
+    return (np.array([e.time for e in res.contact_events]),
+            [e.kind for e in res.contact_events])
 
 
 def _run(drive: bk.TwoMassDrive, t, u) -> tuple[np.ndarray, np.ndarray, list[str]]:
     res = drive.simulate(t, u)
-    return (np.stack([res.w_motor, res.w_load], axis=1),
-            np.array([e.time for e in res.contact_events]),
-            [e.kind for e in res.contact_events])
+    return (np.stack([res.w_motor, res.w_load], axis=1), *_changes(res))
 
 
 def _crossed(t: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -92,8 +96,7 @@ def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.nda
     res = drive.simulate(t, u)
     if not res.contact_events or near_grazing(res):
         return None
-    times0 = np.array([e.time for e in res.contact_events])
-    kinds0 = [e.kind for e in res.contact_events]
+    times0, kinds0 = _changes(res)
     values = {n: getattr(drive, n) for n in PARAMS}
     worst, left_out = 0.0, 0
     for j, name in enumerate(PARAMS):
