@@ -17,7 +17,7 @@ $(BIN)/python:
 
 # Rebuilt when the sources or the project metadata change.
 $(STAMP): $(BIN)/python pyproject.toml Cargo.toml crates/core/Cargo.toml crates/py/Cargo.toml \
-          $(wildcard crates/*/src/*.rs)
+          $(wildcard crates/*/src/*.rs crates/*/src/*/*.rs)
 	$(BIN)/python -m pip install --quiet --upgrade pip "maturin>=1.7,<2"
 	VIRTUAL_ENV=$(CURDIR)/$(VENV) $(BIN)/maturin develop --release --extras test,bench
 	touch $(STAMP)

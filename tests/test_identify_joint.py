@@ -149,17 +149,29 @@ def test_crb_from_exact_sensitivities_matches_central_differences(short, initial
     print(f"CRB of theta: exact {bound.theta_std:.6e}, central differences {by_fd:.6e} "
           f"({bound.theta_std / by_fd - 1:+.1e})")
     assert bound.theta_std == pytest.approx(by_fd, rel=CRB_EXACT_RTOL)
-    # outside the scope (Coulomb friction) the bound differences simulations
+    # Coulomb friction is in the scope, its torques' columns too: the kernel's, which
+    # tests/test_sensitivity_kernel.py checks against extrapolated differences (plain
+    # ones at CHECK_STEP resolve only 1e-2 here, as the motor's stick-slip changes
+    # cross the samples)
+    from backlashkit._sensitivity import sensitivities
+
     rough = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
-    assert crb._exact(rough, names, 0.0, t, u, "paper", x0) == (None, None)
+    with_fc = (*names, "fc_M", "fc_L")
+    _, exact = crb._exact(rough, with_fc, 0.0, t, u, "paper", x0)
+    kernel = sensitivities(rough, t, u, initial_state=x0, params=with_fc)
+    np.testing.assert_array_equal(np.stack(exact, axis=1), kernel)
+    # outside it (a current loop, a breakaway torque of its own) the bound differences
+    assert crb._exact(rough, names, 1e-3, t, u, "paper", x0) == (None, None)
+    sticky = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fs_M=0.02)
+    assert crb._exact(sticky, names, 0.0, t, u, "paper", x0) == (None, None)
 
 
 @pytest.mark.parametrize("ar", [None, [-0.5, 0.1]])
 def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     """The uncertainty's Jacobian (weighted residual in log-parameters, whitened with
     an AR noise model, the prior's rows) from the compiled sensitivities agrees with
-    central differences of the residual; a model outside their scope (Coulomb
-    friction) has none."""
+    central differences of the residual; with Coulomb friction it is the kernel's
+    (:func:`_check_coulomb_columns`)."""
     from backlashkit.identify._model import rel_std
     from backlashkit.identify._problem import build_problem
 
@@ -187,12 +199,42 @@ def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     held = res.exact_jacobian(z, with_theta=False)
     assert held.shape == (res.n_res, len(pb.names) - 1)
     assert np.array_equal(held, exact[:, 1:])
+    _check_coulomb_columns(pb, sig, z)
+
+
+def _check_coulomb_columns(pb, sig, z):
+    """With the Coulomb torques fitted (in natural units, floored, the breakaway
+    torques tied to them) the Jacobian is the kernel's sensitivities weighed as the
+    residual (tests/test_sensitivity_kernel.py checks those against extrapolated
+    differences: plain ones resolve only 1e-2 on this record); a torque held at its
+    floor has a zero column; with a current loop there is none."""
+    from backlashkit._sensitivity import sensitivities
+
     rough = pb.with_params(("fc_M", "fc_L"), {"fc_M": 1e-9, "fc_L": 1e-9},
                            {"fc_M": 0.01, "fc_L": 0.01})
-    rough_res, zr = rough.residual(rough.spans, None, sig), np.r_[z, 1.0, 1.0]
-    assert rough_res.exact_jacobian(zr) is None
-    r = rough_res.at(zr)
-    assert np.array_equal(rough_res.jacobian(zr, r), rough_res.forward_jacobian(zr, r))
+    res = rough.residual(rough.spans, None, sig)
+    for zr in (np.r_[z, 1.0, 2.0], np.r_[z, 1.0, -1.0]):  # the second at fc_L's floor
+        jac, drive = res.exact_jacobian(zr), rough.exact_drive(zr)
+        # fs None: the breakaway torques are the Coulomb torques
+        assert (drive.fc_M, drive.fs_M, drive.fs_L) == (0.01, None, None)
+        assert drive.fc_L == (0.02 if zr[-1] > 0 else 1e-9)
+        per_z = np.r_[np.exp(z), 0.01, 0.01 if zr[-1] > 0 else 0.0]
+        pos = 0
+        for sp in rough.spans:
+            sens = sensitivities(drive, sp.t, sp.torque, params=rough.names)
+            for c in (0, 1):
+                want = -sens[:, c, :] * per_z / sig[sp.k, c]
+                np.testing.assert_allclose(jac[pos : pos + sp.t.size], want, rtol=1e-12,
+                                           atol=0)
+                pos += sp.t.size
+        assert np.array_equal(jac[pos:, -2:], np.zeros((len(rough.free), 2)))
+        r = res.at(zr)
+        assert np.array_equal(res.jacobian(zr, r), jac)
+    looped = rough.with_params(("tau_i",), {"tau_i": 1e-5}, {})
+    res_loop, zl = looped.residual(looped.spans, None, sig), np.r_[z, 1.0, 1.0, np.log(1e-3)]
+    assert res_loop.exact_jacobian(zl) is None
+    r = res_loop.at(zl)
+    assert np.array_equal(res_loop.jacobian(zl, r), res_loop.forward_jacobian(zl, r))
 
 
 @pytest.mark.parametrize(

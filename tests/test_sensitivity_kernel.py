@@ -18,9 +18,14 @@ import backlashkit as bk
 from _differences import agreement, near_grazing
 from _random_drives import LEVELS, LOG_FACTORS, drive_record
 from backlashkit import _core
-from backlashkit._numpy_sensitivity import PARAMS
 from backlashkit._numpy_sensitivity import sensitivities as numpy_sensitivities
-from backlashkit._sensitivity import sensitivities, trajectory_and_sensitivities
+from backlashkit._sensitivity import (
+    LINEAR_AND_THETA,
+    PARAMS,
+    default_params,
+    sensitivities,
+    trajectory_and_sensitivities,
+)
 from backlashkit.papers.ravanbod2002 import A2, P_TRUE, THETA
 
 #: Agreement asked of the two on paper A's drive (1.8e-10; ``-s`` prints the figures)...
@@ -35,14 +40,14 @@ RANDOM_RTOL = 1e-7
 EXAMPLES, N_DRIVES = 150, 100
 #: Issue 24's bar against the differences, as in test_sensitivity.py.
 DIFFERENCES_RTOL = 1e-6
-#: Every parameter, as the kernel indexes them.
-ALL = list(range(len(PARAMS)))
+#: Paper A's model's parameters, as the kernel indexes them.
+LINEAR = list(range(len(LINEAR_AND_THETA)))
 
 
 def _relative_error(drive, t, u) -> float:
     """Largest over the parameters of max |compiled - NumPy| / max |NumPy|."""
     fast, ref = sensitivities(drive, t, u), numpy_sensitivities(drive, t, u)
-    assert fast.shape == ref.shape == (t.size, 2, len(PARAMS))
+    assert fast.shape == ref.shape == (t.size, 2, len(default_params(drive)))
     return float(np.max(np.max(np.abs(fast - ref), axis=(0, 1))
                         / np.max(np.abs(ref), axis=(0, 1))))
 
@@ -113,11 +118,11 @@ def test_twist_matches_central_differences():
     t = bk.signals.time_grid(1.0, 1e-3)
     u = bk.signals.step_down(t, A2, t_s=0.5)
     full = sensitivities(drive, t, u, states=True, initial_state=[0.0, 0.0, 0.0])
-    assert full.shape == (t.size, 3, len(PARAMS))
+    assert full.shape == (t.size, 3, len(LINEAR_AND_THETA))
     np.testing.assert_array_equal(full[:, :2], sensitivities(drive, t, u))
-    values = {n: getattr(drive, n) for n in PARAMS}
+    values = {n: getattr(drive, n) for n in LINEAR_AND_THETA}
     worst = 0.0
-    for j, name in enumerate(PARAMS):
+    for j, name in enumerate(LINEAR_AND_THETA):
         best = np.inf
         for h in TWIST_STEPS:
             hi, lo = (bk.TwoMassDrive(**{**values, name: values[name] * (1 + s * h)})
@@ -148,25 +153,30 @@ def test_bad_inputs_raise_value_error():
     u = np.full(t.size, 0.1)
     p = np.array([getattr(drive, n) for n in PARAMS])
     with pytest.raises(ValueError, match=r"J\[0\] must be finite and > 0"):
-        _core.drive_sensitivities(np.where(np.arange(7) == 0, -1.0, p), 0.0, 1e-3, u,
-                                  np.zeros(3), ALL)
+        _core.drive_sensitivities(np.where(np.arange(9) == 0, -1.0, p), 0.0, 1e-3, u,
+                                  np.zeros(3), LINEAR)
     with pytest.raises(ValueError, match="theta must be > 0"):
-        _core.drive_sensitivities(np.where(np.arange(7) == 6, 0.0, p), 0.0, 1e-3, u,
-                                  np.zeros(3), ALL)
-    with pytest.raises(ValueError, match="params must have 7 entries, got 6"):
-        _core.drive_sensitivities(p[:6], 0.0, 1e-3, u, np.zeros(3), ALL)
+        _core.drive_sensitivities(np.where(np.arange(9) == 6, 0.0, p), 0.0, 1e-3, u,
+                                  np.zeros(3), LINEAR)
+    with pytest.raises(ValueError, match="params must have 9 entries, got 6"):
+        _core.drive_sensitivities(p[:6], 0.0, 1e-3, u, np.zeros(3), LINEAR)
     with pytest.raises(ValueError, match="initial state must have 3 entries"):
-        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(2), ALL)
+        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(2), LINEAR)
     with pytest.raises(ValueError, match="sample time must be > 0"):
-        _core.drive_sensitivities(p, 0.0, -1e-3, u, np.zeros(3), ALL)
-    with pytest.raises(ValueError, match="distinct and below 7"):
+        _core.drive_sensitivities(p, 0.0, -1e-3, u, np.zeros(3), LINEAR)
+    with pytest.raises(ValueError, match="distinct and below 9"):
         _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [6, 6])
+    with pytest.raises(ValueError, match="the sensitivity to fc_M needs fc_M > 0"):
+        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [7])
     with pytest.raises(ValueError, match="params must be distinct names"):
         sensitivities(drive, t, u, params=("theta", "k"))
     with pytest.raises(ValueError, match="one sample per time step"):
         sensitivities(drive, t, u[:-1])
-    with pytest.raises(ValueError, match="no Coulomb friction"):
-        sensitivities(bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01), t, u)
+    with pytest.raises(ValueError, match="fs_M equal to fc_M"):
+        sensitivities(bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fs_M=0.02), t, u)
+    with pytest.raises(ValueError, match="the sensitivity to fc_L needs fc_L > 0"):
+        sensitivities(bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01), t, u,
+                      params=("theta", "fc_L"))
 
 
 def _tangent_case(margin_rel: float):

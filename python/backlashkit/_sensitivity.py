@@ -1,11 +1,11 @@
 """Forward sensitivities of a two-mass drive with backlash, compiled (issue 24).
 
 The compiled twin of :mod:`backlashkit._numpy_sensitivity` (``crates/core``'s
-``sensitivity`` module): the same recurrence, with the contact changes the compiled
-simulator locates. :func:`backlashkit.identify.cramer_rao_bound` uses them, for its
-estimated parameters only, where its model is theirs, and so does the joint fit's
-uncertainty (its Fisher information); the fit's iterations still difference
-simulations.
+``sensitivity`` module): the same recurrence, with the contact and stick-slip changes
+the compiled simulator locates. :func:`backlashkit.identify.cramer_rao_bound` uses
+them, for its estimated parameters only, where its model is theirs, and so do the
+joint fit's iterations, uncertainty and profile refits
+(``identify._problem.Residual.exact_jacobian``).
 """
 
 from __future__ import annotations
@@ -19,8 +19,18 @@ from . import validate as v
 from .errors import InputError, SensitivityWarning
 from .plants import TwoMassDrive
 
-#: The parameters, in the order of the sensitivities' last axis.
-PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta")
+#: The parameters a sensitivity may be taken with respect to, in the kernel's order:
+#: paper A's model, then the Coulomb torques (the breakaway torques tied to them).
+PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta", "fc_M", "fc_L")
+#: Paper A's model: the parameters of every drive's sensitivities.
+LINEAR_AND_THETA = PARAMS[:7]
+
+
+def default_params(drive: TwoMassDrive) -> tuple[str, ...]:
+    """The parameters whose sensitivities exist for ``drive``: paper A's seven, and
+    each Coulomb torque that is positive (at 0 the inertia has no friction switch, and
+    the derivative is one-sided)."""
+    return (*LINEAR_AND_THETA, *(n for n in PARAMS[7:] if getattr(drive, n) > 0))
 
 
 def sensitivities(
@@ -30,15 +40,16 @@ def sensitivities(
     *,
     initial_state: Sequence[float] | np.ndarray | None = None,
     states: bool = False,
-    params: Sequence[str] = PARAMS,
+    params: Sequence[str] | None = None,
 ) -> np.ndarray:
     """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to ``params``.
 
     Parameters
     ----------
     drive : TwoMassDrive
-        Without Coulomb friction (``fc_M = fc_L = 0``) and with ``theta > 0``; paper
-        A's contact law, no current loop.
+        With ``theta > 0``, and Coulomb friction whose breakaway torque is the Coulomb
+        torque (``fs_M`` None or ``fc_M``, and so for the load) or none; paper A's
+        contact law, no current loop.
     t : array_like
         Uniform, strictly increasing time grid in s.
     torque : array_like
@@ -49,8 +60,9 @@ def sensitivities(
     states : bool, optional
         Return the twist's sensitivity too; default False.
     params : sequence of str, optional
-        The parameters, distinct names of :data:`PARAMS` in the order wanted; default
-        all seven. The kernel carries only these (each adds work per sample).
+        The parameters, distinct names of :data:`PARAMS` in the order wanted, a Coulomb
+        torque only where it is positive; default :func:`default_params`. The kernel
+        carries only these (each adds work per sample).
 
     Returns
     -------
@@ -62,8 +74,9 @@ def sensitivities(
     Raises
     ------
     InputError
-        For a drive with Coulomb friction or without ``theta``, mismatched inputs, or
-        an unknown or repeated parameter.
+        For a drive without ``theta``, with a breakaway torque other than its Coulomb
+        torque, mismatched inputs, an unknown or repeated parameter, or a Coulomb
+        torque wanted where it is 0.
     ValueError
         From the kernel: invalid parameters, or a contact change that grazes a flank.
 
@@ -84,7 +97,7 @@ def trajectory_and_sensitivities(
     torque: Sequence[float] | np.ndarray,
     *,
     initial_state: Sequence[float] | np.ndarray | None = None,
-    params: Sequence[str] = PARAMS,
+    params: Sequence[str] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The states ``(len(t), 3)`` (``w_M``, ``w_L`` in rad/s, the twist in rad) and
     their sensitivities ``(len(t), 3, len(params))``, from one run.
@@ -95,16 +108,7 @@ def trajectory_and_sensitivities(
     """
     from . import _core
 
-    if not isinstance(drive, TwoMassDrive):
-        raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
-    if drive.theta is None or drive.fc_M or drive.fc_L:
-        raise InputError("the sensitivities need theta set and no Coulomb friction "
-                         "(fc_M = fc_L = 0)")
-    names = list(params)
-    unknown = [n for n in names if n not in PARAMS]
-    if unknown or len(set(names)) != len(names):
-        raise InputError(f"params must be distinct names among {', '.join(PARAMS)}, got "
-                         f"{params!r}")
+    names = check_scope(drive, params)
     t_arr, ts = v.time_grid(t)
     u = v.finite_array("torque", torque)
     if u.shape != t_arr.shape:
@@ -124,3 +128,28 @@ def trajectory_and_sensitivities(
             "are ill-conditioned (the derivative barely exists there)",
             SensitivityWarning, stacklevel=3)
     return x, out
+
+
+def check_scope(drive: TwoMassDrive, params: Sequence[str] | None) -> list[str]:
+    """The names of ``params`` (None: :func:`default_params`), checked against the
+    sensitivities' scope (the twin's too); a one-line :class:`InputError` otherwise."""
+    if not isinstance(drive, TwoMassDrive):
+        raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
+    if drive.theta is None:
+        raise InputError("the sensitivities need theta set (a drive with backlash)")
+    for side in ("M", "L"):
+        fc, fs = getattr(drive, f"fc_{side}"), getattr(drive, f"fs_{side}")
+        if fs is not None and fs != fc:
+            raise InputError(f"the sensitivities need fs_{side} equal to fc_{side} "
+                             f"(got {fs!r} and {fc!r} N m): no static friction beyond "
+                             "the Coulomb torque")
+    names = list(default_params(drive) if params is None else params)
+    unknown = [n for n in names if n not in PARAMS]
+    if unknown or len(set(names)) != len(names):
+        raise InputError(f"params must be distinct names among {', '.join(PARAMS)}, got "
+                         f"{params!r}")
+    zero = [n for n in names if n in PARAMS[7:] and getattr(drive, n) == 0]
+    if zero:
+        raise InputError(f"the sensitivity to {zero[0]} needs {zero[0]} > 0, got 0 (no "
+                         "friction switch to move)")
+    return names

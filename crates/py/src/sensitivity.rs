@@ -16,9 +16,10 @@ type SensitivityOutput<'py> = (
 
 /// The states `(len(u), 3)` and sensitivities `dx/dp` of a two-mass drive, shape
 /// `(len(u), 3, len(wanted))`: state `[w_M, w_L, phi]` by parameter, the parameters
-/// `wanted` (indices into `[J_M, J_L, k_sh, f_M, f_L, f_sh, theta]`), on the grid
-/// `t0 + i ts` under the held torque `u`, from `x0` with zero sensitivity (paper A's
-/// law, no Coulomb friction, no current loop); and the run's near-grazing passes
+/// `wanted` (indices into `[J_M, J_L, k_sh, f_M, f_L, f_sh, theta, fc_M, fc_L]`,
+/// the values `params` in that order), on the grid `t0 + i ts` under the held torque
+/// `u`, from `x0` with zero sensitivity (paper A's law, Coulomb friction with the
+/// breakaway torques equal to it, no current loop); and the run's near-grazing passes
 /// `(G, 3)` = `[time, shaft, margin]` as `simulate_chain` gives them. See
 /// `backlashkit._sensitivity`.
 #[pyfunction]

@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._sensitivity import PARAMS as SENSITIVITY_PARAMS
 from ..errors import SensitivityWarning
 from ..plants import TwoMassDrive
 from ..signals import highpass_noise_std
@@ -24,6 +25,7 @@ from ._model import (
     LINEAR_PARAMS,
     PACKED,
     PACKED_LONG,
+    TAU_COL,
     TIED,
     Span,
     model_angles,
@@ -152,17 +154,48 @@ class Problem:
         only windows are fitted (they skip the holds)."""
         return self.spans if final_h is None else self.screen
 
-    def simulate(self, z_rows: np.ndarray, spans: Sequence[Span],
-                 ends: list[int] | None = None) -> list[np.ndarray]:
-        """States of log-parameter rows over spans (each up to ``ends[k]`` samples)."""
+    def packed(self, z_rows: np.ndarray) -> np.ndarray:
+        """The packed parameter rows the kernel simulates for estimated rows
+        ``z_rows``: the floors and the tied breakaway torques applied."""
         p = np.repeat(self.base[np.newaxis, :], len(z_rows), axis=0)
         p[:, self.cols] = self.values(z_rows)
         for col, floor in self.floors.items():
             np.maximum(p[:, col], floor, out=p[:, col])
         for dst, src in self.ties:
             p[:, dst] = p[:, src]
+        return p
+
+    def simulate(self, z_rows: np.ndarray, spans: Sequence[Span],
+                 ends: list[int] | None = None) -> list[np.ndarray]:
+        """States of log-parameter rows over spans (each up to ``ends[k]`` samples)."""
+        p = self.packed(z_rows)
         return [simulate_span(p, sp, self.law, self.workers, None if ends is None else ends[k])
                 for k, sp in enumerate(spans)]
+
+    def exact_drive(self, z: np.ndarray) -> TwoMassDrive | None:
+        """The drive the compiled sensitivities take at ``z``, or None outside their
+        scope: another contact law, a current loop, a breakaway torque apart from its
+        Coulomb torque, or an estimated parameter they do not cover."""
+        if self.law != "paper" or not all(n in SENSITIVITY_PARAMS for n in self.names):
+            return None
+        p = self.packed(z[np.newaxis, :])[0]
+        if p.size == len(PACKED_LONG):
+            if p[TAU_COL] != 0.0 or any(p[PACKED_LONG.index(fs)] != p[PACKED_LONG.index(fc)]
+                                        for fs, fc in TIED.items()):
+                return None
+            p = p[: PACKED_LONG.index("fs_M")]
+        return TwoMassDrive(**{n: float(x) for n, x in zip(PACKED_LONG, p, strict=False)})
+
+    def exact_scale(self, z: np.ndarray) -> np.ndarray:
+        """``dp/dz`` of each estimated parameter at ``z``: ``p`` for a logarithm, the
+        scale for one in natural units, and 0 where a floor holds it (the kernel
+        simulates the floor, which does not move with ``z``)."""
+        values = self.values(z)
+        out = np.where(self.scales > 0, self.scales, values)
+        for i, col in enumerate(self.cols):
+            if col in self.floors and values[i] < self.floors[col]:
+                out[i] = 0.0
+        return out
 
     def residual(self, spans: Sequence[Span], horizon: float | None, sig: np.ndarray,
                  ar: np.ndarray | None = None) -> Residual:
@@ -260,25 +293,22 @@ class Residual:
         return ((self(zz) - r) / h).T
 
     def exact_jacobian(self, z: np.ndarray, *, with_theta: bool = True) -> np.ndarray | None:
-        """The Jacobian in log-parameters from the compiled forward sensitivities, one
-        run per span of the estimated parameters alone (without ``theta``'s column
-        where ``with_theta`` is false: a refit that holds it); None outside their scope
-        (a friction or loop term, a start that moves with the parameters, encoder
-        angles, another contact law) or where a contact change grazes (no derivative
-        there: the caller differences instead)."""
+        """The Jacobian in the estimated values from the compiled forward
+        sensitivities, one run per span of the estimated parameters alone (without
+        ``theta``'s column where ``with_theta`` is false: a refit that holds it); None
+        outside their scope (:meth:`Problem.exact_drive`; a start that moves with the
+        parameters, encoder angles) or where a change grazes (no derivative there: the
+        caller differences instead)."""
         pb = self.problem
-        if not (pb.law == "paper" and pb.base.size == len(PACKED)
-                and all(sp.level is None and sp.hold is None and not sp.positions
-                        for sp in self.spans)):
+        drive = pb.exact_drive(z)
+        if drive is None or not all(sp.level is None and sp.hold is None
+                                    and not sp.positions for sp in self.spans):
             return None
         from .._sensitivity import trajectory_and_sensitivities
 
-        p = pb.base.copy()
-        p[pb.cols] = pb.values(z)
-        drive = TwoMassDrive(**{n: float(x) for n, x in zip(PACKED, p, strict=True)})
         first = 0 if with_theta else 1
         names = pb.names[first:]
-        per_z = pb.values(z)[first:]  # d/dz = p d/dp for log-parameters
+        per_z = pb.exact_scale(z)[first:]  # dp/dz
         out = np.empty((self.n_res, len(names)))
         pos = 0
         for sp, s_, m, end in zip(self.spans, self.sels, self.sizes, self.ends, strict=True):
@@ -292,7 +322,8 @@ class Residual:
             for c in (0, 1):  # the residual is data - model: its rows move as -S
                 out[pos : pos + m - self.lag] = self.weigh(sp, c, -(sens[s_, c, :] * per_z).T).T
                 pos += m - self.lag
-        prior = np.nan_to_num(pb.values(z)[1:] / (pb.pen * pb.p_prior))
+        with np.errstate(invalid="ignore"):  # no penalty (inf) on the terms' parameters
+            prior = np.nan_to_num(pb.exact_scale(z)[1:] / (pb.pen * pb.p_prior))
         out[pos:] = 0.0
         out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
         return out

@@ -101,7 +101,8 @@ def cramer_rao_bound(
 
     ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the sensitivity of speed ``c`` (motor,
     load) to the estimated parameters: exact, from the compiled kernel, where the model
-    is its (paper A's law, no Coulomb friction or current loop, a known start), else by
+    is its (paper A's law, no current loop, Coulomb friction with no breakaway torque
+    of its own or none, a known start), else by
     central differences; with autoregressive noise
     (``noise_ar``) the sensitivities are whitened by ``A(q)`` first and ``s_c`` is the
     innovation's standard deviation (the likelihood of
@@ -199,14 +200,16 @@ def cramer_rao_bound(
 def _exact(drive, names, tau_i, t, torque, law, initial_state):
     """``((w_M, w_L), (S_M, S_L))`` of the nominal drive, ``S_c`` the exact sensitivities
     ``(samples, len(names))`` of the compiled kernel, where the model is in its scope
-    (paper A's law, no Coulomb friction or current loop, a known start); else
+    (paper A's law, no current loop, breakaway torques tied to the Coulomb torques,
+    a Coulomb torque estimated only where positive, a known start); else
     ``(None, None)``. One sensitivity run of the estimated parameters alone (the
     speeds come from the same run), against ``2 n + 1`` simulations of central
     differences."""
     from .._sensitivity import PARAMS, trajectory_and_sensitivities
 
-    if (law != "paper" or tau_i or drive.fc_M or drive.fc_L or drive.fs_M or drive.fs_L
-            or not set(names) <= set(PARAMS) or isinstance(initial_state, str)):
+    if (law != "paper" or tau_i or drive.fs_M is not None or drive.fs_L is not None
+            or not set(names) <= set(PARAMS) or isinstance(initial_state, str)
+            or any(getattr(drive, n) == 0 for n in names if n in PARAMS[7:])):
         return None, None
     x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
     try:

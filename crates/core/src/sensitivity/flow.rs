@@ -7,7 +7,7 @@
 //! the exponential's scaling and squaring by itself.
 
 use super::coupled::coupled_expm;
-use super::mode::{system, system_derivative, System};
+use super::mode::{system, system_derivative, Mode, System};
 use super::{N_PARAMS, N_STATES};
 use crate::linalg::{matvec, Mat, Vector};
 
@@ -33,20 +33,20 @@ pub(super) struct Flow {
 }
 
 impl Flow {
-    /// The flow of mode `flank` over `tau`, sensitivities scaled by `scale`: the
+    /// The flow of `mode` over `tau`, sensitivities scaled by `scale`: the
     /// exponential of `[[A, 0], [scale_j A_j, A]] tau` and its integral for every `j`
     /// (see `coupled`), applied to the inputs `[b, scale_j b_j]` and `[c, scale_j c_j]`.
     /// Only the `active` sensitivities are carried (the others stay 0).
     pub fn new(
         p: &[f64; N_PARAMS],
         scale: &[f64; N_PARAMS],
-        flank: i8,
+        mode: Mode,
         tau: f64,
         active: &[bool; N_PARAMS],
     ) -> Self {
-        let sys = system(p, flank);
+        let sys = system(p, mode);
         let der: [System; N_PARAMS] =
-            std::array::from_fn(|j| system_derivative(p, flank, j).scaled(scale[j]));
+            std::array::from_fn(|j| system_derivative(p, mode, j).scaled(scale[j]));
         let ex = coupled_expm(&sys.a, &der.map(|d| d.a), tau, active);
         let (fb, fc) = (matvec(&ex.f, &sys.b), matvec(&ex.f, &sys.c));
         let input = |j: usize, v: &Vector<N_STATES>, dv: &Vector<N_STATES>| {

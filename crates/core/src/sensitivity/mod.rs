@@ -1,7 +1,8 @@
-//! Exact forward sensitivities of the two-mass drive (issue 24, first step): the
-//! derivatives of the state `[w_M, w_L, phi]` with respect to the parameters
-//! [`PARAMS`], under paper A's contact law, without Coulomb friction or current loop,
-//! from a given state whose sensitivity is zero (rest, for the estimators).
+//! Exact forward sensitivities of the two-mass drive (issue 24): the derivatives of the
+//! state `[w_M, w_L, phi]` with respect to the parameters [`PARAMS`], under paper A's
+//! contact law, with Coulomb friction whose breakaway torque is the Coulomb torque
+//! (`fs = fc`) or none, without current loop, from a given state whose sensitivity is
+//! zero (rest, for the estimators).
 //!
 //! Inside a mode the drive is linear, `dx/dt = A x + b u + c`, and so is each
 //! sensitivity `S_j = dx/dp_j`: `dS_j/dt = A S_j + A_j x + b_j u + c_j` (`A_j = dA/dp_j`
@@ -10,6 +11,8 @@
 //! simulator's own); see `mode`, `flow` and `coupled`. The contact changes are those the simulator locates:
 //! the drive is simulated first and its events split the samples they fall in. At a
 //! change the sensitivities jump by the saltation `(f_- - f_+) dtau/dp`; see `run`.
+//! A stick-slip change is a change of mode like a contact change, with its own guard:
+//! the speed's zero crossing, or the breakaway of the torque on a stuck inertia.
 //!
 //! Where the shaft grazes a flank (`dphi/dt = 0` at the change) the derivative does not
 //! exist; near it the jump grows without bound. An exactly grazing change is an
@@ -27,11 +30,17 @@ mod tests;
 
 pub use run::{drive_sensitivities, drive_sensitivities_of, DriveSensitivities};
 
-/// The parameters, in the order of a sensitivity row: motor and load inertias, shaft
-/// stiffness, motor and load viscous frictions, shaft damping, backlash half-width.
-pub const PARAMS: [&str; N_PARAMS] = ["J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta"];
+/// The parameters, in the order of a parameter vector: motor and load inertias, shaft
+/// stiffness, motor and load viscous frictions, shaft damping, backlash half-width
+/// (paper A's model, the first [`N_LINEAR`]), then the motor's and the load's Coulomb
+/// torques (0: no Coulomb friction).
+pub const PARAMS: [&str; N_PARAMS] = [
+    "J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta", "fc_M", "fc_L",
+];
 /// Number of parameters.
-pub const N_PARAMS: usize = 7;
+pub const N_PARAMS: usize = 9;
+/// Paper A's model: the parameters before the Coulomb torques.
+pub const N_LINEAR: usize = 7;
 /// States of the two-mass drive: `[w_M, w_L, phi]`.
 pub const N_STATES: usize = 3;
 
@@ -44,4 +53,6 @@ pub(crate) mod index {
     pub const F_L: usize = 4;
     pub const D: usize = 5;
     pub const THETA: usize = 6;
+    pub const FC_M: usize = 7;
+    pub const FC_L: usize = 8;
 }

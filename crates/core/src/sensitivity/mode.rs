@@ -1,7 +1,10 @@
 //! A mode of the two-mass drive, `dx/dt = A x + b u + c`, and the derivatives of its
 //! matrices with respect to each parameter, written out from the torque balances.
+//!
+//! A mode is the shaft's contact and each inertia's friction switch: slipping forwards
+//! or backwards (the Coulomb torque `-+fc_i` on it) or stuck (its speed row zero).
 
-use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
+use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, THETA};
 use super::{N_PARAMS, N_STATES};
 use crate::linalg::{matvec, Mat, Vector};
 
@@ -29,18 +32,83 @@ impl System {
     }
 }
 
+/// The shaft's contact (0 the gap, +-1 a flank) and each inertia's friction switch
+/// (+-1 slipping forwards / backwards, 0 stuck); an inertia without Coulomb friction
+/// counts as slipping (its Coulomb torque is 0).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Mode {
+    pub flank: i8,
+    pub slip: [i8; 2],
+}
+
+impl Mode {
+    /// Contact `flank`, both inertias slipping forwards.
+    pub fn contact(flank: i8) -> Self {
+        Mode {
+            flank,
+            slip: [1, 1],
+        }
+    }
+
+    /// The mode's slot among the 27, for the cache of whole-sample flows.
+    pub fn slot(&self) -> usize {
+        let code = |m: i8| (m + 1) as usize;
+        (code(self.flank) * 3 + code(self.slip[0])) * 3 + code(self.slip[1])
+    }
+}
+
+/// Number of modes: three contacts times three switches of each inertia.
+pub(super) const N_MODES: usize = 27;
+
 /// Torque balances of the two inertias, `J_i dw_i/dt = r_i . x + beta_i u + gamma_i`,
 /// or their derivative with respect to a parameter other than an inertia.
 #[derive(Clone, Copy, Debug, Default)]
-struct Balance {
-    r: [Vector<N_STATES>; 2],
-    beta: [f64; 2],
-    gamma: [f64; 2],
+pub(super) struct Balance {
+    pub r: [Vector<N_STATES>; 2],
+    pub beta: [f64; 2],
+    pub gamma: [f64; 2],
 }
 
-/// The balances in mode `flank` (0 the gap, +-1 a flank): viscous friction, and in
-/// contact the shaft torque `k (phi - flank theta) + d (w_M - w_L)`.
-fn balance(p: &[f64; N_PARAMS], flank: i8) -> Balance {
+impl Balance {
+    /// Balance `i` at `x` under torque `u`.
+    pub fn torque(&self, i: usize, x: &Vector<N_STATES>, u: f64) -> f64 {
+        let rx: f64 = (0..N_STATES).map(|q| self.r[i][q] * x[q]).sum();
+        rx + self.beta[i] * u + self.gamma[i]
+    }
+}
+
+/// The balances of `mode` with its Coulomb torques, `-slip_i fc_i` on each inertia.
+fn balance_with_friction(p: &[f64; N_PARAMS], mode: Mode) -> Balance {
+    let mut bal = balance(p, mode.flank);
+    for (i, fc) in [p[FC_M], p[FC_L]].into_iter().enumerate() {
+        bal.gamma[i] -= mode.slip[i] as f64 * fc;
+    }
+    bal
+}
+
+/// The derivative of the balances of `mode` with respect to `j`, not an inertia.
+fn balance_with_friction_derivative(p: &[f64; N_PARAMS], mode: Mode, j: usize) -> Balance {
+    let mut db = balance_derivative(p, mode.flank, j);
+    if let Some(i) = [FC_M, FC_L].iter().position(|&f| f == j) {
+        db.gamma[i] = -(mode.slip[i] as f64);
+    }
+    db
+}
+
+/// `sys` with the speed rows of the stuck inertias of `mode` zero.
+fn stuck_rows_zero(mut sys: System, mode: Mode) -> System {
+    for i in (0..2).filter(|&i| mode.slip[i] == 0) {
+        sys.a[i] = [0.0; N_STATES];
+        (sys.b[i], sys.c[i]) = (0.0, 0.0);
+    }
+    sys
+}
+
+/// The balances in mode `flank` (0 the gap, +-1 a flank), Coulomb friction excluded:
+/// viscous friction, and in contact the shaft torque `k (phi - flank theta) + d (w_M -
+/// w_L)`. At a stuck inertia (zero speed) this is the torque its breakaway guard
+/// compares with `fs = fc`.
+pub(super) fn balance(p: &[f64; N_PARAMS], flank: i8) -> Balance {
     let (k, d, th) = (p[K], p[D], p[THETA]);
     let (on, s) = (flank.abs() as f64, flank as f64);
     Balance {
@@ -53,8 +121,9 @@ fn balance(p: &[f64; N_PARAMS], flank: i8) -> Balance {
     }
 }
 
-/// The derivative of the balances with respect to parameter `j`, not an inertia.
-fn balance_derivative(p: &[f64; N_PARAMS], flank: i8, j: usize) -> Balance {
+/// The derivative of the balances (Coulomb friction excluded) with respect to
+/// parameter `j`, not an inertia.
+pub(super) fn balance_derivative(p: &[f64; N_PARAMS], flank: i8, j: usize) -> Balance {
     let (on, s) = (flank.abs() as f64, flank as f64);
     let mut db = Balance::default();
     match j {
@@ -66,6 +135,7 @@ fn balance_derivative(p: &[f64; N_PARAMS], flank: i8, j: usize) -> Balance {
         F_L => db.r[1][1] = -1.0,
         D => db.r = [[-on, on, 0.0], [on, -on, 0.0]],
         THETA => db.gamma = [s * p[K], -s * p[K]],
+        FC_M | FC_L => {}
         _ => unreachable!("inertias are handled by system_derivative"),
     }
     db
@@ -86,23 +156,29 @@ fn from_balance(bal: &Balance, inertia: [f64; 2], twist: bool) -> System {
     sys
 }
 
-/// `(A, b, c)` of mode `flank`.
-pub(super) fn system(p: &[f64; N_PARAMS], flank: i8) -> System {
-    from_balance(&balance(p, flank), [p[J_M], p[J_L]], true)
+/// `(A, b, c)` of `mode`.
+pub(super) fn system(p: &[f64; N_PARAMS], mode: Mode) -> System {
+    let sys = from_balance(&balance_with_friction(p, mode), [p[J_M], p[J_L]], true);
+    stuck_rows_zero(sys, mode)
 }
 
-/// The derivative of `(A, b, c)` of mode `flank` with respect to parameter `j`.
-pub(super) fn system_derivative(p: &[f64; N_PARAMS], flank: i8, j: usize) -> System {
-    match j {
+/// The derivative of `(A, b, c)` of `mode` with respect to parameter `j`.
+pub(super) fn system_derivative(p: &[f64; N_PARAMS], mode: Mode, j: usize) -> System {
+    let sys = match j {
         // d(row / J)/dJ = -row / J^2, on that inertia's row only.
         J_M | J_L => {
             let i = j - J_M;
-            let mut bal = balance(p, flank);
+            let mut bal = balance_with_friction(p, mode);
             bal.r[1 - i] = [0.0; N_STATES];
             (bal.beta[1 - i], bal.gamma[1 - i]) = (0.0, 0.0);
             let sq = [p[J_M] * p[J_M], p[J_L] * p[J_L]];
             from_balance(&bal, sq, false).scaled(-1.0)
         }
-        _ => from_balance(&balance_derivative(p, flank, j), [p[J_M], p[J_L]], false),
-    }
+        _ => from_balance(
+            &balance_with_friction_derivative(p, mode, j),
+            [p[J_M], p[J_L]],
+            false,
+        ),
+    };
+    stuck_rows_zero(sys, mode)
 }

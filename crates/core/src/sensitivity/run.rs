@@ -1,11 +1,11 @@
-//! Sensitivities along a run: the samples, split at the simulator's contact changes,
-//! and the saltation jump at each change.
+//! Sensitivities along a run: the samples, split at the simulator's contact and
+//! stick-slip changes, and the saltation jump at each change.
 
 use super::flow::{Augmented, Flow};
-use super::index::{D, F_L, F_M, J_L, J_M, K, THETA};
+use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, THETA};
 use super::lanes::{groups, Group};
-use super::mode::system;
-use super::{N_PARAMS, N_STATES};
+use super::mode::{balance, balance_derivative, system, Mode, N_MODES};
+use super::{N_LINEAR, N_PARAMS, N_STATES, PARAMS};
 use crate::chain::{simulate_chain, ChainParams, Law};
 use crate::hybrid::{Event, Graze};
 use crate::Error;
@@ -25,10 +25,11 @@ pub struct DriveSensitivities {
 }
 
 /// Sensitivities `dx/dp` of the two-mass drive on the grid `t0 + i ts`, row-major
-/// `(u.len(), 3, 7)`: state `[w_M, w_L, phi]` by parameter (order
-/// [`PARAMS`](super::PARAMS)), in the parameters' SI units. The torque `u[i]` is held
-/// over `[t_i, t_{i+1})`; the run starts at `x0` with zero sensitivity (paper A's law,
-/// no Coulomb friction, no current loop).
+/// `(u.len(), 3, 7)`: state `[w_M, w_L, phi]` by parameter of paper A's model (the
+/// first [`N_LINEAR`] of [`PARAMS`]), in the parameters' SI units. The torque `u[i]`
+/// is held over `[t_i, t_{i+1})`; the run starts at `x0` with zero sensitivity (paper
+/// A's law, Coulomb friction `p[7..]` with breakaway torques equal to it, no current
+/// loop).
 ///
 /// Also returns the simulator's near-grazing passes.
 ///
@@ -42,8 +43,8 @@ pub fn drive_sensitivities(
     u: &[f64],
     x0: &[f64],
 ) -> Result<DriveSensitivities, Error> {
-    let all: [usize; N_PARAMS] = std::array::from_fn(|j| j);
-    drive_sensitivities_of(p, t0, ts, u, x0, &all)
+    let linear: [usize; N_LINEAR] = std::array::from_fn(|j| j);
+    drive_sensitivities_of(p, t0, ts, u, x0, &linear)
 }
 
 /// As [`drive_sensitivities`], for the parameters `wanted` only (indices into
@@ -51,7 +52,9 @@ pub fn drive_sensitivities(
 /// column adds two small matrix-vector products per sample, so a bound or a fit that
 /// estimates a few parameters pays for those alone.
 ///
-/// Errors: as [`drive_sensitivities`], and an index out of range or repeated.
+/// Errors: as [`drive_sensitivities`], an index out of range or repeated, and a
+/// Coulomb torque wanted where it is 0 (the inertia has no friction switch there, and
+/// the derivative is one-sided).
 pub fn drive_sensitivities_of(
     p: &[f64; N_PARAMS],
     t0: f64,
@@ -69,6 +72,12 @@ pub fn drive_sensitivities_of(
         }
         active[j] = true;
     }
+    if let Some(&j) = wanted.iter().find(|&&j| j >= N_LINEAR && p[j] == 0.0) {
+        return Err(Error::InvalidArgument(format!(
+            "the sensitivity to {} needs {} > 0, got 0",
+            PARAMS[j], PARAMS[j]
+        )));
+    }
     let chain = chain_params(p)?;
     if !t0.is_finite() {
         return Err(Error::InvalidArgument(format!(
@@ -76,9 +85,14 @@ pub fn drive_sensitivities_of(
         )));
     }
     let run = simulate_chain(&chain, Law::Paper, t0, ts, u, x0)?;
-    let Some(&first_mode) = run.modes.first() else {
+    let sticky = chain.sticky();
+    let Some(first) = run.modes.get(..1 + sticky.len()) else {
         return Ok(DriveSensitivities::default());
     };
+    let mut mode = Mode::contact(first[0]);
+    for (r, &i) in sticky.iter().enumerate() {
+        mode.slip[i] = first[1 + r];
+    }
     // Sensitivities are carried per log-parameter (see `flow`); a zero friction or
     // damping keeps the plain derivative.
     let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
@@ -94,9 +108,11 @@ pub fn drive_sensitivities_of(
         unscale: scale.map(|v| 1.0 / v),
         active,
         wanted,
-        flank: first_mode,
+        sticky,
+        mode,
         z,
-        full: [None, None, None],
+        last: (f64::NAN, [0.0; N_PARAMS]),
+        full: std::array::from_fn(|_| None),
     };
     let values = walk.run(t0, ts, u, &run.states, &run.events)?;
     Ok(DriveSensitivities {
@@ -108,14 +124,18 @@ pub fn drive_sensitivities_of(
 
 /// The chain of the two-mass drive, validated; `theta` must be positive, the NumPy
 /// twin's scope (with no gap both flanks' changes fall at one instant, not checked).
+/// The breakaway torques are the Coulomb torques (`fs` left empty).
 fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
-    let chain = ChainParams::new(
+    let mut chain = ChainParams::new(
         vec![p[J_M], p[J_L]],
         vec![p[F_M], p[F_L]],
         vec![p[K]],
         vec![p[D]],
         vec![p[THETA]],
     );
+    if p[FC_M] != 0.0 || p[FC_L] != 0.0 {
+        chain.fc = vec![p[FC_M], p[FC_L]];
+    }
     chain.validate()?;
     if p[THETA] <= 0.0 {
         return Err(Error::InvalidArgument(format!(
@@ -135,12 +155,16 @@ struct Walk<'a> {
     /// The sensitivities carried, and the order they are written in.
     active: [bool; N_PARAMS],
     wanted: &'a [usize],
-    /// Current contact mode: 0 the gap, +-1 a flank.
-    flank: i8,
+    /// The inertias with a friction switch: switch `1 + r` of an event is `sticky[r]`'s.
+    sticky: Vec<usize>,
+    /// Current mode: contact and friction switches.
+    mode: Mode,
     z: Augmented,
-    /// Whole-sample flows of the modes -1, 0, +1 in groups of columns, built when
-    /// first needed.
-    full: [Option<Vec<Group>>; 3],
+    /// The last change's time and `dtau/dp`, for a breakaway it sets off.
+    last: (f64, [f64; N_PARAMS]),
+    /// Whole-sample flows of the modes in groups of columns (by [`Mode::slot`]),
+    /// built when first needed.
+    full: [Option<Vec<Group>>; N_MODES],
 }
 
 impl Walk<'_> {
@@ -160,10 +184,11 @@ impl Walk<'_> {
         let mut out = vec![0.0; n * row];
         let (mut k, mut next_event) = (0, 0);
         loop {
-            // Changes up to a sample's end, inclusive, belong to that sample.
-            let next_time = events.get(next_event).map_or(f64::INFINITY, |e| e.time);
+            // Changes up to a sample's end, inclusive, belong to that sample; but a
+            // breakaway at a sample's start is the next torque's (see `pinned`).
+            let next = events.get(next_event);
             let split = (k..n - 1)
-                .find(|&i| t0 + (i + 1) as f64 * ts >= next_time)
+                .find(|&i| next.is_some_and(|e| within(e, t0 + (i + 1) as f64 * ts)))
                 .unwrap_or(n - 1);
             self.steady(ts, k, split, u, states, &mut out[k * row..]);
             self.z.x = std::array::from_fn(|i| states[split * N_STATES + i]);
@@ -173,9 +198,9 @@ impl Walk<'_> {
             }
             let (t_start, t_end) = (t0 + split as f64 * ts, t0 + (split + 1) as f64 * ts);
             let mut t_now = t_start;
-            while let Some(ev) = events.get(next_event).filter(|e| e.time <= t_end) {
+            while let Some(ev) = events.get(next_event).filter(|e| within(e, t_end)) {
                 self.advance(u[split], ev.time - t_now);
-                self.jump(ev, u[split])?;
+                self.jump(ev, u[split], pinned(ev, t_start))?;
                 (t_now, next_event) = (ev.time, next_event + 1);
             }
             self.advance(u[split], t_end - t_now);
@@ -197,11 +222,10 @@ impl Walk<'_> {
         if end == k || self.wanted.is_empty() {
             return;
         }
-        let slot = (self.flank + 1) as usize;
-        let (p, scale, flank, active) = (self.p, &self.scale, self.flank, &self.active);
+        let (p, scale, mode, active) = (self.p, &self.scale, self.mode, &self.active);
         let (wanted, unscale) = (self.wanted, &self.unscale);
-        let groups = self.full[slot].get_or_insert_with(|| {
-            groups(&Flow::new(p, scale, flank, ts, active), wanted, unscale)
+        let groups = self.full[mode.slot()].get_or_insert_with(|| {
+            groups(&Flow::new(p, scale, mode, ts, active), wanted, unscale)
         });
         let x = &states[k * N_STATES..end * N_STATES];
         for group in groups.iter() {
@@ -222,35 +246,119 @@ impl Walk<'_> {
     /// Advance by `tau` in the current mode (nothing for `tau <= 0`).
     fn advance(&mut self, u: f64, tau: f64) {
         if tau > 0.0 {
-            let flow = Flow::new(self.p, &self.scale, self.flank, tau, &self.active);
+            let flow = Flow::new(self.p, &self.scale, self.mode, tau, &self.active);
             flow.apply(&mut self.z, u, self.wanted);
         }
     }
 
-    /// The change `ev` at the current state: the guard `g = phi - s theta` (`s` the
-    /// flank met or left) moves by `dtau/dp = -(dg/dx S + dg/dp) / (dg/dx f_-)` and the
-    /// sensitivities jump by `(f_- - f_+) dtau/dp`.
-    fn jump(&mut self, ev: &Event, u: f64) -> Result<(), Error> {
-        let side = if ev.from == 0 { ev.to } else { ev.from } as f64;
-        let f_minus = system(self.p, self.flank).field(&self.z.x, u);
-        let f_plus = system(self.p, ev.to).field(&self.z.x, u);
-        // dg/dx = [0, 0, 1]: the guard's rate is the twist rate w_M - w_L.
-        let rate = f_minus[2];
+    /// The change `ev` at the current state. It moves by `dtau/dp = -(dg/dx S + dg/dp)
+    /// / (dg/dx f_-)`, its guard `g` linearised, and the sensitivities jump by `(f_- -
+    /// f_+) dtau/dp`. A breakaway that another change or the torque's step set off at
+    /// its instant (its guard jumped past 0 there) moves with that cause instead: by
+    /// the other change's `dtau/dp`, or not at all (`pinned`).
+    fn jump(&mut self, ev: &Event, u: f64, pinned: bool) -> Result<(), Error> {
+        let mut after = self.mode;
+        let stuck = if ev.index == 0 {
+            after.flank = ev.to;
+            None
+        } else {
+            let i = self.sticky[ev.index - 1];
+            after.slip[i] = ev.to;
+            (ev.to == 0).then_some(i)
+        };
+        let f_minus = system(self.p, self.mode).field(&self.z.x, u);
+        let f_plus = system(self.p, after).field(&self.z.x, u);
+        let set_off = ev.index > 0 && ev.from == 0 && self.last.0 == ev.time;
+        let dtau = if pinned {
+            [0.0; N_PARAMS]
+        } else if set_off {
+            self.last.1
+        } else {
+            let guard = self.guard(ev, &f_minus, u);
+            std::array::from_fn(|j| {
+                -(guard.slope(&self.z.s[j]) + guard.dg_dp[j]) / guard.rate
+            })
+        };
         for j in (0..N_PARAMS).filter(|&j| self.active[j]) {
-            let dg_dp = if j == THETA {
-                -side * self.scale[j]
-            } else {
-                0.0
-            };
-            let dtau = -(self.z.s[j][2] + dg_dp) / rate;
-            if !dtau.is_finite() {
+            if !dtau[j].is_finite() {
                 return Err(Error::Grazing { time: ev.time });
             }
             for i in 0..N_STATES {
-                self.z.s[j][i] += (f_minus[i] - f_plus[i]) * dtau;
+                self.z.s[j][i] += (f_minus[i] - f_plus[i]) * dtau[j];
+            }
+            if let Some(i) = stuck {
+                self.z.s[j][i] = 0.0; // the jump's value, to rounding
             }
         }
-        self.flank = ev.to;
+        if let Some(i) = stuck {
+            self.z.x[i] = 0.0; // as the simulator sets it
+        }
+        (self.mode, self.last) = (after, (ev.time, dtau));
         Ok(())
+    }
+
+    /// The guard of change `ev` linearised at the current state: a contact change's
+    /// `phi - s theta` (`s` the flank met or left); a slipping inertia's speed `w_i`
+    /// crossing zero; a stuck inertia's breakaway `s T_i - fc_i`, `T_i` the torque on
+    /// it (input and shaft, friction excluded) and `s` the direction it breaks away
+    /// in, the breakaway torque tied to the Coulomb torque.
+    fn guard(&self, ev: &Event, f_minus: &[f64; N_STATES], u: f64) -> Guard {
+        let mut g = Guard {
+            dg_dx: [0.0; N_STATES],
+            dg_dp: [0.0; N_PARAMS],
+            rate: 0.0,
+        };
+        if ev.index == 0 {
+            let side = if ev.from == 0 { ev.to } else { ev.from } as f64;
+            g.dg_dx[2] = 1.0;
+            g.dg_dp[THETA] = -side * self.scale[THETA];
+        } else if ev.from != 0 {
+            // The sign of g = -m w_i cancels in dtau: w_i itself serves.
+            g.dg_dx[self.sticky[ev.index - 1]] = 1.0;
+        } else {
+            let (i, s) = (self.sticky[ev.index - 1], ev.to as f64);
+            let flank = self.mode.flank;
+            g.dg_dx = balance(self.p, flank).r[i].map(|v| s * v);
+            for j in (0..N_PARAMS).filter(|&j| self.active[j] && j != J_M && j != J_L) {
+                let torque = balance_derivative(self.p, flank, j).torque(i, &self.z.x, u);
+                g.dg_dp[j] = s * torque * self.scale[j];
+            }
+            let fc = [FC_M, FC_L][i];
+            if self.active[fc] {
+                g.dg_dp[fc] -= self.scale[fc];
+            }
+        }
+        g.rate = g.slope(f_minus);
+        g
+    }
+}
+
+/// Whether change `ev` belongs to the sample ending at `t_end`: it is before, or at
+/// the end and not [`pinned`] there.
+fn within(ev: &Event, t_end: f64) -> bool {
+    ev.time < t_end || (ev.time == t_end && !pinned(ev, t_end))
+}
+
+/// Whether change `ev` is a breakaway at the sample's start `t_start`: the torque
+/// stepped past the breakaway torque there, so the change stays at that instant as
+/// the parameters move (`dtau/dp = 0`), under the new sample's torque. The simulator
+/// finds it at the start of that sample, at exactly this time; a breakaway that the
+/// flow drives lands on a sample's instant only by chance.
+fn pinned(ev: &Event, t_start: f64) -> bool {
+    ev.index > 0 && ev.from == 0 && ev.time == t_start
+}
+
+/// A change's guard linearised: `dg/dx`, `dg/dp` per log-parameter, and its rate
+/// `dg/dx f_-` along the flow before the change.
+struct Guard {
+    dg_dx: [f64; N_STATES],
+    dg_dp: [f64; N_PARAMS],
+    rate: f64,
+}
+
+impl Guard {
+    /// `dg/dx v`.
+    fn slope(&self, v: &[f64; N_STATES]) -> f64 {
+        (0..N_STATES).map(|q| self.dg_dx[q] * v[q]).sum()
     }
 }
