@@ -1,22 +1,38 @@
 """Forward sensitivities of a two-mass drive with backlash, in plain NumPy (issue 24).
 
-The reference for the compiled sensitivities to come: the derivatives of the speeds
-with respect to the parameters ``J_M, J_L, k_sh, f_M, f_L, f_sh, theta`` of a drive
-without Coulomb friction or current loop, under paper A's contact law, from rest. Not
-yet used by the estimators, which still difference simulations.
+The reference for the compiled sensitivities (:mod:`backlashkit._sensitivity`, which
+takes the same conventions): the derivatives of the speeds with respect to the
+parameters :data:`PARAMS` (``J_M, J_L, k_sh, f_M, f_L, f_sh, theta`` and the Coulomb
+torques ``fc_M, fc_L``) of a drive under paper A's contact law, from rest, without
+current loop, with Coulomb friction whose breakaway torque is the Coulomb torque
+(``fs = fc``: the two are one parameter). Not used by the estimators.
 
+A mode is the shaft's contact (gap, or flank ``s = +-1``) and, for each inertia with
+``fc > 0``, its friction switch: slipping forwards or backwards (``+1`` / ``-1``, a
+Coulomb torque ``-+fc`` on it) or stuck (``0``, its speed row of the dynamics zero).
 Inside a mode the drive is linear, ``dx/dt = A x + b u + c``, and so are its
 sensitivities ``S = dx/dp``: ``dS_j/dt = A S_j + dA/dp_j x + db/dp_j u + dc/dp_j``. The
-state and the seven sensitivities together follow one linear system, whose flow over a
+state and the sensitivities together follow one linear system, whose flow over a
 sample of held torque is exact (a matrix exponential, as the simulator's own). The
 derivatives of ``A``, ``b`` and ``c`` are taken by complex step, exact to rounding.
 
-At a contact change at time ``tau`` the guard ``g = phi - s theta`` crosses 0 (``s``
-the flank). The change moves with the parameters, ``dtau/dp = -(dg/dx S + dg/dp) /
-(dg/dx f_-)``, and the sensitivities jump by the saltation ``S_+ = S_- + (f_- - f_+)
-dtau/dp``, ``f_-`` and ``f_+`` the vector fields before and after. Where the shaft
-grazes a flank (``dphi/dt = 0`` at the change) the derivative does not exist, and the
-jump grows without bound near it.
+The run walks the simulator's changes in time order. At a change at time ``tau`` a
+guard ``g`` crosses 0, the change moves with the parameters, ``dtau/dp = -(dg/dx S +
+dg/dp) / (dg/dx f_-)``, and the sensitivities jump by the saltation ``S_+ = S_- + (f_-
+- f_+) dtau/dp``, ``f_-`` and ``f_+`` the vector fields before and after. The guards:
+
+* the shaft meets or leaves flank ``s``: ``g = phi - s theta``;
+* inertia ``i`` slipping in direction ``m`` stops (it sticks, or slips on the other
+  way): ``g = -m w_i``; after a stick ``w_i`` and its sensitivities are exactly 0;
+* inertia ``i`` stuck breaks away in direction ``s``: ``g = s T_i - fc_i``, ``T_i``
+  the torque on it from the input and the shaft (friction excluded). A breakaway
+  whose guard is already positive at the change was set off by another change at
+  that instant (a contact's damper torque) and moves with it, or by the torque's step
+  at a sample instant and does not move.
+
+Where a guard is crossed at zero rate (the shaft grazes a flank, an inertia creeps to
+a stop, the torque on a stuck one barely exceeds ``fc``) the derivative does not exist,
+and the jump grows without bound near it; at exactly zero rate a ValueError is raised.
 """
 
 from __future__ import annotations
@@ -24,45 +40,73 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
+from ._sensitivity import PARAMS, default_params
+from .errors import InputError
 from .plants import TwoMassDrive
 
-#: The parameters, in the order of the sensitivities' last axis.
-PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta")
+__all__ = ["PARAMS", "sensitivities"]
+
 #: Complex step of the derivatives of the mode matrices (exact for h far below 1).
 COMPLEX_STEP = 1e-30
-N_STATES, N_PARAMS = 3, len(PARAMS)
+N_STATES = 3
+#: A breakaway whose guard exceeds this share of the Coulomb torque at the change did
+#: not cross it there but was set off (a located crossing is at 0 to about 1e-10 of it,
+#: the simulator's tolerance and the two runs' rounding).
+PINNED_RTOL = 1e-6
+#: Changes closer than this share of a sample are at the same instant (the simulator's
+#: times of one instant differ by rounding).
+SAME_INSTANT = 1e-9
+#: Index in :data:`PARAMS` of each inertia's Coulomb torque (0 the motor, 1 the load).
+_FC = (PARAMS.index("fc_M"), PARAMS.index("fc_L"))
+#: The friction switch of an inertia without Coulomb friction: slipping forwards, which
+#: adds nothing (its Coulomb torque is 0).
+NO_SWITCH = 1
 
 
-def mode_system(p, flank: int):
-    """``(A, b, c)`` of a mode: the gap (``flank`` 0) or a flank (+-1), for parameters
-    ``p`` (order :data:`PARAMS`; real or complex)."""
-    j_m, j_l, k, f_m, f_l, d, theta = p
+def mode_system(p, mode: tuple[int, int, int], *, friction: bool = True):
+    """``(A, b, c)`` of ``mode = (flank, m_M, m_L)`` for parameters ``p`` (the nine of
+    :data:`PARAMS`, real or complex); without the viscous and Coulomb friction when not
+    ``friction`` (``J_i`` times row ``i`` is then the torque on inertia ``i``)."""
+    j_m, j_l, k, f_m, f_l, d, theta, fc_m, fc_l = p
+    flank = mode[0]
     dtype = np.result_type(*p, float)
     a = np.zeros((N_STATES, N_STATES), dtype)
     c = np.zeros(N_STATES, dtype)
-    a[0, 0], a[1, 1] = -f_m / j_m, -f_l / j_l
+    if friction:
+        a[0, 0], a[1, 1] = -f_m / j_m, -f_l / j_l
     a[2, 0], a[2, 1] = 1.0, -1.0
     if flank:  # shaft torque k (phi - s theta) + d (w_M - w_L)
         a[0] += np.array([-d, d, -k]) / j_m
         a[1] += np.array([d, -d, k]) / j_l
         c[0], c[1] = k * flank * theta / j_m, -k * flank * theta / j_l
     b = np.array([1.0 / j_m, 0.0, 0.0], dtype)
+    if friction:
+        for i, (j_i, fc_i) in enumerate(((j_m, fc_m), (j_l, fc_l))):
+            if mode[1 + i] == 0:  # stuck: the speed stays at 0
+                a[i], b[i], c[i] = 0.0, 0.0, 0.0
+            else:
+                c[i] -= mode[1 + i] * fc_i / j_i
     return a, b, c
 
 
-def augmented_flow(p: np.ndarray, flank: int, tau: float):
-    """``(Phi, Gamma)``: ``z(tau) = Phi z(0) + Gamma [u, 1]`` for ``z = [x, S_1 .. S_7]``
-    in a mode under a held torque ``u``."""
-    a, b, c = mode_system(p, flank)
-    n, m = N_STATES, N_STATES * (1 + N_PARAMS)
+def _complex_step(p: np.ndarray, col: int) -> np.ndarray:
+    pj = p.astype(complex)
+    pj[col] += 1j * COMPLEX_STEP
+    return pj
+
+
+def augmented_flow(p: np.ndarray, mode: tuple[int, int, int], tau: float, cols):
+    """``(Phi, Gamma)``: ``z(tau) = Phi z(0) + Gamma [u, 1]`` for ``z = [x, S_1 ..]``,
+    the sensitivities to the parameters ``cols`` (indices in :data:`PARAMS`), in a mode
+    under a held torque ``u``."""
+    a, b, c = mode_system(p, mode)
+    n, m = N_STATES, N_STATES * (1 + len(cols))
     big = np.zeros((m + 2, m + 2))
-    for blk in range(1 + N_PARAMS):
+    for blk in range(1 + len(cols)):
         big[blk * n:(blk + 1) * n, blk * n:(blk + 1) * n] = a
     big[:n, m], big[:n, m + 1] = b, c
-    for j in range(N_PARAMS):
-        pj = p.astype(complex)
-        pj[j] += 1j * COMPLEX_STEP
-        da, db, dc = (x.imag / COMPLEX_STEP for x in mode_system(pj, flank))
+    for j, col in enumerate(cols):
+        da, db, dc = (x.imag / COMPLEX_STEP for x in mode_system(_complex_step(p, col), mode))
         rows = slice((1 + j) * n, (2 + j) * n)
         big[rows, :n] = da
         big[rows, m], big[rows, m + 1] = db, dc
@@ -70,71 +114,187 @@ def augmented_flow(p: np.ndarray, flank: int, tau: float):
     return e[:m, :m], e[:m, m:]
 
 
-def field(p: np.ndarray, flank: int, x: np.ndarray, u: float) -> np.ndarray:
+def field(p: np.ndarray, mode: tuple[int, int, int], x: np.ndarray, u: float) -> np.ndarray:
     """The vector field ``A x + b u + c`` of a mode."""
-    a, b, c = mode_system(p, flank)
+    a, b, c = mode_system(p, mode)
     return a @ x + b * u + c
 
 
-def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray) -> np.ndarray:
-    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to :data:`PARAMS`, from rest.
+def drive_torque(p, flank: int, i: int, x: np.ndarray, u: float):
+    """The torque in N m on inertia ``i`` from the input and the shaft (friction
+    excluded) at the state ``x``; complex with complex ``p``."""
+    a, b, c = mode_system(p, (flank, NO_SWITCH, NO_SWITCH), friction=False)
+    return p[i] * (a[i] @ x + b[i] * u + c[i])  # p[i]: J_i
+
+
+def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
+                  params=None) -> np.ndarray:
+    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to ``params``, from rest.
 
     Parameters
     ----------
     drive : TwoMassDrive
-        Without Coulomb friction (``fc_M = fc_L = 0``), ``theta > 0``.
+        With ``theta > 0``, and each breakaway torque the Coulomb torque (``fs_M`` and
+        ``fs_L`` None or equal to ``fc_M``, ``fc_L``).
     t, torque : numpy.ndarray
-        Uniform time grid in s and the torque in N m held over each sample.
+        Uniform time grid in s and the motor torque in N m held over each sample (no
+        current loop).
+    params : sequence of str, optional
+        Distinct names of :data:`PARAMS`, in the order wanted; default
+        :func:`~backlashkit._sensitivity.default_params` (``fc_i`` only where > 0).
 
     Returns
     -------
     numpy.ndarray
-        ``(len(t), 2, 7)``: ``d w / d p`` in the parameters' SI units.
+        ``(len(t), 2, len(params))``: ``d w / d p`` in the parameters' SI units.
+
+    Raises
+    ------
+    InputError
+        For a drive other than the above, or a parameter unknown, repeated, or a
+        Coulomb torque that is 0 (its derivative is one-sided).
+    ValueError
+        At a change whose guard is crossed at zero rate (exactly grazing).
     """
+    names = _checked_params(drive, params)
+    cols = [PARAMS.index(n) for n in names]
     p = np.array([getattr(drive, n) for n in PARAMS], float)
     ts = float(t[1] - t[0])
     res = drive.simulate(t, torque)
-    changes = [(e.time, 0 if e.kind == "contact_lost" else (1 if e.flank == "positive" else -1),
-                1 if e.flank == "positive" else -1) for e in res.contact_events]
-    z = np.zeros(N_STATES * (1 + N_PARAMS))
-    flank, i_ev, full = 0, 0, {}
-    out = np.empty((t.size, 2, N_PARAMS))
+    sticky = [i for i in (0, 1) if p[_FC[i]] > 0]
+    changes = [(time, int(j), int(to)) for time, j, _, to in res.event_array.tolist()]
+    mode = _initial_mode(res, sticky)
+    z = np.zeros(N_STATES * (1 + len(cols)))
+    i_ev, full, last = 0, {}, (-np.inf, None)
+    out = np.empty((t.size, 2, len(cols)))
     for k in range(t.size):
-        out[k] = z[N_STATES:].reshape(N_PARAMS, N_STATES)[:, :2].T
+        out[k] = z[N_STATES:].reshape(len(cols), N_STATES)[:, :2].T
         if k == t.size - 1:
             break
         t_now, u = float(t[k]), float(torque[k])
         while i_ev < len(changes) and changes[i_ev][0] <= t[k + 1]:
-            t_ev, to, s = changes[i_ev]
-            z = _advance(p, flank, z, u, t_ev - t_now)
-            z = saltation(p, z, u, flank, to, s)
-            flank, t_now, i_ev = to, t_ev, i_ev + 1
+            t_ev, j, to = changes[i_ev]
+            z = _advance(p, mode, z, u, t_ev - t_now, cols)
+            z, mode, last = _change(p, z, u, mode, (j, to), (t_ev, ts, last), cols)
+            t_now, i_ev = t_ev, i_ev + 1
         if t_now == t[k]:  # a whole sample in one mode: its flow is cached
-            if flank not in full:
-                full[flank] = augmented_flow(p, flank, ts)
-            phi, gam = full[flank]
+            if mode not in full:
+                full[mode] = augmented_flow(p, mode, ts, cols)
+            phi, gam = full[mode]
             z = phi @ z + gam @ np.array([u, 1.0])
         else:
-            z = _advance(p, flank, z, u, float(t[k + 1]) - t_now)
+            z = _advance(p, mode, z, u, float(t[k + 1]) - t_now, cols)
     return out
 
 
-def _advance(p, flank, z, u, tau):
+def _checked_params(drive, params) -> tuple[str, ...]:
+    """The parameters' names, after the checks of :func:`sensitivities`."""
+    if not isinstance(drive, TwoMassDrive):
+        raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
+    if drive.theta is None or drive.theta <= 0:
+        raise InputError(f"the sensitivities need theta > 0, got {drive.theta!r}")
+    for side in ("M", "L"):
+        fs, fc = getattr(drive, f"fs_{side}"), getattr(drive, f"fc_{side}")
+        if fs is not None and fs != fc:
+            raise InputError(f"fs_{side} = {fs!r} differs from fc_{side} = {fc!r} N m: the "
+                             "sensitivities need the breakaway torque equal to the Coulomb "
+                             f"torque (leave fs_{side} None)")
+    names = default_params(drive) if params is None else tuple(params)
+    if any(n not in PARAMS for n in names) or len(set(names)) != len(names):
+        raise InputError(f"params must be distinct names among {', '.join(PARAMS)}, got "
+                         f"{params!r}")
+    for n in names:
+        if n in ("fc_M", "fc_L") and getattr(drive, n) == 0:
+            raise InputError(f"{n} is 0: the inertia has no friction switch and the "
+                             f"derivative is one-sided; leave {n} out of params")
+    return names
+
+
+def _initial_mode(res, sticky: list[int]) -> tuple[int, int, int]:
+    """``(flank, m_M, m_L)`` at the start of the response ``res``."""
+    m = [NO_SWITCH, NO_SWITCH]
+    for r, i in enumerate(sticky):
+        m[i] = int(res.friction_modes[0, r])
+    return (int(res.modes[0, 0]), *m)
+
+
+def _advance(p, mode, z, u, tau, cols):
     if tau <= 0.0:
         return z
-    phi, gam = augmented_flow(p, flank, tau)
+    phi, gam = augmented_flow(p, mode, tau, cols)
     return phi @ z + gam @ np.array([u, 1.0])
 
 
-def saltation(p: np.ndarray, z: np.ndarray, u: float, before: int, after: int, s: int
-              ) -> np.ndarray:
-    """``z`` after a contact change from mode ``before`` to ``after`` at the flank
-    ``s``: the sensitivities jump by ``(f_- - f_+) dtau/dp``."""
+def _change(p, z, u, before, change, when, cols):
+    """``(z, mode, (time, dtau/dp))`` after the change ``(slot, to)`` (the simulator's
+    event row ``j``: 0 the shaft, ``1 + i`` inertia ``i``'s switch, to mode ``to``) at
+    ``when = (time, sample time, the last change's (time, dtau/dp))``."""
+    (slot, to), (t_ev, ts, (t_last, dtau_last)) = change, when
+    after = list(before)
+    after[slot] = to
+    after = tuple(after)
+    g, dg_dx, dg_dp = _guard(p, z[:N_STATES], u, before, slot, to, cols)
+    if g is None or abs(g) <= PINNED_RTOL * p[_FC[slot - 1]]:
+        dtau = jump_time(p, z, u, before, dg_dx, dg_dp, t_ev)
+    elif abs(t_ev - t_last) <= SAME_INSTANT * ts:  # set off by the last change
+        dtau = dtau_last
+    else:  # set off by the torque's step at a sample instant: fixed in time
+        dtau = np.zeros(len(cols))
+    z = saltation(p, z, u, before, after, dtau)
+    if slot and to == 0:  # stuck: the speed and its derivatives exactly 0
+        z = z.copy()
+        z[slot - 1::N_STATES] = 0.0
+    return z, after, (t_ev, dtau)
+
+
+def _guard(p, x, u, before, slot, to, cols):
+    """``(g, dg/dx, dg/dp)`` of a change of ``slot`` (0 the shaft's contact, ``1 + i``
+    inertia ``i``'s switch) from ``before`` to ``to``; ``g`` None but for a breakaway,
+    the one guard that can be positive at its change."""
+    dg_dx, dg_dp = np.zeros(N_STATES), np.zeros(len(cols))
+    if slot == 0:  # g = phi - s theta
+        s = to or before[0]
+        dg_dx[2] = 1.0
+        if PARAMS.index("theta") in cols:
+            dg_dp[cols.index(PARAMS.index("theta"))] = -s
+        return None, dg_dx, dg_dp
+    i, m = slot - 1, before[slot]
+    if m:  # a slipping inertia stops: g = -m w_i
+        dg_dx[i] = -m
+        return None, dg_dx, dg_dp
+    a, _, _ = mode_system(p, (before[0], NO_SWITCH, NO_SWITCH), friction=False)
+    dg_dx = to * p[i] * a[i]  # breakaway in direction s = to: g = s T_i - fc_i
+    for n, col in enumerate(cols):
+        dt_dp = drive_torque(_complex_step(p, col), before[0], i, x, u).imag / COMPLEX_STEP
+        dg_dp[n] = to * dt_dp - (col == _FC[i])
+    return to * drive_torque(p, before[0], i, x, u) - p[_FC[i]], dg_dx, dg_dp
+
+
+def jump_time(p, z, u, before, dg_dx, dg_dp, time: float) -> np.ndarray:
+    """``dtau/dp = -(dg/dx S + dg/dp) / (dg/dx f_-)`` of a change at ``time`` from the
+    mode ``before``.
+
+    Raises
+    ------
+    ValueError
+        Where the guard's rate ``dg/dx f_-`` is 0 (exactly grazing).
+    """
     x = z[:N_STATES]
-    sens = z[N_STATES:].reshape(N_PARAMS, N_STATES).T  # (state, parameter)
+    sens = z[N_STATES:].reshape(-1, N_STATES).T  # (state, parameter)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dtau = -(dg_dx @ sens + dg_dp) / (dg_dx @ field(p, before, x, u))
+    if not np.all(np.isfinite(dtau)):
+        raise ValueError(f"the change at t = {time!r} s is crossed at zero rate (exactly "
+                         "grazing): its sensitivities do not exist")
+    return dtau
+
+
+def saltation(p: np.ndarray, z: np.ndarray, u: float, before, after, dtau: np.ndarray
+              ) -> np.ndarray:
+    """``z`` after a change from mode ``before`` to ``after`` that moves by ``dtau`` per
+    parameter: the sensitivities jump by ``(f_- - f_+) dtau/dp``."""
+    x = z[:N_STATES]
+    sens = z[N_STATES:].reshape(-1, N_STATES).T  # (state, parameter)
     f_minus, f_plus = field(p, before, x, u), field(p, after, x, u)
-    dg_dp = np.zeros(N_PARAMS)
-    dg_dp[PARAMS.index("theta")] = -s  # g = phi - s theta
-    dtau = -(sens[2] + dg_dp) / f_minus[2]
     sens = sens + np.outer(f_minus - f_plus, dtau)
     return np.concatenate([x, sens.T.ravel()])

@@ -108,7 +108,6 @@ pub fn drive_sensitivities_of(
         unscale: scale.map(|v| 1.0 / v),
         active,
         wanted,
-        sticky,
         mode,
         z,
         last: (f64::NAN, [0.0; N_PARAMS]),
@@ -155,9 +154,8 @@ struct Walk<'a> {
     /// The sensitivities carried, and the order they are written in.
     active: [bool; N_PARAMS],
     wanted: &'a [usize],
-    /// The inertias with a friction switch: switch `1 + r` of an event is `sticky[r]`'s.
-    sticky: Vec<usize>,
-    /// Current mode: contact and friction switches.
+    /// Current mode: contact and friction switches (the simulator's event `1 + i`
+    /// switches inertia `i`'s).
     mode: Mode,
     z: Augmented,
     /// The last change's time and `dtau/dp`, for a breakaway it sets off.
@@ -224,9 +222,8 @@ impl Walk<'_> {
         }
         let (p, scale, mode, active) = (self.p, &self.scale, self.mode, &self.active);
         let (wanted, unscale) = (self.wanted, &self.unscale);
-        let groups = self.full[mode.slot()].get_or_insert_with(|| {
-            groups(&Flow::new(p, scale, mode, ts, active), wanted, unscale)
-        });
+        let groups = self.full[mode.slot()]
+            .get_or_insert_with(|| groups(&Flow::new(p, scale, mode, ts, active), wanted, unscale));
         let x = &states[k * N_STATES..end * N_STATES];
         for group in groups.iter() {
             group.stream(&mut self.z.s, wanted.len(), &u[k..end], x, out);
@@ -262,7 +259,7 @@ impl Walk<'_> {
             after.flank = ev.to;
             None
         } else {
-            let i = self.sticky[ev.index - 1];
+            let i = ev.index - 1;
             after.slip[i] = ev.to;
             (ev.to == 0).then_some(i)
         };
@@ -275,9 +272,7 @@ impl Walk<'_> {
             self.last.1
         } else {
             let guard = self.guard(ev, &f_minus, u);
-            std::array::from_fn(|j| {
-                -(guard.slope(&self.z.s[j]) + guard.dg_dp[j]) / guard.rate
-            })
+            std::array::from_fn(|j| -(guard.slope(&self.z.s[j]) + guard.dg_dp[j]) / guard.rate)
         };
         for j in (0..N_PARAMS).filter(|&j| self.active[j]) {
             if !dtau[j].is_finite() {
@@ -314,9 +309,9 @@ impl Walk<'_> {
             g.dg_dp[THETA] = -side * self.scale[THETA];
         } else if ev.from != 0 {
             // The sign of g = -m w_i cancels in dtau: w_i itself serves.
-            g.dg_dx[self.sticky[ev.index - 1]] = 1.0;
+            g.dg_dx[ev.index - 1] = 1.0;
         } else {
-            let (i, s) = (self.sticky[ev.index - 1], ev.to as f64);
+            let (i, s) = (ev.index - 1, ev.to as f64);
             let flank = self.mode.flank;
             g.dg_dx = balance(self.p, flank).r[i].map(|v| s * v);
             for j in (0..N_PARAMS).filter(|&j| self.active[j] && j != J_M && j != J_L) {

@@ -340,12 +340,17 @@ fn coulomb_friction_matches_central_differences() {
     // torques' too, follows across the contact and stick-slip changes.
     // 0.1 N m for 1 s from rest, then 0 for 11 s: the load breaks away as the shaft
     // winds up, and both inertias stick in the end.
-    let u: Vec<f64> = (0..12001).map(|i| if i < 1000 { 0.1 } else { 0.0 }).collect();
+    let u: Vec<f64> = (0..12001)
+        .map(|i| if i < 1000 { 0.1 } else { 0.0 })
+        .collect();
     let run = simulate(&COULOMB, &u);
-    let sticks = run.events.iter().filter(|e| e.index > 0 && e.to == 0).count();
+    let sticks = run
+        .events
+        .iter()
+        .filter(|e| e.index > 0 && e.to == 0)
+        .count();
     assert!(sticks >= 1, "{} changes, none a stick", run.events.len());
-    let err = worst_error_from(&COULOMB, &u, &[0.0; 3], &ALL)
-        .expect("no step changes the changes");
+    let err = worst_error_from(&COULOMB, &u, &[0.0; 3], &ALL).expect("no step changes the changes");
     eprintln!(
         "Coulomb friction, {} changes ({sticks} sticks): largest error {err:.2e}",
         run.events.len()
@@ -366,10 +371,17 @@ fn a_breakaway_matches_central_differences() {
         })
         .collect();
     let run = simulate(&COULOMB, &u);
-    let breakaways = run.events.iter().filter(|e| e.index > 0 && e.from == 0).count();
-    assert!(breakaways >= 1, "{} changes, no breakaway", run.events.len());
-    let err =
-        worst_error_from(&COULOMB, &u, &[0.0; 3], &ALL).expect("no step changes the changes");
+    let breakaways = run
+        .events
+        .iter()
+        .filter(|e| e.index > 0 && e.from == 0)
+        .count();
+    assert!(
+        breakaways >= 1,
+        "{} changes, no breakaway",
+        run.events.len()
+    );
+    let err = worst_error_from(&COULOMB, &u, &[0.0; 3], &ALL).expect("no step changes the changes");
     eprintln!(
         "breakaway, {} changes ({breakaways} breakaways): largest error {err:.2e}",
         run.events.len()
@@ -389,3 +401,21 @@ fn without_friction_the_columns_are_the_same_to_the_bit() {
     assert!(a.values == b.values);
 }
 
+#[test]
+fn friction_on_one_inertia_alone_matches_central_differences() {
+    // The simulator numbers a friction switch by its inertia (event `1 + i`), whether
+    // or not the other inertia has one: with the load's Coulomb torque alone, its
+    // switch is event 2. Paper A's step-down: each inertia breaks away at the start.
+    let u = step_down(2.0, LEVEL);
+    for fc in [FC_M, FC_L] {
+        let mut p = PAPER;
+        p[fc] = COULOMB[fc];
+        let run = simulate(&p, &u);
+        assert!(run.events.iter().any(|e| e.index == fc - FC_M + 1));
+        let wanted: Vec<usize> = (0..N_LINEAR).chain([fc]).collect();
+        let err =
+            worst_error_from(&p, &u, &[0.0; 3], &wanted).expect("no step changes the changes");
+        eprintln!("{} alone: largest error {err:.2e}", PARAMS[fc]);
+        assert!(err < RTOL, "{}: largest error {err:.2e}", PARAMS[fc]);
+    }
+}
