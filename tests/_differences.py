@@ -41,6 +41,14 @@ GRAZING = 0.05
 #: torque): its stop's time moves like the inverse of that deceleration, as a grazing
 #: contact's. Not checked either.
 STOP_GRAZING = 0.05
+#: A slipping inertia that slows to this share of its largest speed without stopping
+#: nearly stops (one drive that did, at 0.06 %, read 1.6e-6 against the differences,
+#: whose steps that follow its sequence of changes are too small to resolve the bar;
+#: at 1 % one drive in a draw of 112 still read 1.07e-6).
+NEAR_STOP = GRAZING
+#: A slipping inertia's sampled speed minimum this many samples or fewer from a change
+#: of its switch is that change (a stop), not a near miss.
+NEAR_STOP_SAMPLES = 2
 #: Changes closer than this share of a sample are at one instant (a breakaway set off
 #: by another change, or by the torque's step at a sample instant).
 SAME_INSTANT = 1e-9
@@ -64,7 +72,10 @@ def near_grazing(res: bk.DriveResponse) -> bool:
     """Whether a change of ``res`` is crossed at a low rate: a contact change, or a
     breakaway that the torque's rise crosses, at a relative speed below
     :data:`GRAZING` of its largest, or an inertia's stop at a deceleration below
-    :data:`STOP_GRAZING` of its Coulomb torque's."""
+    :data:`STOP_GRAZING` of its Coulomb torque's; or whether a slipping inertia
+    nearly stops (:func:`_near_stop`)."""
+    if _near_stop(res):
+        return True
     rel = res.w_motor - res.w_load
     slow = GRAZING * np.max(np.abs(rel))
     flank = int(res.modes[0, 0])
@@ -78,6 +89,26 @@ def near_grazing(res: bk.DriveResponse) -> bool:
         elif src and _stop_is_slow(res, time, j, src, flank):
             return True
         flank = dst if j == 0 else flank
+    return False
+
+
+def _near_stop(res: bk.DriveResponse) -> bool:
+    """Whether an inertia with Coulomb friction slows to a speed below
+    :data:`NEAR_STOP` of its largest and speeds up again without stopping: the stop's
+    guard is then all but touched, and a step of a parameter that makes it stop (a
+    stick, a reversal) changes every sample after it, so only steps too small to
+    resolve the bar follow the nominal sequence. A sampled local minimum of ``|w|``
+    with no change of that inertia's switch within :data:`NEAR_STOP_SAMPLES` of it."""
+    for i, fc in enumerate(res.drive.fc):
+        if fc == 0:
+            continue
+        speed = np.abs(res.states[:, i])
+        rows = res.event_array[res.event_array[:, 1] == 1 + i]
+        k = np.flatnonzero((speed[1:-1] < speed[:-2]) & (speed[1:-1] < speed[2:])) + 1
+        k = k[speed[k] < NEAR_STOP * speed.max()]
+        ts = res.t[1] - res.t[0]
+        if any(np.all(np.abs(rows[:, 0] - res.t[x]) > NEAR_STOP_SAMPLES * ts) for x in k):
+            return True
     return False
 
 
@@ -198,22 +229,18 @@ def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.nda
 #: Issue 24's bar: the sensitivities within 1e-6 of the differences, relative to each
 #: column's largest.
 BAR = 1e-6
-#: With Coulomb friction a few drawn drives read past the bar, up to 1.6e-6 on ``J_L``
-#: (2 of about 250 checked over two invocations of both test files; the draws vary
-#: between invocations). On the one traced, the twin and the kernel agree to 4e-9,
-#: and the error, the same at steps 3e-4 to 3e-5, grows through the contact phases
-#: from about 4e-7 of the column's local size; the cause is not found. The Coulomb
-#: kinds allow this share of a draw past the bar, none past COULOMB_RTOL
-#: (docs/design/sensitivities.md, "Coulomb friction").
-COULOMB_RTOL, COULOMB_OVER = 3e-6, 0.02
+#: The random drives allowed past :data:`BAR` in one draw of a kind, and the limit
+#: they must still meet. With the near stops left out, one drive of a reversing draw
+#: read 1.29e-6 in one of five invocations (53 checked; the draws vary between
+#: invocations): it was not caught again to trace, and a scan of 1 400 more reversing
+#: draws (94 checked) found none past 5e-7 (docs/design/sensitivities.md, "The
+#: reference").
+STRAYS, STRAY_BAR = 1, 3e-6
 
 
-def assert_within_bar(errors: list[float], kind: str, rtol: float = BAR) -> None:
-    """Every error within ``rtol``; with Coulomb friction, all but a share
-    :data:`COULOMB_OVER` of them, and those within :data:`COULOMB_RTOL`."""
-    over = [e for e in errors if e >= rtol]
-    if kind == "viscous":
-        assert not over, f"{kind}: {len(over)} past {rtol:g}: {over}"
-    else:
-        assert len(over) <= COULOMB_OVER * len(errors), f"{kind}: {len(over)} past {rtol:g}"
-        assert all(e < COULOMB_RTOL for e in over), f"{kind}: {over}"
+def check_bar(errors: list[float]) -> None:
+    """Every error of a draw within :data:`BAR`, but for :data:`STRAYS` within
+    :data:`STRAY_BAR`."""
+    over = sorted(e for e in errors if e >= BAR)
+    assert len(over) <= STRAYS and all(e < STRAY_BAR for e in over), (
+        f"{len(over)} of {len(errors)} past {BAR:g}: {over}")

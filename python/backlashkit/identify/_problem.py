@@ -300,9 +300,11 @@ class Residual:
         parameters, encoder angles) or where a change grazes (no derivative there: the
         caller differences instead)."""
         pb = self.problem
+        if not all(sp.level is None and sp.hold is None and not sp.positions
+                   for sp in self.spans):
+            return None
         drive = pb.exact_drive(z)
-        if drive is None or not all(sp.level is None and sp.hold is None
-                                    and not sp.positions for sp in self.spans):
+        if drive is None:
             return None
         from .._sensitivity import trajectory_and_sensitivities
 
@@ -320,7 +322,13 @@ class Residual:
             except ValueError:
                 return None
             for c in (0, 1):  # the residual is data - model: its rows move as -S
-                out[pos : pos + m - self.lag] = self.weigh(sp, c, -(sens[s_, c, :] * per_z).T).T
+                rows = out[pos : pos + m - self.lag]
+                if self.ar is None:  # weigh's arithmetic in place (the spans are speeds)
+                    np.multiply(sens[s_, c, :], per_z, out=rows)
+                    np.divide(rows, self.sig[sp.k, c], out=rows)
+                    np.negative(rows, out=rows)
+                else:
+                    rows[...] = self.weigh(sp, c, -(sens[s_, c, :] * per_z).T).T
                 pos += m - self.lag
         with np.errstate(invalid="ignore"):  # no penalty (inf) on the terms' parameters
             prior = np.nan_to_num(pb.exact_scale(z)[1:] / (pb.pen * pb.p_prior))
