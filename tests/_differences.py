@@ -42,9 +42,9 @@ GRAZING = 0.05
 #: contact's. Not checked either.
 STOP_GRAZING = 0.05
 #: A slipping inertia that slows to this share of its largest speed without stopping
-#: nearly stops (one drive that did, at 0.06 %, read 1.6e-6 against the differences,
-#: whose steps that follow its sequence of changes are too small to resolve the bar;
-#: at 1 % one drive in a draw of 112 still read 1.07e-6).
+#: nearly stops: one drive that did read 1.6e-6 on ``J_L`` against the differences,
+#: whose steps that keep its sequence of changes are too small to resolve the bar
+#: (docs/design/sensitivities.md, "Near stops").
 NEAR_STOP = GRAZING
 #: A slipping inertia's sampled speed minimum this many samples or fewer from a change
 #: of its switch is that change (a stop), not a near miss.
@@ -230,11 +230,10 @@ def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.nda
 #: column's largest.
 BAR = 1e-6
 #: The random drives allowed past :data:`BAR` in one draw of a kind, and the limit
-#: they must still meet. With the near stops left out, one drive of a reversing draw
-#: read 1.29e-6 in one of five invocations (53 checked; the draws vary between
-#: invocations): it was not caught again to trace, and a scan of 1 400 more reversing
-#: draws (94 checked) found none past 5e-7 (docs/design/sensitivities.md, "The
-#: reference").
+#: they must still meet. With the near stops left out, one drive of the reversing draw
+#: reads 1.29e-6 on ``J_L`` (53 checked; the draws change with the tests' source): its
+#: load nearly stops, just above :data:`NEAR_STOP` (docs/design/sensitivities.md,
+#: "Near stops").
 STRAYS, STRAY_BAR = 1, 3e-6
 
 
