@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import backlashkit as bk
-from backlashkit._numpy_sensitivity import PARAMS
+from backlashkit._numpy_sensitivity import PARAMS, SAME_INSTANT
 from backlashkit._sensitivity import default_params
 
 #: Largest relative steps ``h`` of the differences; each column is compared with the
@@ -49,9 +49,6 @@ NEAR_STOP = GRAZING
 #: A slipping inertia's sampled speed minimum this many samples or fewer from a change
 #: of its switch is that change (a stop), not a near miss.
 NEAR_STOP_SAMPLES = 2
-#: Changes closer than this share of a sample are at one instant (a breakaway set off
-#: by another change, or by the torque's step at a sample instant).
-SAME_INSTANT = 1e-9
 #: A step whose runs follow another sequence of changes is compared up to the first
 #: change that differs (a change near the record's end that appears at one step), and
 #: used only where that leaves out at most this share of the samples.
@@ -99,6 +96,7 @@ def _near_stop(res: bk.DriveResponse) -> bool:
     stick, a reversal) changes every sample after it, so only steps too small to
     resolve the bar follow the nominal sequence. A sampled local minimum of ``|w|``
     with no change of that inertia's switch within :data:`NEAR_STOP_SAMPLES` of it."""
+    ts = res.t[1] - res.t[0]
     for i, fc in enumerate(res.drive.fc):
         if fc == 0:
             continue
@@ -106,7 +104,6 @@ def _near_stop(res: bk.DriveResponse) -> bool:
         rows = res.event_array[res.event_array[:, 1] == 1 + i]
         k = np.flatnonzero((speed[1:-1] < speed[:-2]) & (speed[1:-1] < speed[2:])) + 1
         k = k[speed[k] < NEAR_STOP * speed.max()]
-        ts = res.t[1] - res.t[0]
         if any(np.all(np.abs(rows[:, 0] - res.t[x]) > NEAR_STOP_SAMPLES * ts) for x in k):
             return True
     return False
@@ -123,10 +120,10 @@ def _set_off(res: bk.DriveResponse, time: float) -> bool:
 
 def _stop_is_slow(res: bk.DriveResponse, time: float, j: int, m: int, flank: int
                   ) -> bool:
-    """Whether inertia ``j - 1`` (the simulator's event row ``j``), slipping in direction ``m``,
-    reaches zero speed at ``time`` with its deceleration ``(T - m fc) / J`` below
-    :data:`STOP_GRAZING` of ``fc / J`` (``T`` the torque on it from the input and the
-    shaft, from the record interpolated)."""
+    """Whether inertia ``j - 1`` (the simulator's event row ``j``), slipping in
+    direction ``m``, reaches zero speed at ``time`` with its deceleration ``(T - m fc)
+    / J`` below :data:`STOP_GRAZING` of ``fc / J`` (``T`` the torque on it from the
+    input and the shaft, from the record interpolated)."""
     chain = res.drive
     i = j - 1  # the simulator's row j = 1 + i: inertia i's switch
     w_m, w_l, phi = (np.interp(time, res.t, col) for col in res.states.T)
@@ -145,7 +142,7 @@ def _changes(res: bk.DriveResponse) -> tuple[np.ndarray, list[tuple[int, int, in
     return rows[:, 0].copy(), [tuple(int(x) for x in r) for r in rows[:, 1:]]
 
 
-def _run(drive: bk.TwoMassDrive, t, u) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def _run(drive: bk.TwoMassDrive, t, u) -> tuple[np.ndarray, np.ndarray, list]:
     res = drive.simulate(t, u)
     return (np.stack([res.w_motor, res.w_load], axis=1), *_changes(res))
 
