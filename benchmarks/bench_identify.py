@@ -197,6 +197,9 @@ def count(recs, prior) -> None:
     sim_s = statistics.median(r[2] for r in ratio)
     print(f"  one simulation (drive.simulate) of a record: {1e3 * sim_s:.2f} ms, "
           f"{1e9 * sim_s / recs[0].t.size:.0f} ns a sample")
+    # issue 24's own measure: the fit's wall time over one simulation of the records
+    print(f"  by wall time, one fit ({wall:.2f} s) costs {wall / (len(recs) * sim_s):.0f} "
+          f"simulations of the records")
 
 
 #: Pause before each timed call of the bound, in s (see ``crb_cost``).

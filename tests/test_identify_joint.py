@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -200,6 +201,70 @@ def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     assert held.shape == (res.n_res, len(pb.names) - 1)
     assert np.array_equal(held, exact[:, 1:])
     _check_coulomb_columns(pb, sig, z)
+
+
+@pytest.mark.parametrize("start", ["hold", "steady"])
+def test_the_exact_jacobian_from_a_start_that_moves_with_the_parameters(short, start):
+    """A span that starts after a held torque (the short-horizon stages' spans,
+    ``Problem.screen``, fitted in windows) or from the model's steady state starts
+    with that state's sensitivity: the Jacobian agrees with central differences."""
+    from backlashkit.identify._model import rel_std
+    from backlashkit.identify._problem import build_problem
+
+    t, u, clean = short
+    recs = [_noisy(clean, 30, 1), _noisy(clean, 30, 2)]
+    search = JointSearch() if start == "hold" else JointSearch(start="steady",
+                                                               pre_window=0.5)
+    pb, sig = build_problem(TRUE.with_theta(None), recs, rel_std(0.3, LINEAR_PARAMS), None,
+                            search, "paper", 1)
+    spans, horizon = (pb.screen, 0.3) if start == "hold" else (pb.spans, None)
+    assert all((sp.hold is not None) == (start == "hold") for sp in spans if sp.level)
+    assert any(sp.level is not None for sp in spans)
+    res = pb.residual(spans, horizon, sig)
+    z = np.log([getattr(TRUE, n) for n in pb.names])
+    exact = res.exact_jacobian(z)
+    assert exact is not None and exact.shape == (res.n_res, len(pb.names))
+    zz = np.repeat(z[np.newaxis, :], 2 * z.size, axis=0)
+    for i in range(z.size):
+        zz[2 * i, i] += CHECK_STEP
+        zz[2 * i + 1, i] -= CHECK_STEP
+    rr = res(zz)
+    fd = ((rr[0::2] - rr[1::2]) / (2 * CHECK_STEP)).T
+    worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
+    print(f"exact Jacobian from a {start} start against central differences: {worst:.1e}")
+    assert worst < SENS_FD_RTOL
+
+
+def test_the_steady_starts_sensitivity_is_the_long_holds():
+    """The steady state's sensitivity in closed form
+    (:func:`~backlashkit.identify._model.steady_sensitivity`) against central
+    differences of the steady state, and against the compiled sensitivities at the end
+    of a held torque long enough to settle (an independent route to it), with Coulomb
+    friction, moving or held stuck."""
+    from backlashkit._sensitivity import PARAMS
+    from backlashkit.identify._model import Span, initial_states, packed_row, span_start
+    from backlashkit.identify._model import steady_sensitivity as steady
+
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    for level in (A2, -A2, 0.02):  # 0.02 N m < fc_M + fc_L: held stuck
+        got = steady(drive, level, PARAMS)
+        for c, n in enumerate(PARAMS):
+            h = 1e-6 * getattr(drive, n)
+            hi, lo = (initial_states(packed_row(replace(drive, **{n: getattr(drive, n) + d})
+                                                )[np.newaxis, :], level)[0]
+                      for d in (h, -h))
+            np.testing.assert_allclose(got[:, c], (hi - lo) / (2 * h), rtol=1e-6,
+                                       atol=1e-9 * np.max(np.abs(got)), err_msg=n)
+    # a 120 s hold from rest: the slowest mode's time constant, (J_M + J_L) / (f_M +
+    # f_L), is 7.3 s, so the state is e^-16 and its sensitivity, which carries t
+    # e^(-t/tau) terms, 16 e^-16 = 1.2e-6 from settled
+    t, u = np.arange(3) * 1e-3, np.zeros(3)
+    span = Span(None, 0, 0, t, u, u, u, A2, hold=120.0)
+    x0, s0 = span_start(drive, span, PARAMS)
+    want = steady(drive, A2, PARAMS)
+    np.testing.assert_allclose(x0, initial_states(packed_row(drive)[np.newaxis, :], A2)[0],
+                               rtol=1e-6)
+    np.testing.assert_allclose(s0, want, rtol=0, atol=1e-5 * np.max(np.abs(want)))
 
 
 def _check_coulomb_columns(pb, sig, z):

@@ -55,6 +55,27 @@ def test_paper_drive_matches_numpy_twin():
     assert err < RTOL
 
 
+def test_a_start_with_its_sensitivity_matches_numpy_twin():
+    """From a moving state with a given sensitivity (a run that continues another):
+    paper A's drive with Coulomb friction, kernel against twin, every column carrying
+    its start."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    t = bk.signals.time_grid(1.5, 1e-3)
+    u = bk.signals.step_down(t, A2, t_s=0.5)
+    x0 = drive.steady_state(A2)
+    s0 = np.random.default_rng(7).standard_normal((3, len(PARAMS)))
+    s0 /= np.array([getattr(drive, n) for n in PARAMS])  # dx/dp of a relative step
+    fast = sensitivities(drive, t, u, initial_state=x0, initial_sensitivity=s0)
+    ref = numpy_sensitivities(drive, t, u, initial_state=x0, initial_sensitivity=s0)
+    err = float(np.max(np.max(np.abs(fast - ref), axis=(0, 1))
+                       / np.max(np.abs(ref), axis=(0, 1))))
+    print(f"from a start with its sensitivity: compiled vs NumPy {err:.2e}")
+    assert err < RTOL
+    np.testing.assert_allclose(fast[0], s0[:2], rtol=1e-15)
+    plain = sensitivities(drive, t, u, initial_state=x0)
+    assert np.max(np.abs(fast - plain)) > 0.1 * np.max(np.abs(plain))
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_random_drives_match_numpy_twin(kind):
     """Random drives drawn as in test_sensitivity.py, of each kind (with Coulomb
@@ -178,6 +199,10 @@ def test_bad_inputs_raise_value_error():
     with pytest.raises(ValueError, match="the sensitivity to fc_L needs fc_L > 0"):
         sensitivities(bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01), t, u,
                       params=("theta", "fc_L"))
+    with pytest.raises(ValueError, match=r"initial_sensitivity must have shape \(3, 7\)"):
+        sensitivities(drive, t, u, initial_sensitivity=np.zeros((2, 7)))
+    with pytest.raises(ValueError, match="initial sensitivity must hold 3 x 1 finite values"):
+        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [6], np.full((1, 1), 0.0))
 
 
 def _tangent_case(margin_rel: float):

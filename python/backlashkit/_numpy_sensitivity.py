@@ -128,8 +128,8 @@ def drive_torque(p, flank: int, i: int, x: np.ndarray, u: float):
 
 
 def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
-                  params=None) -> np.ndarray:
-    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to ``params``, from rest.
+                  params=None, initial_state=None, initial_sensitivity=None) -> np.ndarray:
+    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to ``params``.
 
     Parameters
     ----------
@@ -142,6 +142,10 @@ def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
     params : sequence of str, optional
         Distinct names of :data:`PARAMS`, in the order wanted; default
         :func:`~backlashkit._sensitivity.default_params` (``fc_i`` only where > 0).
+    initial_state : numpy.ndarray, optional
+        ``[w_M, w_L, phi]`` at ``t[0]``; default rest.
+    initial_sensitivity : numpy.ndarray, optional
+        ``d x / d p`` at ``t[0]``, ``(3, len(params))``; default zero.
 
     Returns
     -------
@@ -160,11 +164,15 @@ def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
     cols = [PARAMS.index(n) for n in names]
     p = np.array([getattr(drive, n) for n in PARAMS], float)
     ts = float(t[1] - t[0])
-    res = drive.simulate(t, torque)
+    res = drive.simulate(t, torque, initial_state=initial_state)
     sticky = [i for i in (0, 1) if p[_FC[i]] > 0]
     changes = [(time, int(j), int(to)) for time, j, _, to in res.event_array.tolist()]
     mode = _initial_mode(res, sticky)
     z = np.zeros(N_STATES * (1 + len(cols)))
+    if initial_state is not None:
+        z[:N_STATES] = initial_state
+    if initial_sensitivity is not None:  # z holds a column's three states together
+        z[N_STATES:] = np.asarray(initial_sensitivity, float).T.ravel()
     i_ev, full, last = 0, {}, (-np.inf, None)
     out = np.empty((t.size, 2, len(cols)))
     for k in range(t.size):

@@ -39,6 +39,7 @@ def sensitivities(
     torque: Sequence[float] | np.ndarray,
     *,
     initial_state: Sequence[float] | np.ndarray | None = None,
+    initial_sensitivity: np.ndarray | None = None,
     states: bool = False,
     params: Sequence[str] | None = None,
 ) -> np.ndarray:
@@ -55,8 +56,11 @@ def sensitivities(
     torque : array_like
         Motor torque in N m, one sample per entry of ``t``, held over the sample.
     initial_state : array_like, optional
-        ``[w_M, w_L, phi]`` at ``t[0]``, taken as independent of the parameters (zero
-        sensitivity); default rest.
+        ``[w_M, w_L, phi]`` at ``t[0]``; default rest.
+    initial_sensitivity : array_like, optional
+        ``d x / d p`` at ``t[0]``, ``(3, len(params))`` (the twist's row included), in
+        the parameters' SI units: where the run continues another (a held torque's)
+        or starts from a state that moves with the parameters; default zero.
     states : bool, optional
         Return the twist's sensitivity too; default False.
     params : sequence of str, optional
@@ -87,6 +91,7 @@ def sensitivities(
         it the sensitivities are ill-conditioned.
     """
     out = trajectory_and_sensitivities(drive, t, torque, initial_state=initial_state,
+                                       initial_sensitivity=initial_sensitivity,
                                        params=params)[1]
     return out if states else out[:, :2, :]
 
@@ -97,6 +102,7 @@ def trajectory_and_sensitivities(
     torque: Sequence[float] | np.ndarray,
     *,
     initial_state: Sequence[float] | np.ndarray | None = None,
+    initial_sensitivity: np.ndarray | None = None,
     params: Sequence[str] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The states ``(len(t), 3)`` (``w_M``, ``w_L`` in rad/s, the twist in rad) and
@@ -116,10 +122,15 @@ def trajectory_and_sensitivities(
                          f"got {u.size}")
     x0 = np.zeros(3) if initial_state is None else v.finite_array("initial_state",
                                                                    initial_state)
+    s0 = None if initial_sensitivity is None else v.finite_array(
+        "initial_sensitivity", initial_sensitivity, ndim=2)
+    if s0 is not None and s0.shape != (3, len(names)):
+        raise InputError(f"initial_sensitivity must have shape (3, {len(names)}) (states by "
+                         f"parameters), got {s0.shape}")
     p = np.array([getattr(drive, n) for n in PARAMS], float)
     x, out, grazes = _core.drive_sensitivities(p, float(t_arr[0]), ts, u,
                                                np.ascontiguousarray(x0),
-                                               [PARAMS.index(n) for n in names])
+                                               [PARAMS.index(n) for n in names], s0)
     if len(grazes):
         time, _, margin = grazes[0]
         warnings.warn(

@@ -224,6 +224,48 @@ def initial_states(p: np.ndarray, level: float | None, torque0: float = 0.0) -> 
     return np.column_stack(cols)
 
 
+def steady_sensitivity(drive: TwoMassDrive, level: float, names: Sequence[str]
+                       ) -> np.ndarray:
+    """``d x / d p`` of the steady state under ``level`` (:func:`initial_states`, no
+    current loop), ``(3, len(names))``: the speeds and the shaft angle by the parameters
+    ``names`` (of :data:`backlashkit._sensitivity.PARAMS`), in their SI units."""
+    sign = 1.0 if level >= 0 else -1.0
+    f_sum, k = drive.f_M + drive.f_L, drive.k_sh
+    moving = abs(level) - drive.fc_M - drive.fc_L > 0  # else held stuck: w = 0
+    w = sign * (abs(level) - drive.fc_M - drive.fc_L) / f_sum if moving else 0.0
+    dw = {"f_M": -w / f_sum, "f_L": -w / f_sum, "fc_M": -sign / f_sum,
+          "fc_L": -sign / f_sum} if moving else {}
+    twist = (drive.f_L * w + sign * drive.fc_L) / k
+    # twist = (f_L w + sign fc_L) / k, differentiated through w
+    direct = {"f_L": w / k, "fc_L": sign / k, "k_sh": -twist / k}
+    out = np.zeros((3, len(names)))
+    for c, n in enumerate(names):
+        out[0, c] = out[1, c] = dw.get(n, 0.0)
+        out[2, c] = drive.f_L * dw.get(n, 0.0) / k + direct.get(n, 0.0) \
+            + (sign if n == "theta" else 0.0)
+    return out
+
+
+def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str]
+               ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The state ``[w_M, w_L, phi]`` the model starts ``span`` from and its sensitivity
+    to ``names`` (``(3, len(names))``), for the compiled sensitivities: ``(None,
+    None)`` from rest; the end of the held torque's run on the coarse grid of
+    :func:`simulate_span`; or the steady state and :func:`steady_sensitivity`."""
+    from .._sensitivity import trajectory_and_sensitivities
+
+    if span.hold is not None:
+        n = max(2, math.ceil(span.hold / HOLD_STEP))
+        x, sens = trajectory_and_sensitivities(
+            drive, np.linspace(0.0, span.hold, n + 1), np.full(n + 1, span.level),
+            params=names)
+        return x[-1], sens[-1]
+    if span.level is None:
+        return None, None
+    x0 = initial_states(packed_row(drive)[np.newaxis, :], span.level)[0]
+    return x0, steady_sensitivity(drive, span.level, names)
+
+
 def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None
                   ) -> np.ndarray:
     """States ``(len(p), end, S)`` of packed parameter rows ``p`` over a span: the two

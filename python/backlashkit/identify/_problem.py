@@ -31,6 +31,7 @@ from ._model import (
     model_angles,
     screen_spans,
     simulate_span,
+    span_start,
 )
 from ._model import spans as record_spans
 from .noise import whiten
@@ -296,12 +297,12 @@ class Residual:
         """The Jacobian in the estimated values from the compiled forward
         sensitivities, one run per span of the estimated parameters alone (without
         ``theta``'s column where ``with_theta`` is false: a refit that holds it); None
-        outside their scope (:meth:`Problem.exact_drive`; a start that moves with the
-        parameters, encoder angles) or where a change grazes (no derivative there: the
-        caller differences instead)."""
+        outside their scope (:meth:`Problem.exact_drive`, encoder angles) or where a
+        change grazes (no derivative there: the caller differences instead). A span
+        that starts after a held torque or from a steady state starts with that
+        state's sensitivity (:func:`~backlashkit.identify._model.span_start`)."""
         pb = self.problem
-        if not all(sp.level is None and sp.hold is None and not sp.positions
-                   for sp in self.spans):
+        if any(sp.positions for sp in self.spans):
             return None
         drive = pb.exact_drive(z)
         if drive is None:
@@ -317,8 +318,10 @@ class Residual:
             try:
                 with warnings.catch_warnings():  # as quiet near grazing as the differences
                     warnings.simplefilter("ignore", SensitivityWarning)
+                    x0, s0 = span_start(drive, sp, names)
                     _, sens = trajectory_and_sensitivities(
-                        drive, sp.t[:end], sp.torque[:end], params=names)
+                        drive, sp.t[:end], sp.torque[:end], initial_state=x0,
+                        initial_sensitivity=s0, params=names)
             except ValueError:
                 return None
             for c in (0, 1):  # the residual is data - model: its rows move as -S

@@ -1,8 +1,8 @@
 //! Exact forward sensitivities of the two-mass drive (issue 24): the derivatives of the
 //! state `[w_M, w_L, phi]` with respect to the parameters [`PARAMS`], under paper A's
 //! contact law, with Coulomb friction whose breakaway torque is the Coulomb torque
-//! (`fs = fc`) or none, without current loop, from a given state whose sensitivity is
-//! zero (rest, for the estimators).
+//! (`fs = fc`) or none, without current loop, from a given state and its sensitivity
+//! (zero from rest; a held torque's run or a steady state's where a run continues one).
 //!
 //! Inside a mode the drive is linear, `dx/dt = A x + b u + c`, and so is each
 //! sensitivity `S_j = dx/dp_j`: `dS_j/dt = A S_j + A_j x + b_j u + c_j` (`A_j = dA/dp_j`
@@ -28,7 +28,9 @@ mod run;
 #[cfg(test)]
 mod tests;
 
-pub use run::{drive_sensitivities, drive_sensitivities_of, DriveSensitivities};
+pub use run::{
+    drive_sensitivities, drive_sensitivities_from, drive_sensitivities_of, DriveSensitivities,
+};
 
 /// The parameters, in the order of a parameter vector: motor and load inertias, shaft
 /// stiffness, motor and load viscous frictions, shaft damping, backlash half-width

@@ -63,6 +63,25 @@ pub fn drive_sensitivities_of(
     x0: &[f64],
     wanted: &[usize],
 ) -> Result<DriveSensitivities, Error> {
+    drive_sensitivities_from(p, t0, ts, u, x0, None, wanted)
+}
+
+/// As [`drive_sensitivities_of`], from `x0` whose sensitivity `dx0/dp` is `s0`
+/// (row-major `(3, wanted.len())`, the output's layout; `None`: zero): a run that
+/// continues another, such as the window after a held torque's run, or one that
+/// starts from a steady state that moves with the parameters. The jumps and the flow
+/// are linear in the sensitivities, so the run carries `s0` exactly.
+///
+/// Errors: as [`drive_sensitivities_of`], and `s0` of another size or not finite.
+pub fn drive_sensitivities_from(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    x0: &[f64],
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+) -> Result<DriveSensitivities, Error> {
     let mut active = [false; N_PARAMS];
     for &j in wanted {
         if j >= N_PARAMS || active[j] {
@@ -77,6 +96,16 @@ pub fn drive_sensitivities_of(
             "the sensitivity to {} needs {} > 0, got 0",
             PARAMS[j], PARAMS[j]
         )));
+    }
+    if let Some(s0) = s0 {
+        if s0.len() != N_STATES * wanted.len() || !s0.iter().all(|v| v.is_finite()) {
+            return Err(Error::InvalidArgument(format!(
+                "the initial sensitivity must hold {N_STATES} x {} finite values (states by \
+                 parameters), got {} values",
+                wanted.len(),
+                s0.len()
+            )));
+        }
     }
     let chain = chain_params(p)?;
     if !t0.is_finite() {
@@ -98,10 +127,14 @@ pub fn drive_sensitivities_of(
     let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
     // The simulator has checked that x0 has three finite entries.
     let x = [x0[0], x0[1], x0[2]];
-    let z = Augmented {
-        x,
-        s: [[0.0; N_STATES]; N_PARAMS],
-    };
+    // Carried per log-parameter, as the flow carries them.
+    let mut s = [[0.0; N_STATES]; N_PARAMS];
+    for (c, &j) in wanted.iter().enumerate() {
+        for i in 0..N_STATES {
+            s[j][i] = s0.map_or(0.0, |s0| s0[i * wanted.len() + c] * scale[j]);
+        }
+    }
+    let z = Augmented { x, s };
     let mut walk = Walk {
         p,
         scale,

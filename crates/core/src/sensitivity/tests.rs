@@ -419,3 +419,46 @@ fn friction_on_one_inertia_alone_matches_central_differences() {
         assert!(err < RTOL, "{}: largest error {err:.2e}", PARAMS[fc]);
     }
 }
+
+#[test]
+fn a_run_continued_from_its_state_and_sensitivity_gives_the_whole_runs() {
+    // Paper A's step-down with Coulomb friction (sticks and breakaways), cut at sample
+    // `cut` (after the step-down, the contact changes on either side): the second part,
+    // started from the first part's last state and sensitivity, gives the whole run's
+    // rows from there on. Not to the bit: the simulator restarts its engine at the cut.
+    let u = step_down(4.0, LEVEL);
+    let cut = u.len() / 2 + 150;
+    let whole = drive_sensitivities_of(&COULOMB, 0.0, TS, &u, &[0.0; 3], &ALL).unwrap();
+    let m = ALL.len();
+    let row = N_STATES * m;
+    let x0 = &whole.states[cut * N_STATES..(cut + 1) * N_STATES];
+    let s0 = &whole.values[cut * row..(cut + 1) * row];
+    let t0 = cut as f64 * TS;
+    let rest = drive_sensitivities_from(&COULOMB, t0, TS, &u[cut..], x0, Some(s0), &ALL).unwrap();
+    assert!(
+        simulate(&COULOMB, &u).events.len() >= 4,
+        "the record's changes"
+    );
+    for c in 0..m {
+        let col = |v: &[f64], k: usize, i: usize| v[(k * N_STATES + i) * m + c];
+        let big = (0..u.len())
+            .flat_map(|k| (0..N_STATES).map(move |i| (k, i)))
+            .fold(1e-300f64, |b, (k, i)| b.max(col(&whole.values, k, i).abs()));
+        for k in 0..u.len() - cut {
+            for i in 0..N_STATES {
+                let (got, want) = (col(&rest.values, k, i), col(&whole.values, cut + k, i));
+                assert!(
+                    (got - want).abs() <= 1e-9 * big,
+                    "{}: sample {k} state {i}: {got} against {want}",
+                    PARAMS[ALL[c]]
+                );
+            }
+        }
+    }
+    // Zero sensitivity given is no sensitivity given, and a wrong size is refused.
+    let zero = vec![0.0; row];
+    let a = drive_sensitivities_from(&COULOMB, 0.0, TS, &u, &[0.0; 3], Some(&zero), &ALL);
+    assert!(a.unwrap().values == whole.values);
+    let bad = drive_sensitivities_from(&COULOMB, 0.0, TS, &u, &[0.0; 3], Some(&zero[1..]), &ALL);
+    assert!(matches!(bad, Err(Error::InvalidArgument(_))));
+}
