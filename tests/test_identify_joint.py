@@ -167,6 +167,24 @@ def test_crb_from_exact_sensitivities_matches_central_differences(short, initial
     assert crb._exact(sticky, names, 0.0, t, u, "paper", x0) == (None, None)
 
 
+def _exact_against_differences(res, z: np.ndarray, what: str) -> np.ndarray:
+    """The residual's exact Jacobian at ``z``, checked against its central differences
+    (step CHECK_STEP) to SENS_FD_RTOL of each column's largest; ``-s`` prints the
+    agreement."""
+    exact = res.exact_jacobian(z)
+    assert exact is not None and exact.shape == (res.n_res, z.size)
+    zz = np.repeat(z[np.newaxis, :], 2 * z.size, axis=0)
+    for i in range(z.size):
+        zz[2 * i, i] += CHECK_STEP
+        zz[2 * i + 1, i] -= CHECK_STEP
+    rr = res(zz)
+    fd = ((rr[0::2] - rr[1::2]) / (2 * CHECK_STEP)).T
+    worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
+    print(f"exact Jacobian {what} against central differences: {worst:.1e}")
+    assert worst < SENS_FD_RTOL
+    return exact
+
+
 @pytest.mark.parametrize("ar", [None, [-0.5, 0.1]])
 def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     """The uncertainty's Jacobian (weighted residual in log-parameters, whitened with
@@ -183,17 +201,7 @@ def test_the_fits_exact_jacobian_matches_central_differences(short, ar):
     lags = None if ar is None else np.tile(ar, (len(recs), 2, 1))
     res = pb.residual(pb.spans, None, sig, lags)
     z = np.log([getattr(TRUE, n) for n in pb.names])
-    exact = res.exact_jacobian(z)
-    assert exact is not None and exact.shape == (res.n_res, len(pb.names))
-    zz = np.repeat(z[np.newaxis, :], 2 * z.size, axis=0)
-    for i in range(z.size):
-        zz[2 * i, i] += CHECK_STEP
-        zz[2 * i + 1, i] -= CHECK_STEP
-    rr = res(zz)
-    fd = ((rr[0::2] - rr[1::2]) / (2 * CHECK_STEP)).T
-    worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
-    print(f"exact Jacobian of the fit against central differences: {worst:.1e}")
-    assert worst < SENS_FD_RTOL
+    exact = _exact_against_differences(res, z, "of the fit")
     # the iterations (Problem.refine) take the same Jacobian, and the profile's
     # held-theta refits the same without theta's column, from runs without it
     assert np.array_equal(res.jacobian(z, res.at(z)), exact)
@@ -221,18 +229,8 @@ def test_the_exact_jacobian_from_a_start_that_moves_with_the_parameters(short, s
     assert all((sp.hold is not None) == (start == "hold") for sp in spans if sp.level)
     assert any(sp.level is not None for sp in spans)
     res = pb.residual(spans, horizon, sig)
-    z = np.log([getattr(TRUE, n) for n in pb.names])
-    exact = res.exact_jacobian(z)
-    assert exact is not None and exact.shape == (res.n_res, len(pb.names))
-    zz = np.repeat(z[np.newaxis, :], 2 * z.size, axis=0)
-    for i in range(z.size):
-        zz[2 * i, i] += CHECK_STEP
-        zz[2 * i + 1, i] -= CHECK_STEP
-    rr = res(zz)
-    fd = ((rr[0::2] - rr[1::2]) / (2 * CHECK_STEP)).T
-    worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
-    print(f"exact Jacobian from a {start} start against central differences: {worst:.1e}")
-    assert worst < SENS_FD_RTOL
+    _exact_against_differences(res, np.log([getattr(TRUE, n) for n in pb.names]),
+                               f"from a {start} start")
 
 
 def test_the_steady_starts_sensitivity_is_the_long_holds():
