@@ -105,11 +105,29 @@ def test_viscous_model_on_friction_names_friction_not_units(coulomb):
     assert "rpm" not in text
 
 
-def test_current_loop_found_and_theta_within_3_percent():
+def _looks_past(monkeypatch) -> list[bool]:
+    """Whether each side of the profile intervals fitted from now on looked past its
+    end (``IntervalInputs.look_past``)."""
+    from backlashkit.identify.intervals import ProfileLikelihood
+
+    seen, end = [], ProfileLikelihood._end
+
+    def recorded(self, rise, first, look_past):
+        seen.append(look_past)
+        return end(self, rise, first, look_past)
+
+    monkeypatch.setattr(ProfileLikelihood, "_end", recorded)
+    return seen
+
+
+def test_current_loop_found_and_theta_within_3_percent(monkeypatch):
     """Issue 20's second row: a 1 ms current loop, 40 dB (today: +1.4 %, and an
-    interval excluding the truth)."""
+    interval excluding the truth). The loop, added after the search, lets the profile
+    of theta fall again past a crossing: its ends are looked past."""
     recs = _records(P_TRUE, THETA, tau_i=1e-3, seed=1)
+    looked = _looks_past(monkeypatch)
     fit = _fit(recs, P_TRUE)
+    assert looked == [True, True]
     assert fit.tau_i_ == pytest.approx(1e-3, rel=0.5)
     assert fit.friction_ == "viscous"
     assert fit.theta_ == pytest.approx(THETA, rel=THETA_RTOL)
@@ -153,11 +171,13 @@ def _exact_speeds():
     return out
 
 
-def test_ideal_records_keep_paper_a_model_unchanged():
+def test_ideal_records_keep_paper_a_model_unchanged(monkeypatch):
     """On an ideal drive ``auto`` keeps the viscous model without a loop, and the
-    estimate is that model's own fit."""
+    estimate is that model's own fit; its profile does not look past its ends."""
     recs = _records(P_TRUE, THETA, seed=3)
+    looked = _looks_past(monkeypatch)
     auto = _fit(recs, P_TRUE)
+    assert looked == [False, False]
     plain = _fit(recs, P_TRUE, friction="viscous", actuator=None)
     assert (auto.friction_, auto.tau_i_) == ("viscous", 0.0)
     assert not any(c.kept for c in auto.choices_)

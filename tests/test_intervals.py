@@ -140,3 +140,37 @@ def test_bootstrap_refits_anywhere_give_the_same_interval():
         assert other.ci95 == serial.ci95
     with ThreadPoolExecutor(1) as ex, pytest.raises(bk.InputError, match="executor or jobs"):
         bk.ParametricBootstrap(8, jobs=2, executor=ex)
+
+
+def _profile_of(rise_at):
+    """A fit of ``theta`` alone (``z = 0``, a Fisher error of 0.1 in ``log theta``)
+    whose profile rises by ``rise_at(d)`` at a distance ``d`` on either side."""
+    import numpy as np
+
+    from backlashkit.identify.intervals import IntervalInputs
+
+    def residual(zz):
+        return np.sqrt([[rise_at(abs(float(zz[0, 0])))]])
+
+    return lambda look_past: IntervalInputs(
+        theta=1.0, std=0.1, z=np.zeros(1), cov_z=np.array([[0.01]]), cost=0.0,
+        residual=residual, fd_step=1e-6, resample=None, refit=None, look_past=look_past)
+
+
+def test_a_profile_that_falls_again_is_looked_past():
+    """A profile whose rise reaches 3.84 and then falls (a current loop's lag jumping
+    across its valley, docs/validation/real-drives.md) ends at its outer crossing when
+    the fit says it may fall again, and at the first crossing otherwise; a profile that
+    keeps rising ends where it did, at one more refit per side."""
+    def bump(d):  # 3.67 at the Fisher end 0.196, 2.51 a quarter further out
+        return (d / 0.1) ** 2 if d <= 0.19 else 2.5 + ((d - 0.25) / 0.05) ** 2
+
+    fit = _profile_of(bump)
+    first = bk.ProfileLikelihood()._interval(fit(False))
+    assert first.ci95 == pytest.approx((math.exp(-0.196), math.exp(0.196)))
+    looked = bk.ProfileLikelihood()._interval(fit(True))
+    lo, hi = -math.log(looked.ci95[0]), math.log(looked.ci95[1])
+    assert lo == pytest.approx(hi) and abs(bump(lo) - CHI2_95) <= 0.25 and lo > 0.29
+    plain = _profile_of(lambda d: (d / 0.1) ** 2)
+    once, twice = (bk.ProfileLikelihood()._interval(plain(k)) for k in (False, True))
+    assert twice.ci95 == once.ci95 and len(twice.profile) == len(once.profile) + 2

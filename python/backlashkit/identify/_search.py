@@ -309,11 +309,12 @@ class Uncertain:
 
 def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_iter: int,
                 draw: Callable[[np.ndarray, np.random.Generator], list[Record]],
-                refit: Callable[[list[Record]], float]) -> Uncertain:
+                refit: Callable[[list[Record]], float], *, look_past: bool = False
+                ) -> Uncertain:
     """Stage 8: Gauss-Newton covariance and the interval object's interval; a profile
     refit well below the estimate's cost moves the estimate there (at most
     :data:`RECENTRE_MAX` times). ``draw(z, rng)``: a bootstrap resample at ``z``;
-    ``refit(records)``: its ``theta``."""
+    ``refit(records)``: its ``theta``; ``look_past``: :attr:`IntervalInputs.look_past`."""
     for k_centre in range(RECENTRE_MAX + 1):
         z = best.z
         # the prior's rows are in the residual: its information is in J^T J
@@ -330,7 +331,7 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
         found = interval._interval(IntervalInputs(
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
             pb.fd_step, partial(draw, z), refit,
-            partial(rows_unc.exact_jacobian, with_theta=False)))
+            partial(rows_unc.exact_jacobian, with_theta=False), look_past))
         if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
             break
         st = pb.refine(rows_unc, found.lowest_z, max_iter)
@@ -543,8 +544,11 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
     refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1])
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
+    # a term added after the search (a loop's lag) trades against the linear parameters
+    # along a curved valley, and theta's profile can fall again past a crossing
     unc = uncertainty(pb, best, rows_unc, interval, search.max_iter,
-                      partial(resample, pb, sig, ar), refit)
+                      partial(resample, pb, sig, ar), refit,
+                      look_past=bool(joined_terms(terms, choices)))
     if quantised(rows_unc):
         errors = quantisation_errors(unc, rows_unc)
         unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)

@@ -49,6 +49,14 @@ CHI2_95 = 3.841458820694124
 Z_95 = 1.96
 #: First distance (log theta) of the profile search when the Fisher error is 0.
 PROFILE_FIRST_STEP = 0.05
+#: Where a profile may fall again past its first crossing (``IntervalInputs.look_past``),
+#: it is looked at this fraction of the end's distance further out. On the second drive
+#: of ``benchmarks/real_drive.py`` with friction and a current loop (trial 18), the
+#: profile of ``theta`` rose to 3.71 and fell to 2.60 a quarter further out, where the
+#: refits' lag jumped across its valley; the truth lay there.
+LOOK_PAST = 0.25
+#: Looks past an end at most, per side.
+LOOKS_PAST = 2
 
 
 @dataclass
@@ -64,7 +72,10 @@ class IntervalInputs:
     ``residual`` at one point in the log-parameters other than ``theta``'s, which a
     profile refit holds (rows by log-parameter, from the compiled sensitivities), or
     None where it does not exist there; the profile's refits then difference
-    ``residual`` instead.
+    ``residual`` instead. ``look_past``: whether the profile may rise and fall again
+    past its first crossing (a current loop's lag, fitted after the search, trading
+    against the linear parameters along a curved valley), so that its ends are looked
+    past (:data:`LOOK_PAST`).
     """
 
     theta: float
@@ -77,6 +88,7 @@ class IntervalInputs:
     resample: Callable[[np.random.Generator], list]
     refit: Callable[[list], float]
     jacobian: Callable[[np.ndarray], np.ndarray | None] | None = None
+    look_past: bool = False
 
 
 @dataclass
@@ -129,6 +141,10 @@ class ProfileLikelihood:
     Fisher standard error of ``log theta``) and moves by the square-root law
     ``sqrt(cost rise)`` proportional to the distance (secant steps once bracketed),
     until the rise is within ``tol`` of 3.84. ``std_`` stays the Fisher standard error.
+    Where the fit keeps a current loop's lag found after the search, the profile can
+    fall again past a crossing (the lag jumps across its valley): each end is then
+    looked past by a quarter of its distance (``LOOK_PAST``, at most twice), and the
+    search goes on outwards where the rise there is still below 3.84.
 
     Where the shaft rattles the profile is rough at the scale of a chi-square unit: a
     refit held at ``theta`` can end below the estimate's cost. The rise is then taken
@@ -175,10 +191,8 @@ class ProfileLikelihood:
         search = _HeldTheta(fit, self.max_iter)
         ends, bounded = [], []
         for sign in (-1.0, 1.0):
-            d, ok = profile_crossing(partial(search.rise, sign, {}),
-                                     Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP,
-                                     tol=self.tol, max_evaluations=self.max_evaluations,
-                                     largest=math.log(self.max_factor))
+            d, ok = self._end(partial(search.rise, sign, {}),
+                              Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP, fit.look_past)
             ends.append(math.exp(z[0] + sign * d))
             bounded.append(ok)
         lowest = min(search.evaluated, key=lambda e: e[0])
@@ -186,6 +200,20 @@ class ProfileLikelihood:
         return ThetaInterval("profile", (ends[0], ends[1]), (bounded[0], bounded[1]),
                              profile=points, lowest_rise=float(lowest[0]),
                              lowest_z=lowest[1])
+
+    def _end(self, rise: Callable[[float], float], first: float, look_past: bool
+             ) -> tuple[float, bool]:
+        """One side's end: its distance (log theta) and whether it is bounded."""
+        search = partial(profile_crossing, rise, tol=self.tol,
+                         max_evaluations=self.max_evaluations,
+                         largest=math.log(self.max_factor))
+        d, ok = search(first)
+        for _ in range(LOOKS_PAST if look_past else 0):
+            past = d * (1.0 + LOOK_PAST)
+            if not ok or past >= math.log(self.max_factor) or rise(past) > CHI2_95 + self.tol:
+                break
+            d, ok = search(past)  # the profile fell again: on outwards from there
+        return d, ok
 
     def _quantised(self, found: ThetaInterval, theta: float, errors: np.ndarray
                    ) -> ThetaInterval:
@@ -203,6 +231,7 @@ class _HeldTheta:
         self.slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(z.size - 1)
         #: every refit: cost rise and log-parameters (the estimate first)
         self.evaluated: list[tuple[float, np.ndarray]] = [(0.0, z)]
+        self._rises: dict[tuple[float, float], float] = {}  # (sign, d) -> rise
 
     def _residual(self, zt: float, w: np.ndarray) -> np.ndarray:
         try:
@@ -225,6 +254,12 @@ class _HeldTheta:
     def rise(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
         """Cost rise of the profile at distance ``d`` (log theta) on the side ``sign``;
         ``memo`` holds that side's refits (distance -> other log-parameters)."""
+        if (sign, d) in self._rises:  # a look past an end is where the search goes on
+            return self._rises[sign, d]
+        self._rises[sign, d] = self._rise(sign, memo, d)
+        return self._rises[sign, d]
+
+    def _rise(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
         z, cost = self.fit.z, self.fit.cost
         zt = z[0] + sign * d
         if z.size == 1:  # theta alone is estimated: the profile is the cost itself
