@@ -676,3 +676,35 @@ def test_bootstrap_resamples_encoder_records_as_encoders_read_them(encoder):
     assert fit.interval_ == "bootstrap"
     assert np.all(np.abs(fit.bootstrap_thetas_ - fit.theta_) < 5e-6)
     assert np.ptp(fit.bootstrap_thetas_) > 0
+
+
+def test_a_prior_on_the_coulomb_torques_pulls_them(coulomb):
+    """A prior may give the Coulomb torques with a relative std (issue 20: "the prior
+    TOML may give these terms, with their uncertainty"). With fc_M given 30 % above
+    the truth at a 1 % std, the fit moves fc_M from the free fit's value towards the
+    prior's as the Gaussian update of the free fit's estimate by that prior predicts,
+    ``fc + v / (v + s^2) (prior - fc)`` with variance ``1 / (1 / v + 1 / s^2)`` (``v``
+    the free fit's variance of fc_M, ``s`` the prior's std): within one standard error,
+    which the model's nonlinearity leaves between the two."""
+    prior = bk.TwoMassDrive(**P_TRUE, fc_M=0.013, fc_L=0.02)
+    linear = dict.fromkeys(P_TRUE, 0.3)
+    fits = [bk.JointIdentifier(prior, prior_rel_std=rel, friction="coulomb", actuator=None,
+                               interval=bk.FisherInterval(), workers=1).fit(coulomb)
+            for rel in (linear, {**linear, "fc_M": 0.01})]
+    free, pulled = (f.fc_M_ for f in fits)
+    v, s2 = fits[0].param_std_["fc_M"] ** 2, (0.01 * 0.013) ** 2
+    std = math.sqrt(1.0 / (1.0 / v + 1.0 / s2))
+    assert pulled == pytest.approx(free + v / (v + s2) * (0.013 - free), abs=std)
+    assert fits[1].param_std_["fc_M"] == pytest.approx(std, rel=0.1)
+
+
+@pytest.mark.parametrize("fc, rel, kw, match", [
+    ((0.0, 0.02), {"fc_M": 0.1}, {}, r"the prior's fc_M is 0: give its value"),
+    ((0.01, 0.02), {"fc_L": 0.1}, {"friction": "viscous"},
+     r"friction='viscous' does not fit it: use friction='coulomb' or 'auto', or drop fc_L"),
+    ((0.01, 0.02), {"tau_i": 0.1}, {}, r"prior_rel_std has unknown parameter 'tau_i'"),
+])
+def test_a_prior_std_the_fit_cannot_use_is_refused(coulomb, fc, rel, kw, match):
+    prior = bk.TwoMassDrive(**P_TRUE, fc_M=fc[0], fc_L=fc[1])
+    with pytest.raises(InputError, match=match):
+        bk.JointIdentifier(prior, prior_rel_std=rel, **kw).fit(coulomb)

@@ -70,13 +70,19 @@ def test_uncertainty_table_is_accepted_and_read(tmp_path):
     assert read_drive_toml(path) == TwoMassDrive(**PAPER)
     assert read_uncertainty_toml(path) == {"J_L": 0.1, "k_sh": 0.2}
     assert read_uncertainty_toml(write(tmp_path, toml_text(), "b.toml")) == {}
+    # the Coulomb torques too, whose values the [drive] table gives
+    text = toml_text(extra="[uncertainty]\nfc_M = 0.5\n").replace(
+        "[drive]", "[drive]\nfc_M = 0.01")
+    path = write(tmp_path, text, "c.toml")
+    assert read_drive_toml(path).fc_M == 0.01
+    assert read_uncertainty_toml(path) == {"fc_M": 0.5}
 
 
 @pytest.mark.parametrize(
     ("extra", "culprit"),
     [
         ("[uncertainty]\nJ_X = 0.1\n", r"unknown key\(s\) J_X in \[uncertainty\]; allowed keys: "
-         r"J_M, J_L, k_sh, f_M, f_L, f_sh$"),
+         r"J_M, J_L, k_sh, f_M, f_L, f_sh, fc_M, fc_L$"),
         ("[uncertainty]\ntheta = 0.1\n", r"\[uncertainty\] theta: the backlash is what identify "
          r"estimates"),
         ("[uncertainty]\nJ_L = -0.1\n", "J_L must be >= 0"),

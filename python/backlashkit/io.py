@@ -18,8 +18,9 @@ friction torques, N m, >= 0) and ``fs_M``, ``fs_L`` (breakaway torques, N m, >= 
 Coulomb torque; default equal to it). An optional ``[actuator]`` table with ``tau_i``
 (current-loop time constant, s, >= 0) is read by :func:`read_actuator_toml`.
 Besides ``[drive]`` the file may hold an optional
-``[uncertainty]`` table of relative (fractional) uncertainties of the same
-parameters, e.g. ``J_L = 0.1`` for +-10 %, read by :func:`read_uncertainty_toml`;
+``[uncertainty]`` table of relative (fractional) uncertainties of the linear
+parameters and the Coulomb torques, e.g. ``J_L = 0.1`` for +-10 %, read by
+:func:`read_uncertainty_toml`;
 :func:`read_drive_toml` accepts and ignores it. Any other table or key is an error
 (a misspelt key would otherwise be silently dropped).
 
@@ -66,6 +67,9 @@ PathLike = str | os.PathLike[str]
 DRIVE_KEYS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta")
 #: Optional friction keys of the ``[drive]`` table.
 FRICTION_KEYS = ("fc_M", "fc_L", "fs_M", "fs_L")
+#: The friction keys an ``[uncertainty]`` table may give: the Coulomb torques, which
+#: the joint estimator fits (the breakaway torque is tied to them).
+UNCERTAIN_FRICTION_KEYS = ("fc_M", "fc_L")
 #: Keys of the optional ``[actuator]`` table.
 ACTUATOR_KEYS = ("tau_i",)
 #: Top-level tables a drive file may hold.
@@ -274,7 +278,9 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
 
     Each entry is the relative (fractional) uncertainty of one linear drive parameter
     (``J_M``, ``J_L``, ``k_sh``, ``f_M``, ``f_L``, ``f_sh``; not ``theta``, which is
-    estimated), e.g. ``J_L = 0.1`` for +-10 %. Parameters not listed are taken as exact.
+    estimated), e.g. ``J_L = 0.1`` for +-10 %, or of a Coulomb torque (``fc_M``,
+    ``fc_L``) whose value the ``[drive]`` table gives. Linear parameters not listed are
+    taken as exact; a Coulomb torque not listed is fitted without a prior.
 
     Parameters
     ----------
@@ -290,24 +296,25 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     ------
     InputError
         If the file does not parse, the table holds a key that is not a linear drive
-        parameter, or a value that is not a finite number >= 0.
+        parameter or a Coulomb torque, or a value that is not a finite number >= 0.
     """
     doc = load_toml(path)
     _check_top_level(doc, path)
     table = _table(doc, "uncertainty", path, required=False)
     if table is None:
         return {}
-    linear = DRIVE_KEYS[:-1]  # theta has no prior: it is what identification estimates
+    # theta has no prior: it is what identification estimates
+    allowed = DRIVE_KEYS[:-1] + UNCERTAIN_FRICTION_KEYS
     if "theta" in table:
         raise InputError(
             f"{path}: [uncertainty] theta: the backlash is what identify estimates, without "
-            f"a prior; remove it (list the linear parameters only: {_fmt_keys(linear)})"
+            f"a prior; remove it (list only: {_fmt_keys(allowed)})"
         )
-    unknown = [k for k in table if k not in linear]
+    unknown = [k for k in table if k not in allowed]
     if unknown:
         raise InputError(
             f"{path}: unknown key(s) {_fmt_keys(unknown)} in [uncertainty]"
-            f"{_did_you_mean(unknown, linear)}; allowed keys: {_fmt_keys(linear)}"
+            f"{_did_you_mean(unknown, allowed)}; allowed keys: {_fmt_keys(allowed)}"
         )
     out = {}
     for key, value in table.items():

@@ -71,7 +71,8 @@ likelihood over theta AND the linear parameters, on every record and both speeds
 (each weighted by its own noise level, estimated from the data), the prior entering
 as a Gaussian penalty with the relative std of the [uncertainty] table of the --drive
 file (or --prior-rel-std); without either, the linear parameters are refined from the
-data alone. It reports the standard error std (Fisher information) and a 95% interval
+data alone. The table may also give the Coulomb torques fc_M, fc_L, about their values
+in [drive]. It reports the standard error std (Fisher information) and a 95% interval
 ci95 of theta (profile likelihood; --interval fisher: theta +- 1.96 std), and says
 when the residuals are correlated from sample to sample (filtered speeds: --noise ar
 models the noise as autoregressive instead of white); its t_c, t_b are the contact

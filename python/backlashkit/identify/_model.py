@@ -66,18 +66,22 @@ def drive_with(base: TwoMassDrive, names: Sequence[str], values: np.ndarray) -> 
     return replace(base, **{n: float(x) for n, x in zip(names, values, strict=True)})
 
 
-def rel_std(prior_rel_std, names: Sequence[str]) -> dict[str, float | None]:
-    """Parameter -> relative std (None: estimated without penalty); absent = fixed."""
+def rel_std(prior_rel_std, names: Sequence[str], extra: Sequence[str] = ()
+            ) -> dict[str, float | None]:
+    """Parameter -> relative std (None: estimated without penalty); absent = fixed.
+    A dict may also give the parameters ``extra`` (a term's, fitted or not by its own
+    option); a float or None applies to ``names`` alone."""
     if prior_rel_std is None:
         return {n: None for n in names}
     if isinstance(prior_rel_std, Mapping):
         out: dict[str, float | None] = {}
+        allowed = (*names, *extra)
         for key, val in prior_rel_std.items():
             if key == "theta":
                 continue  # theta is always estimated, without a prior
-            if key not in names:
+            if key not in allowed:
                 raise InputError(
-                    f"prior_rel_std has unknown parameter {key!r}; allowed: {', '.join(names)}"
+                    f"prior_rel_std has unknown parameter {key!r}; allowed: {', '.join(allowed)}"
                 )
             x = v.nonnegative(f"prior_rel_std[{key!r}]", val)
             if x > 0:

@@ -394,10 +394,12 @@ def build_problem(prior: TwoMassDrive, recs: list[Record], rel: dict, noise,
     pb = Problem(
         spans=spans_, screen=screen_spans(spans_), free=[*free, *extra], names=names,
         base=base, cols=[PACKED_LONG.index(n) for n in names],
-        # the added terms have no prior: rows of 0 (p_prior 1, infinite std)
-        p_prior=np.array([getattr(prior, n) for n in free] + [1.0] * len(extra)),
+        # an added term's parameter without a prior std has a row of 0 (p_prior 1,
+        # infinite std); with one, the prior's value is where its penalty is 0
+        p_prior=np.array([getattr(prior, n) for n in free]
+                         + [getattr(prior, n) if rel.get(n) else 1.0 for n in extra]),
         pen=np.array([rel[n] if rel[n] is not None else np.inf for n in free]
-                     + [np.inf] * len(extra)),
+                     + [rel.get(n) or np.inf for n in extra]),
         law=law, workers=workers, fd_step=search.fd_step,
         floors={PACKED_LONG.index(n): x for term in terms if term.fitted
                 for n, x in term.floors(recs).items()},

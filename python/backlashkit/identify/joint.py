@@ -124,7 +124,7 @@ from .quantum import speed_quantum
 from .record import as_records, check_prior
 from .search import JointSearch
 from .step import check_fit_near_prior, check_step_downs, held_speed_gain
-from .terms import Term, actuator_term, friction_term
+from .terms import PRIOR_PARAMS, Term, actuator_term, friction_term
 
 __all__ = ["JointIdentifier", "LINEAR_PARAMS"]
 
@@ -157,7 +157,9 @@ class JointIdentifier:
         Prior linear parameters (its ``theta`` is ignored).
     prior_rel_std : None, float or dict, optional
         None (default): all six linear parameters estimated freely; a float: all six
-        with that relative prior std; a dict: only those it gives a std > 0.
+        with that relative prior std; a dict: only those it gives a std > 0. A dict
+        may also give the Coulomb torques ``fc_M``, ``fc_L`` a relative std about the
+        prior's values (which must then be > 0), where ``friction`` fits them.
     noise : tuple of float, optional
         Noise std ``(s_M, s_L)`` in rad/s of every record; default estimated.
     search : JointSearch, optional
@@ -412,8 +414,10 @@ class JointIdentifier:
         noise_model = self.noise_model._resolve(held, held_samples,
                                                 fixed_noise=self.noise is not None,
                                                 final_horizon=search.final_horizon)
-        rel = rel_std(self.prior_rel_std, LINEAR_PARAMS)
+        rel = rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS)
         terms = self._terms()
+        for term in terms:
+            term.check_prior(rel, prior)
         pb, sigma = build_problem(prior, recs, rel, self.noise, search, self.law,
                                   self.workers, terms)
         start = prior if anchor is None else anchor

@@ -44,7 +44,8 @@ from .record import Record
 from .step import find_step_down
 
 __all__ = [
-    "ESTIMATED_FALL", "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "SCREEN_DROP", "Term",
+    "ESTIMATED_FALL", "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "PRIOR_PARAMS",
+    "SCREEN_DROP", "Term",
     "TermChoice", "actuator_term", "friction_term",
 ]
 
@@ -53,6 +54,10 @@ __all__ = [
 #: the statistic is a mixture of chi-squares with fewer degrees of freedom), so paper A's
 #: ideal records keep the viscous model in at least 99 % of fits.
 KEEP_LEVEL = 0.99
+#: The terms' parameters a prior may give with a relative std (``prior_rel_std``): the
+#: Coulomb torques, which a :class:`~backlashkit.TwoMassDrive` holds. A current loop's
+#: lag is not a drive parameter; a known one is given as a ``CurrentLoop``.
+PRIOR_PARAMS = ("fc_M", "fc_L")
 #: A term the test would drop is kept anyway where it is estimated (it lowers
 #: ``-2 log L`` and the data pin it down) and dropping it moves ``theta`` by more than
 #: this many of its standard errors (in the model without it). Keeping a term the
@@ -188,6 +193,34 @@ class Term:
         """
         ts = min(r.ts for r in recs)
         return [dict.fromkeys(self.params, x * ts) for x in TAU_START_SAMPLES]
+
+    def check_prior(self, rel: dict, prior: TwoMassDrive) -> None:
+        """Refuse a prior std of the term's parameters that the fit cannot use.
+
+        Parameters
+        ----------
+        rel : dict
+            Parameter name -> relative prior std (``prior_rel_std``, read).
+        prior : TwoMassDrive
+            The prior; a relative std needs its value > 0.
+
+        Raises
+        ------
+        InputError
+            If the term is not fitted, or the prior's value is 0.
+        """
+        for n in self.params:
+            if not rel.get(n):
+                continue
+            if not self.fitted:
+                raise InputError(  # only friction's parameters are in PRIOR_PARAMS
+                    f"prior_rel_std gives {n} a std, but {self.name}='viscous' does not fit "
+                    f"it: use {self.name}='coulomb' or 'auto', or drop {n}")
+            if not getattr(prior, n, 0.0) > 0:
+                raise InputError(
+                    f"prior_rel_std gives {n} a relative std of {rel[n]:g}, but the prior's "
+                    f"{n} is 0: give its value (TwoMassDrive({n}=...) in N m, or {n} in "
+                    "the [drive] table of the drive file)")
 
     def floors(self, recs: Sequence[Record]) -> dict[str, float]:
         """Smallest values simulated of the fitted parameters.
