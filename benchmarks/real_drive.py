@@ -32,7 +32,8 @@ Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
 [--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial ``K``
 alone (the study prints its trial of largest error) and prints its fitted parameters
-against the truth, each term test's reason and (analogue speeds) ``-2 log L`` of the
+against the truth, each term test's reason, the profile's refits (``theta`` and the
+rise of the cost at each) and (analogue speeds) ``-2 log L`` of the
 true drive against the estimate's; on analogue records of a drive with a
 current loop it also refits them with the loop's lag held at its true value, a check
 of the profile interval (:func:`held_loop_check`). ``--snr DB`` sets the analogue
@@ -260,6 +261,8 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
             print(_fitted_line(fit, linear, fc, tau), flush=True)
             for c in fit.choices_:
                 print(f"  {c.reason()}", flush=True)
+            if fit.profile_ is not None:
+                print(_profile_line(fit.profile_, theta), flush=True)
             if not counts and fit.noise_ar_ is None:
                 print(truth_line(linear, theta, fc, tau, recs, fit), flush=True)
         if tau and not counts:
@@ -379,6 +382,13 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)
             break
+
+
+def _profile_line(profile, theta) -> str:
+    """The profile's refits, by ``theta``: where each held ``theta`` lies from the truth,
+    and the rise of the cost (chi-square units) there above the estimate's."""
+    points = ", ".join(f"{100 * (th / theta - 1):+.2f} % {rise:.3g}" for th, rise in profile)
+    return f"  profile (theta from the truth, rise): {points}"
 
 
 def _trial_line(r, theta) -> str:

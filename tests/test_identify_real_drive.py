@@ -699,12 +699,42 @@ def test_a_prior_on_the_coulomb_torques_pulls_them(coulomb):
 
 
 @pytest.mark.parametrize("fc, rel, kw, match", [
-    ((0.0, 0.02), {"fc_M": 0.1}, {}, r"the prior's fc_M is 0: give its value"),
+    ((0.0, 0.02), {"fc_M": 0.1}, {},
+     r"fc_M is given \(prior_rel_std\['fc_M'\] = 0.1\), but the prior's fc_M is 0: give "
+     r"its value in N m \(TwoMassDrive\(fc_M=...\)\)"),
     ((0.01, 0.02), {"fc_L": 0.1}, {"friction": "viscous"},
-     r"friction='viscous' does not fit it: use friction='coulomb' or 'auto', or drop fc_L"),
+     r"friction='viscous' does not fit it: use friction='coulomb' or friction='auto', or "
+     r"remove it"),
+    ((0.01, 0.02), {"fc_M": 0.0}, {}, r"fitted, not held at the prior's value; give a std > 0"),
     ((0.01, 0.02), {"tau_i": 0.1}, {}, r"prior_rel_std has unknown parameter 'tau_i'"),
 ])
 def test_a_prior_std_the_fit_cannot_use_is_refused(coulomb, fc, rel, kw, match):
     prior = bk.TwoMassDrive(**P_TRUE, fc_M=fc[0], fc_L=fc[1])
     with pytest.raises(InputError, match=match):
         bk.JointIdentifier(prior, prior_rel_std=rel, **kw).fit(coulomb)
+
+
+def test_cli_names_the_drive_file_where_a_coulomb_prior_is_wrong(coulomb, tmp_path, capsys):
+    """The refusals above in the command line's words: the table's entry and the file."""
+    paths, prior = _files(coulomb, tmp_path)
+    with open(prior, "a") as f:
+        f.write("[uncertainty]\nJ_M = 0.1\nfc_M = 0.5\n")
+    assert cli_main(["identify", *paths, "--drive", prior]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"a relative std of fc_M is given ({prior}: [uncertainty] fc_M = 0.5), "
+                        f"but the prior's fc_M is 0: give its value in N m (fc_M in the "
+                        f"[drive] table of {prior})")
+    assert len(err.splitlines()) == 1
+
+
+def test_the_published_drive_has_the_friction_the_model_simulated():
+    """A prior's Coulomb torques start the fit; where the model has no Coulomb friction
+    (friction='viscous', or 'auto' dropping it), the fitted drive has none either and
+    says so, not the prior's torques (nor its breakaway torque)."""
+    recs = _records(P_TRUE, THETA, seed=3)
+    prior = bk.TwoMassDrive(**P_TRUE, fc_M=0.015, fc_L=0.015, fs_M=0.03)
+    for friction in ("viscous", "auto"):
+        fit = bk.JointIdentifier(prior, friction=friction, actuator=None,
+                                 interval=bk.FisherInterval(), workers=1).fit(recs)
+        assert fit.friction_ == "viscous" and (fit.fc_M_, fit.fc_L_) == (0.0, 0.0)
+        assert (fit.drive_.fc_M, fit.drive_.fs_M) == (0.0, None)

@@ -219,9 +219,9 @@ class DriveChain(_Simulates):
                 if u == 0:
                     return np.zeros(self.n_states)
                 raise InputError(
-                    f"steady_state: the torque {u!r} N m does not overcome the Coulomb "
-                    f"friction (sum of fc = {fc.sum()!r} N m): the drive comes to rest with "
-                    "a twist its dynamics do not determine"
+                    f"steady_state: the torque {float(u)!r} N m does not overcome the "
+                    f"Coulomb friction (sum of fc = {float(fc.sum())!r} N m): the drive comes "
+                    "to rest with a twist its dynamics do not determine"
                 )
             # Slipping in the direction of the torque: the Coulomb torques act as a
             # constant load opposing the motion.
@@ -373,7 +373,10 @@ class TwoMassDrive(_Simulates):
         Returns
         -------
         numpy.ndarray
-            ``[w_M, w_L, phi_d]``: both speeds ``torque / (f_M + f_L)``, the shaft
-            twisted by ``theta + f_L w / k_sh`` (mirrored for a negative torque).
+            ``[w_M, w_L, phi_d]``: both speeds ``(torque - fc_M - fc_L) / (f_M + f_L)``,
+            the shaft twisted by ``theta + (f_L w + fc_L) / k_sh`` (mirrored for a
+            negative torque). A torque within the Coulomb torques' sum (but 0, which
+            gives rest) is refused: the drive stops with a twist its dynamics do not
+            determine.
         """
         return self.to_chain().steady_state(torque)

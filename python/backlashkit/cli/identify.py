@@ -19,6 +19,7 @@ import inspect
 import json
 import math
 import warnings
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -71,8 +72,8 @@ likelihood over theta AND the linear parameters, on every record and both speeds
 (each weighted by its own noise level, estimated from the data), the prior entering
 as a Gaussian penalty with the relative std of the [uncertainty] table of the --drive
 file (or --prior-rel-std); without either, the linear parameters are refined from the
-data alone. The table may also give the Coulomb torques fc_M, fc_L, about their values
-in [drive]. It reports the standard error std (Fisher information) and a 95% interval
+data alone. The table may also give the Coulomb torques fc_M, fc_L a relative std about
+their values in [drive]. It reports the standard error std (Fisher information) and a 95% interval
 ci95 of theta (profile likelihood; --interval fisher: theta +- 1.96 std), and says
 when the residuals are correlated from sample to sample (filtered speeds: --noise ar
 models the noise as autoregressive instead of white); its t_c, t_b are the contact
@@ -132,8 +133,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--drive",
         metavar="PRIOR.toml",
         required=True,
-        help="prior linear parameters: [drive] with J_M, J_L, k_sh, f_M, f_L, f_sh (SI); "
-        "theta, if present, is ignored",
+        help="prior linear parameters: [drive] with J_M, J_L, k_sh, f_M, f_L, f_sh (SI), "
+        "optionally the Coulomb torques fc_M, fc_L (N m: the fit's start, and its prior "
+        "with an [uncertainty]); theta, if present, is ignored",
     )
     p.add_argument("--method", choices=METHODS, default=DEFAULT_METHOD,
                    help=f"default {DEFAULT_METHOD}")
@@ -203,7 +205,7 @@ def _add_joint_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--prior-rel-std", type=float, default=None, metavar="REL",
         help="joint: relative std of every linear parameter of the prior (overrides the "
-        "[uncertainty] table; 0 = known exactly)"
+        "[uncertainty] table, its Coulomb torques too; 0 = known exactly)"
     )
     p.add_argument(
         "--interval", choices=("profile", "fisher"), default=None,
@@ -319,11 +321,25 @@ def run(args: argparse.Namespace) -> int:
         Exit status (0 on success; bad input raises :class:`InputError`, whose
         message names the flag, e.g. ``--final-horizon``, not the parameter).
     """
-    flags = dict(FLAGS)
+    flags: dict[str, Any] = dict(FLAGS)
     if args.prior_rel_std is not None:  # else the [uncertainty] table gave the values
         flags["prior_rel_std"] = "--prior-rel-std"
+    else:  # a std the table gave, named where it is
+        flags["prior_rel_std"] = partial(_table_entry, args.drive)
+    flags["prior_value"] = partial(_drive_entry, args.drive)
     with flag_names(flags):
         return _run(args, flags)
+
+
+def _table_entry(drive: str, option: Any) -> str:
+    """Where the drive file gave a prior std (``terms.prior_std_option``)."""
+    name, value = option.value
+    return f"{drive}: [uncertainty] {name} = {value:g}"
+
+
+def _drive_entry(drive: str, option: Any) -> str:
+    """Where the drive file gives a prior value (``Term.check_prior``)."""
+    return f"{option.value} in the [drive] table of {drive}"
 
 
 def _check_options(args: argparse.Namespace) -> None:

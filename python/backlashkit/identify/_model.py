@@ -70,7 +70,8 @@ def rel_std(prior_rel_std, names: Sequence[str], extra: Sequence[str] = ()
             ) -> dict[str, float | None]:
     """Parameter -> relative std (None: estimated without penalty); absent = fixed.
     A dict may also give the parameters ``extra`` (a term's, fitted or not by its own
-    option); a float or None applies to ``names`` alone."""
+    option; kept at 0 too, for the term to refuse: :meth:`Term.check_prior`); a float
+    or None applies to ``names`` alone."""
     if prior_rel_std is None:
         return {n: None for n in names}
     if isinstance(prior_rel_std, Mapping):
@@ -84,7 +85,7 @@ def rel_std(prior_rel_std, names: Sequence[str], extra: Sequence[str] = ()
                     f"prior_rel_std has unknown parameter {key!r}; allowed: {', '.join(allowed)}"
                 )
             x = v.nonnegative(f"prior_rel_std[{key!r}]", val)
-            if x > 0:
+            if x > 0 or key in extra:
                 out[key] = x
         return out
     x = v.nonnegative("prior_rel_std", prior_rel_std)

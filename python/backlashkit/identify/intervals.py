@@ -51,9 +51,9 @@ Z_95 = 1.96
 PROFILE_FIRST_STEP = 0.05
 #: Where a profile may fall again past its first crossing (``IntervalInputs.look_past``),
 #: it is looked at this fraction of the end's distance further out. On the second drive
-#: of ``benchmarks/real_drive.py`` with friction and a current loop (trial 18), the
-#: profile of ``theta`` rose to 3.71 and fell to 2.60 a quarter further out, where the
-#: refits' lag jumped across its valley; the truth lay there.
+#: of ``benchmarks/real_drive.py`` with friction and a current loop (``--trial 18``),
+#: the profile of ``theta`` rose to 3.79 at its first crossing and fell to 2.65 a
+#: quarter further out; the truth lay beyond.
 LOOK_PAST = 0.25
 #: Looks past an end at most, per side.
 LOOKS_PAST = 2
@@ -142,7 +142,7 @@ class ProfileLikelihood:
     ``sqrt(cost rise)`` proportional to the distance (secant steps once bracketed),
     until the rise is within ``tol`` of 3.84. ``std_`` stays the Fisher standard error.
     Where the fit keeps a current loop's lag found after the search, the profile can
-    fall again past a crossing (the lag jumps across its valley): each end is then
+    fall again past a crossing (along the lag's curved valley): each end is then
     looked past by a quarter of its distance (``LOOK_PAST``, at most twice), and the
     search goes on outwards where the rise there is still below 3.84.
 

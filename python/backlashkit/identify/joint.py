@@ -88,7 +88,7 @@ import inspect
 import math
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -106,7 +106,14 @@ from ..errors import (
 from ..parallel import reporter
 from ..plants import TwoMassDrive
 from . import _search
-from ._model import LINEAR_PARAMS, TAU_COL, drive_with, model_commutation, rel_std
+from ._model import (
+    LINEAR_PARAMS,
+    PACKED_LONG,
+    TAU_COL,
+    drive_with,
+    model_commutation,
+    rel_std,
+)
 from ._problem import build_problem
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
@@ -536,11 +543,15 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
     """The fitted attributes of one search."""
     pb, unc = out.problem, out.unc
     fitted = dict(zip(pb.names, (float(x) for x in unc.values), strict=True))
-    for n in ("fc_M", "fc_L"):  # estimated in natural units: below 0 the model has 0
-        if n in fitted:
-            fitted[n] = max(fitted[n], 0.0)
-    on_drive = [n for n in pb.names if n != "tau_i"]
-    drive = drive_with(prior, on_drive, np.array([fitted[n] for n in on_drive]))
+    for n in ("fc_M", "fc_L"):
+        # estimated in natural units: below 0 the model has 0; not estimated, what the
+        # model simulated (0 without friction), not the prior's starting value
+        fitted[n] = max(fitted[n], 0.0) if n in fitted else (
+            float(pb.base[PACKED_LONG.index(n)]) if pb.base.size > TAU_COL else 0.0)
+    on_drive = [*(n for n in pb.names if n in LINEAR_PARAMS or n == "theta"), "fc_M", "fc_L"]
+    # the breakaway torques are tied to the Coulomb torques (None), as simulated
+    drive = replace(drive_with(prior, on_drive, np.array([fitted[n] for n in on_drive])),
+                    fs_M=None, fs_L=None)
     tau_i = fitted.get("tau_i", float(pb.base[TAU_COL]) if pb.base.size > TAU_COL else 0.0)
     residuals, fits = _search.residuals_and_fit(pb.spans, out.sims)
     theta = float(unc.values[0])

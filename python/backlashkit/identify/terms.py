@@ -38,14 +38,14 @@ import numpy as np
 from scipy.special import chdtri
 
 from ..actuator import CurrentLoop
-from ..errors import InputError
+from ..errors import InputError, Option
 from ..plants import TwoMassDrive
 from .record import Record
 from .step import find_step_down
 
 __all__ = [
     "ESTIMATED_FALL", "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "PRIOR_PARAMS",
-    "SCREEN_DROP", "Term",
+    "SCREEN_DROP", "Term", "prior_std_option",
     "TermChoice", "actuator_term", "friction_term",
 ]
 
@@ -207,20 +207,25 @@ class Term:
         Raises
         ------
         InputError
-            If the term is not fitted, or the prior's value is 0.
+            If the term is not fitted, the std is 0, or the prior's value is 0.
         """
         for n in self.params:
-            if not rel.get(n):
+            if n not in rel:
                 continue
-            if not self.fitted:
-                raise InputError(  # only friction's parameters are in PRIOR_PARAMS
-                    f"prior_rel_std gives {n} a std, but {self.name}='viscous' does not fit "
-                    f"it: use {self.name}='coulomb' or 'auto', or drop {n}")
+            given = (f"a relative std of {n} is given (", prior_std_option(n, rel[n]), ")")
+            if rel[n] == 0:
+                raise InputError(
+                    *given, ": a Coulomb torque is fitted, not held at the prior's value; "
+                    "give a std > 0 (0.01 for 1 %), or remove it to fit it freely")
+            if not self.fitted:  # only friction's parameters are in PRIOR_PARAMS
+                raise InputError(
+                    *given, ", but ", Option(self.name, "viscous"), " does not fit it: use ",
+                    Option(self.name, "coulomb"), " or ", Option(self.name, "auto"),
+                    ", or remove it")
             if not getattr(prior, n, 0.0) > 0:
                 raise InputError(
-                    f"prior_rel_std gives {n} a relative std of {rel[n]:g}, but the prior's "
-                    f"{n} is 0: give its value (TwoMassDrive({n}=...) in N m, or {n} in "
-                    "the [drive] table of the drive file)")
+                    *given, f", but the prior's {n} is 0: give its value in N m (",
+                    Option("prior_value", n, python=f"TwoMassDrive({n}=...)"), ")")
 
     def floors(self, recs: Sequence[Record]) -> dict[str, float]:
         """Smallest values simulated of the fitted parameters.
@@ -386,6 +391,26 @@ class TermChoice:
                     "beyond a factor e), so that shift does not keep it")
         return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}), and "
                 f"{moves}{both}")
+
+
+def prior_std_option(name: str, value: float) -> Option:
+    """Where a message says a prior std was given: ``prior_rel_std[name] = value`` in
+    Python's words (a front end spells it as its own source, e.g. a file's table).
+
+    Parameters
+    ----------
+    name : str
+        The parameter.
+    value : float
+        Its relative std.
+
+    Returns
+    -------
+    Option
+        Named ``"prior_rel_std"``, its value ``(name, value)``.
+    """
+    return Option("prior_rel_std", (name, value),
+                  python=f"prior_rel_std[{name!r}] = {value:g}")
 
 
 def friction_term(friction: str) -> Term:
