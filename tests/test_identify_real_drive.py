@@ -229,6 +229,18 @@ def test_cli_json_says_what_the_model_chose(coulomb, tmp_path, capsys):
     assert len(doc["model_choices"]) == 2
 
 
+def test_cli_reads_a_known_loop_from_the_drive_file(coulomb, tmp_path, capsys):
+    """A drive file's [actuator] table (as ``simulate`` reads it) fixes the loop's lag
+    where ``--current-loop`` is not given: nothing to test, no standard error."""
+    paths, prior = _files(coulomb, tmp_path)
+    with open(prior, "a") as f:
+        f.write("[actuator]\ntau_i = 0.0005\n")
+    assert cli_main(["identify", *paths, "--drive", prior, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["tau_i"], doc["tau_i_std"]) == (0.0005, None)
+    assert [c.split()[0] for c in doc["model_choices"]] == ["Coulomb"]
+
+
 def test_cli_current_loop_flag_refuses_nonsense(coulomb, tmp_path, capsys):
     (path,), prior = _files(coulomb[1:], tmp_path)
     code = cli_main(["identify", path, "--drive", prior, "--current-loop", "fast"])

@@ -45,7 +45,7 @@ from ..identify.step import REFUSE_FROM_PRIOR
 from ..identify.terms import FRICTION_CHOICES
 from ..identify.torque import torque_levels
 from ..identify.two_step import DEFAULT_DT4, RegressionIdentifier, TwoStepIdentifier
-from ..io import read_drive_toml, read_uncertainty_toml
+from ..io import read_actuator_toml, read_drive_toml, read_uncertainty_toml
 from ._identify_text import print_result
 from .files import add_file_options, file_options, reader_errors
 from .main import flag_names, word
@@ -241,8 +241,8 @@ def _add_joint_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--current-loop", default=None, metavar="auto|none|TAU",
         help="joint: the drive's current loop, a first-order lag of the torque: its time "
-        "constant fitted and kept where the data call for it (auto, the default), none, "
-        "or known (TAU in s)"
+        "constant fitted and kept where the data call for it (auto), none, or known (TAU "
+        "in s); default: the --drive file's [actuator] tau_i where it has one, else auto"
     )
     p.add_argument(
         "--final-horizon", type=float, default=None, metavar="S",
@@ -478,6 +478,8 @@ def _joint_identifier(args: argparse.Namespace, prior: Any) -> Any:
         terms["friction"] = args.friction
     if args.current_loop is not None:
         terms["actuator"] = _current_loop(args.current_loop)
+    elif (known := read_actuator_toml(args.drive)) is not None:  # as simulate reads it
+        terms["actuator"] = known
     return JointIdentifier(prior, prior_rel_std=rel, interval=interval,
                            noise_model=noise_model, **terms,
                            search=JointSearch(final_horizon=args.final_horizon),
