@@ -164,9 +164,8 @@ class JointIdentifier:
         Prior linear parameters (its ``theta`` is ignored).
     prior_rel_std : None, float or dict, optional
         None (default): all six linear parameters estimated freely; a float: all six
-        with that relative prior std; a dict: only those it gives a std > 0. A dict
-        may also give the Coulomb torques ``fc_M``, ``fc_L`` a relative std about the
-        prior's values (which must then be > 0), where ``friction`` fits them.
+        with that relative prior std; a dict: only those it gives a std > 0 (and the
+        Coulomb torques ``fc_M``, ``fc_L``, about the prior's values, which must be > 0).
     noise : tuple of float, optional
         Noise std ``(s_M, s_L)`` in rad/s of every record; default estimated.
     search : JointSearch, optional
