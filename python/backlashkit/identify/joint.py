@@ -546,7 +546,8 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
         # estimated in natural units: below 0 the model has 0; not estimated, what the
         # model simulated (0 without friction), not the prior's starting value
         fitted[n] = max(fitted[n], 0.0) if n in fitted else (
-            float(pb.base[PACKED_LONG.index(n)]) if pb.base.size > TAU_COL else 0.0)
+            float(pb.base[PACKED_LONG.index(n)]) if pb.base.size > PACKED_LONG.index(n)
+            else 0.0)
     on_drive = [*(n for n in pb.names if n in LINEAR_PARAMS or n == "theta"), "fc_M", "fc_L"]
     # the breakaway torques are tied to the Coulomb torques (None), as simulated
     drive = replace(drive_with(prior, on_drive, np.array([fitted[n] for n in on_drive])),
