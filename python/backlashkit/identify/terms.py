@@ -39,6 +39,7 @@ from scipy.special import chdtri
 
 from ..actuator import CurrentLoop
 from ..errors import InputError, Option
+from ..io import UNCERTAIN_FRICTION_KEYS
 from ..plants import TwoMassDrive
 from .record import Record
 from .step import find_step_down
@@ -55,9 +56,10 @@ __all__ = [
 #: ideal records keep the viscous model in at least 99 % of fits.
 KEEP_LEVEL = 0.99
 #: The terms' parameters a prior may give with a relative std (``prior_rel_std``): the
-#: Coulomb torques, which a :class:`~backlashkit.TwoMassDrive` holds. A current loop's
-#: lag is not a drive parameter; a known one is given as a ``CurrentLoop``.
-PRIOR_PARAMS = ("fc_M", "fc_L")
+#: Coulomb torques, which a :class:`~backlashkit.TwoMassDrive` holds, as the drive
+#: file's ``[uncertainty]`` table may. A current loop's lag is not a drive parameter; a
+#: known one is given as a ``CurrentLoop``.
+PRIOR_PARAMS = UNCERTAIN_FRICTION_KEYS
 #: A term the test would drop is kept anyway where it is estimated (it lowers
 #: ``-2 log L`` and the data pin it down) and dropping it moves ``theta`` by more than
 #: this many of its standard errors (in the model without it). Keeping a term the
