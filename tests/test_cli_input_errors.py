@@ -175,6 +175,33 @@ def test_uncertainty_of_theta_is_refused(exp_csv, tmp_path, capsys):
     assert "[uncertainty] theta: the backlash is what identify estimates" in err
 
 
+def test_an_empty_uncertainty_table_is_refused(exp_csv, tmp_path, capsys):
+    """Read as no table it estimated every parameter, while Python's ``{}`` held them
+    all: both refuse it now, naming the two meanings."""
+    prior = tmp_path / "prior.toml"
+    prior.write_text(Path(DRIVE_TOML).read_text() + "\n[uncertainty]\n")
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", str(prior)])
+    assert f"{prior}: [uncertainty] is empty; list the parameters' relative stds" in err
+    t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    for rel, match in (({}, r"^prior_rel_std is an empty dict: give 0 to hold"),
+                       ({"theta": 0.1}, r"^prior_rel_std\['theta'\]: the backlash is what")):
+        with pytest.raises(InputError, match=match):
+            JointIdentifier(read_drive_toml(DRIVE_TOML).with_theta(None),
+                            prior_rel_std=rel).fit(Record(t, u, w_m, w_l))
+
+
+@pytest.mark.parametrize("method", ["two-step", "regression"])
+def test_paper_a_methods_say_they_do_not_read_the_uncertainty_table(exp_csv, tmp_path,
+                                                                    capsys, method):
+    prior = tmp_path / "prior.toml"
+    prior.write_text(Path(DRIVE_TOML).read_text() + "\n[uncertainty]\nk_sh = 0.1\n")
+    assert main(["identify", str(exp_csv), "--drive", str(prior), "--method", method,
+                 "--json"]) == 0
+    notes = " ".join(json.loads(capsys.readouterr().out)["notes"])
+    assert (f"the [uncertainty] table of {prior} is read by --method joint only: --method "
+            f"{method} holds the linear parameters at the prior's values") in notes
+
+
 def test_time_in_ms_is_refused_for_every_method(exp_csv, tmp_path, capsys):
     t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
     path = tmp_path / "ms.csv"

@@ -511,7 +511,7 @@ def test_stiffness_grid_starts(short):
 def test_known_noise_and_subset_of_parameters(short):
     _, _, clean = short
     prior = TRUE.with_theta(None)
-    e = JointIdentifier(prior, prior_rel_std={"k_sh": 0.1, "J_M": 0.0, "theta": 1.0},
+    e = JointIdentifier(prior, prior_rel_std={"k_sh": 0.1, "J_M": 0.0},
                         noise=(0.5, 0.5), **PAPER_MODEL).fit(_noisy(clean, 30, 4))
     assert e.estimated_ == ("theta", "k_sh")
     assert e.params_["J_M"] == P_TRUE["J_M"]

@@ -19,6 +19,7 @@ import pytest
 import backlashkit as bk
 from backlashkit.cli.main import main as cli_main
 from backlashkit.errors import InputError, PriorMismatchWarning
+from backlashkit.identify.joint import PRIOR_CONFLICT_Z
 from backlashkit.identify.terms import SCREEN_DROP
 from backlashkit.io import write_csv
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA
@@ -708,6 +709,39 @@ def test_a_prior_on_the_coulomb_torques_pulls_them(coulomb):
     std = math.sqrt(1.0 / (1.0 / v + 1.0 / s2))
     assert pulled == pytest.approx(free + v / (v + s2) * (0.013 - free), abs=std)
     assert fits[1].param_std_["fc_M"] == pytest.approx(std, rel=0.1)
+
+
+def test_a_wrong_tight_prior_is_flagged_as_a_conflict(coulomb):
+    """A prior's value 30 % off with a 1 % std pulls the estimate to it, and the
+    others with it; the pull of the data says so (``prior_pull_``): the free fit's
+    distance from the prior over the spread of that distance, ``(free - prior) /
+    sqrt(v + s^2)`` (the Gaussian update's), and the fit warns, naming the torque. The
+    same prior at the truth's value pulls by less than its limit and says nothing."""
+    linear = dict.fromkeys(P_TRUE, 0.3)
+    fits = {}
+    for fc_m in (0.01, 0.013):
+        prior = bk.TwoMassDrive(**P_TRUE, fc_M=fc_m, fc_L=0.02)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fits[fc_m] = bk.JointIdentifier(
+                prior, prior_rel_std={**linear, "fc_M": 0.01}, friction="coulomb",
+                actuator=None, interval=bk.FisherInterval(), workers=1).fit(coulomb)
+        fits[fc_m].conflicts = [str(w.message) for w in caught
+                                if issubclass(w.category, PriorMismatchWarning)]
+    free = bk.JointIdentifier(bk.TwoMassDrive(**P_TRUE, fc_M=0.013, fc_L=0.02),
+                              prior_rel_std=linear, friction="coulomb", actuator=None,
+                              interval=bk.FisherInterval(), workers=1).fit(coulomb)
+    v, s2 = free.param_std_["fc_M"] ** 2, (0.01 * 0.013) ** 2
+    expected = (free.fc_M_ - 0.013) / math.sqrt(v + s2)
+    wrong = fits[0.013]
+    assert wrong.prior_pull_["fc_M"] == pytest.approx(expected, rel=0.2)
+    assert abs(expected) > 2 * PRIOR_CONFLICT_Z
+    assert len(wrong.conflicts) == 1
+    assert wrong.conflicts[0].startswith(
+        f"the data pull fc_M {abs(wrong.prior_pull_['fc_M']):.1f} standard deviations from "
+        "the prior's values (relative stds fc_M 0.01): a prior-data conflict")
+    assert abs(fits[0.01].prior_pull_["fc_M"]) < PRIOR_CONFLICT_Z
+    assert fits[0.01].conflicts == []
 
 
 @pytest.mark.parametrize("fc, rel, kw, match", [

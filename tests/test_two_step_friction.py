@@ -158,6 +158,31 @@ def test_viscous_is_the_default_and_publishes_no_coulomb():
 
 
 @pytest.mark.parametrize("cls", [TwoStepIdentifier, RegressionIdentifier])
+def test_the_viscous_model_has_no_coulomb_torques_whatever_the_prior_gives(coulomb, cls,
+                                                                          monkeypatch):
+    """A prior with Coulomb torques (as a drive file's ``[drive]`` table may give): the
+    viscous fit is the one of the prior without them, and says so (it simulated the
+    prior's torques and called them viscous before); the Coulomb fit starts from them."""
+    rec1 = noisy(coulomb[0], 60.0, 0, "step1")
+    rec2 = noisy(coulomb[1], SNR_DB, 0, "step2")
+    given = bk.TwoMassDrive(**P_TRUE, fc_M=FC_M, fc_L=FC_L)
+    finals = {"final_records": rec2} if cls is TwoStepIdentifier else {}
+    recs = rec1 if cls is TwoStepIdentifier else rec2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SearchEdgeWarning)
+        fits = [cls(p, workers=1).fit(recs, **finals) for p in (PRIOR, given)]
+        starts = []
+        fit_from = bk.identify.two_step.coulomb_fit
+        monkeypatch.setattr(bk.identify.two_step, "coulomb_fit",
+                            lambda *a: starts.append(a[-1]) or fit_from(*a))
+        started = cls(given, friction="coulomb", workers=1).fit(recs, **finals)
+    assert fits[1].friction_ == "viscous" and (fits[1].fc_M_, fits[1].fc_L_) == (0.0, 0.0)
+    assert (fits[1].theta_, fits[1].cost_) == (fits[0].theta_, fits[0].cost_)
+    assert started.friction_ == "coulomb" and starts[0] == (FC_M, FC_L)
+    assert 0.5 < (started.fc_M_ + started.fc_L_) / (FC_M + FC_L) < 1.5
+
+
+@pytest.mark.parametrize("cls", [TwoStepIdentifier, RegressionIdentifier])
 def test_friction_refused_with_its_name(viscous, cls):
     rec = noisy(viscous[1], None, 0, "step2")
     with pytest.raises(InputError, match=r"^friction must be one of 'viscous', 'coulomb', "

@@ -295,14 +295,21 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     Raises
     ------
     InputError
-        If the file does not parse, the table holds a key that is not a linear drive
-        parameter or a Coulomb torque, or a value that is not a finite number >= 0.
+        If the file does not parse, the table is empty, holds a key that is not a
+        linear drive parameter or a Coulomb torque, or a value that is not a finite
+        number >= 0.
     """
     doc = load_toml(path)
     _check_top_level(doc, path)
     table = _table(doc, "uncertainty", path, required=False)
     if table is None:
         return {}
+    if not table:  # else read as "no table" (all estimated) or "all held": say which
+        raise InputError(
+            f"{path}: [uncertainty] is empty; list the parameters' relative stds (e.g. "
+            "k_sh = 0.1), or remove the table to estimate every linear parameter from the "
+            "data"
+        )
     # theta has no prior: it is what identification estimates
     allowed = DRIVE_KEYS[:-1] + UNCERTAIN_FRICTION_KEYS
     if "theta" in table:

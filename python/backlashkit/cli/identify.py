@@ -601,7 +601,7 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
     after theta, and the ``notes`` of ``--json``)."""
     out = []
     if getattr(est, "std_", None) is None:  # two-step, regression: a bounded search
-        return _noted(caught, flags, (SearchEdgeWarning,))
+        return _noted(caught, flags, (SearchEdgeWarning,)) + _unread_table(args)
     for end, bounded in zip(("lower", "upper"), est.ci95_bounded_, strict=True):
         if not bounded:
             out.append(f"the likelihood does not rise to the 95% level on the {end} side "
@@ -620,6 +620,16 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
                    "is multimodal on these records); the interval describes the best one "
                    "only: try --bootstrap N or longer records")
     return out
+
+
+def _unread_table(args: argparse.Namespace) -> list[str]:
+    """Paper A's methods hold the prior's linear parameters: a table of their
+    uncertainty is not read, which the reader must know."""
+    if not read_uncertainty_toml(args.drive):
+        return []
+    return [f"the [uncertainty] table of {args.drive} is read by --method joint only: "
+            f"--method {args.method} holds the linear parameters at the prior's values "
+            "(paper A's method)"]
 
 
 def _held_notes(est: Any) -> list[str]:

@@ -77,9 +77,14 @@ def rel_std(prior_rel_std, names: Sequence[str], extra: Sequence[str] = ()
     if isinstance(prior_rel_std, Mapping):
         out: dict[str, float | None] = {}
         allowed = (*names, *extra)
+        if not prior_rel_std:  # the CLI refuses an empty [uncertainty] table alike
+            raise InputError("prior_rel_std is an empty dict: give 0 to hold the linear "
+                             "parameters at the prior, None to estimate them from the data, "
+                             "or a dict of their relative stds")
         for key, val in prior_rel_std.items():
-            if key == "theta":
-                continue  # theta is always estimated, without a prior
+            if key == "theta":  # as the CLI refuses it in the [uncertainty] table
+                raise InputError("prior_rel_std['theta']: the backlash is what the fit "
+                                 "estimates, without a prior; remove it")
             if key not in allowed:
                 raise InputError(
                     f"prior_rel_std has unknown parameter {key!r}; allowed: {', '.join(allowed)}"

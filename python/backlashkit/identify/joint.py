@@ -76,6 +76,13 @@ Fitted attributes besides those in the class docstring
 ``misfit_restarted_``, ``misfit_restart_won_``
     Whether the residuals triggered the second search (``Restarts.misfit``), and
     whether its fit was kept (every attribute then comes from it).
+``prior_pull_``
+    Per parameter with a prior std: how far the data pulled its estimate from the
+    prior's value, in standard deviations of that pull (``d / sqrt(s^2 - var)``: ``d``
+    the move, ``s`` the prior's std, ``var`` the estimate's variance; normal where the
+    prior is right). Beyond :data:`PRIOR_CONFLICT_Z` :meth:`fit` warns
+    (:class:`~backlashkit.errors.PriorMismatchWarning`): the prior's value or its std
+    is likely wrong, and it pulls the other estimates too.
 ``far_from_prior_``
     Estimated linear parameters more than
     :data:`~backlashkit.identify.FAR_FROM_PRIOR` times off the prior; :meth:`fit`
@@ -100,6 +107,7 @@ from ..errors import (
     CorrelatedResidualsWarning,
     InputError,
     Option,
+    PriorMismatchWarning,
     QuantisedSpeedsWarning,
     SensitivityWarning,
 )
@@ -148,6 +156,11 @@ MISFIT_MARGIN = 1.0
 NOISE_FREE = 1e-7
 #: Fewest samples after each torque jump that ``final_horizon`` must span.
 MIN_FINAL_SAMPLES = 10
+#: A parameter with a prior std whose estimate the data pull this many standard
+#: deviations from the prior's value (``prior_pull_``) warns of a prior-data conflict:
+#: the two-sided 0.1 % point of the normal, so a right prior warns in 1 fit of 1000 per
+#: parameter.
+PRIOR_CONFLICT_Z = 3.29
 
 #: The defaults (frozen, so one instance serves every identifier).
 _SEARCH = JointSearch()
@@ -164,8 +177,8 @@ class JointIdentifier:
         Prior linear parameters (its ``theta`` is ignored).
     prior_rel_std : None, float or dict, optional
         None (default): all six linear parameters estimated freely; a float: all six
-        with that relative prior std; a dict: only those it gives a std > 0 (and the
-        Coulomb torques ``fc_M``, ``fc_L``, about the prior's values, which must be > 0).
+        with that relative prior std; a non-empty dict without ``theta``: only those it
+        gives a std > 0 (and ``fc_M``, ``fc_L``, about the prior's values, which are > 0).
     noise : tuple of float, optional
         Noise std ``(s_M, s_L)`` in rad/s of every record; default estimated.
     search : JointSearch, optional
@@ -313,6 +326,8 @@ class JointIdentifier:
             with reporter(self.progress, "identify", unit="stage") as bar:
                 fitted, restarted, won = self._fit_and_restart(records, bar)
         far = self._far_from_prior(fitted, records, prior)
+        _warn_prior_conflicts(fitted["prior_pull_"],
+                              rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
         self.__dict__.update(fitted, misfit_restarted_=restarted, misfit_restart_won_=won,
                              far_from_prior_=far)
         parts = self._correlation_parts()
@@ -584,4 +599,31 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
         "commutations_": commutations,
         "t_c_": [c[1] for c in commutations], "t_b_": [c[2] for c in commutations],
         "ambiguous_": out.ambiguous,
+        "prior_pull_": _prior_pulls(pb, unc),
     }
+
+
+def _prior_pulls(pb, unc: _search.Uncertain) -> dict[str, float]:
+    """``prior_pull_``: where the prior is right, the move from its value has the
+    variance of the prior less that of the estimate (a Gaussian update)."""
+    out = {}
+    for i, name in enumerate(pb.names[1:], start=1):
+        prior_std = pb.pen[i - 1] * pb.p_prior[i - 1]
+        if not np.isfinite(prior_std):
+            continue
+        var = prior_std**2 - unc.cov[i, i]
+        move = float(unc.values[i]) - pb.p_prior[i - 1]
+        out[name] = float(move / math.sqrt(var)) if var > 0 else 0.0
+    return out
+
+
+def _warn_prior_conflicts(pulls: dict[str, float], rel: dict) -> None:
+    far = {n: z for n, z in pulls.items() if abs(z) > PRIOR_CONFLICT_Z}
+    if far:
+        named = ", ".join(f"{n} {abs(z):.1f}" for n, z in far.items())
+        stds = ", ".join(f"{n} {rel[n]:g}" for n in far)
+        warnings.warn(PriorMismatchWarning(
+            f"the data pull {named} standard deviations from the prior's values (relative "
+            f"stds {stds}): a prior-data conflict; a value or its std is likely wrong, and "
+            "it pulls the other estimates too: correct it, or widen its std"),
+            stacklevel=3)

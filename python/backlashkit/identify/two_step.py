@@ -83,7 +83,9 @@ and holds with any friction. Two equations change (:mod:`backlashkit.identify.de
   at the measured steady state with the shaft carrying the load's friction
   (``phi_d = theta + (f_L w_0 + fc_L) / k_sh``); ``W_1`` is minimised over theta and
   both torques (the torques profiled out for every candidate theta,
-  :func:`~backlashkit.identify.decay.coulomb_profile_costs`).
+  :func:`~backlashkit.identify.decay.coulomb_profile_costs`), from the prior's
+  torques where it gives them. The viscous model has none, whatever the prior gives
+  (as in the joint fit).
 
 The fit runs in two rounds: the viscous pre-estimate bounds a first Coulomb fit of
 ``W_1``; its ``fc_L`` enters eq. 9, whose new pre-estimate bounds the final fit.
@@ -101,7 +103,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -146,12 +148,14 @@ FRICTIONS = ("viscous", "coulomb", "auto")
 #: exceeds this: chi-square with 2 degrees of freedom (fc_M, fc_L) at 99.9 %, so
 #: white noise alone calls for them in 1 of 1000 fits with a correct prior.
 FRICTION_LR = 13.8155
-@dataclass
 
+
+@dataclass
 class _Prepared:
     """What both identifiers check and read before fitting."""
 
-    prior: TwoMassDrive
+    prior: TwoMassDrive  # without Coulomb torques: the viscous model is paper A's
+    given_fc: tuple[float, float]  # the prior's Coulomb torques: where the fit starts
     recs: list
     finals: list
     gains: list[float]
@@ -177,7 +181,9 @@ def _prepare(est: Any, records: Any, final_records: Any = None) -> _Prepared:
     gains = check_held_speeds(every, prior, allow_far_from_prior=est.allow_far_from_prior,
                               stacklevel=3)
     segments = [criterion_window(r, dt4, level_window) for r in finals]
-    return _Prepared(prior, recs, finals, gains, segments, n_grid)
+    viscous = replace(prior, fc_M=0.0, fc_L=0.0, fs_M=None, fs_L=None)
+    return _Prepared(viscous, (prior.fc_M, prior.fc_L), recs, finals, gains, segments,
+                     n_grid)
 
 
 def _keeps_coulomb(friction: str, lr: float) -> bool:
@@ -189,8 +195,9 @@ def _viscous_fit(prep: _Prepared, lo: float, hi: float, workers) -> tuple[float,
 
 
 def _coulomb_fit(prep: _Prepared, lo: float, hi: float, workers,
-                 fc: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, tuple]:
-    return coulomb_fit(prep.prior, prep.segments, lo, hi, prep.n_grid, workers, fc)
+                 fc: tuple[float, float] | None = None) -> tuple[float, float, tuple]:
+    start = prep.given_fc if fc is None else fc
+    return coulomb_fit(prep.prior, prep.segments, lo, hi, prep.n_grid, workers, start)
 
 
 def _likelihood_ratio(prep: _Prepared, viscous_cost: float, coulomb_cost: float) -> float:
@@ -260,8 +267,8 @@ class TwoStepIdentifier:
     friction_ : str
         The friction model of the results, ``"viscous"`` or ``"coulomb"``.
     fc_M_, fc_L_ : float
-        Motor and load Coulomb torques in N m of that model (the prior's own, 0
-        unless it gives them, for ``"viscous"``).
+        Motor and load Coulomb torques in N m of that model (0 for ``"viscous"``: the
+        prior's own, where it gives them, only start the Coulomb fit).
     friction_lr_ : float
         The likelihood ratio ``N ln(W_1 viscous / W_1 Coulomb)`` that ``"auto"``
         compared with :data:`FRICTION_LR` (NaN for a forced model).
@@ -356,7 +363,7 @@ class TwoStepIdentifier:
         prior = prep.prior
         comms, inis = self._pre_estimates(prep, 0.0)
         lo, hi = _interval(inis, n_theta)
-        fc = (prior.fc_M, prior.fc_L)
+        fc = (0.0, 0.0)  # the viscous model's
         lr = math.nan
         if self.friction != "coulomb":
             theta, cost = _viscous_fit(prep, lo, hi, self.workers)
@@ -474,8 +481,8 @@ class RegressionIdentifier:
     friction_ : str
         The friction model of the results, ``"viscous"`` or ``"coulomb"``.
     fc_M_, fc_L_ : float
-        Motor and load Coulomb torques in N m of that model (the prior's own, 0
-        unless it gives them, for ``"viscous"``).
+        Motor and load Coulomb torques in N m of that model (0 for ``"viscous"``: the
+        prior's own, where it gives them, only start the Coulomb fit).
     friction_lr_ : float
         The likelihood ratio ``N ln(W_1 viscous / W_1 Coulomb)`` that ``"auto"``
         compared with :data:`FRICTION_LR` (NaN for a forced model).
@@ -541,7 +548,7 @@ class RegressionIdentifier:
         """
         theta_max = v.positive("theta_max", self.theta_max)
         prep = _prepare(self, records)
-        fc = (prep.prior.fc_M, prep.prior.fc_L)
+        fc = (0.0, 0.0)  # the viscous model's
         lr = math.nan
         if self.friction != "coulomb":
             theta, cost = _viscous_fit(prep, 0.0, theta_max, self.workers)
