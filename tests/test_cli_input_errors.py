@@ -459,6 +459,8 @@ def test_parameters_held_by_the_uncertainty_table_are_noted(exp_csv, tmp_path, c
                  "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["estimated"] == ["theta", "J_L"]
+    assert list(doc["prior_pull"]) == ["J_L"]  # the right prior: under its limit
+    assert abs(doc["prior_pull"]["J_L"]) < 3.29
     assert ("J_M, k_sh, f_M, f_L, f_sh held at the prior's values: [uncertainty] lists J_L "
             "only") in " ".join(doc["notes"])
 

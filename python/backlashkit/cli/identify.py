@@ -537,6 +537,7 @@ def _fit_joint(args: argparse.Namespace, prior: Any, records: list[Record],
         "param_std": est.param_std_,
         "prior_rel_std": est.prior_rel_std,
         "far_from_prior": est.far_from_prior_,
+        "prior_pull": est.prior_pull_,
         **_terms_json(est),
     }
     return est, {"theta_ini": est.theta_ini_, "per_record": per_record,
