@@ -460,6 +460,9 @@ def test_parameters_held_by_the_uncertainty_table_are_noted(exp_csv, tmp_path, c
     doc = json.loads(capsys.readouterr().out)
     assert doc["estimated"] == ["theta", "J_L"]
     assert list(doc["prior_pull"]) == ["J_L"]  # the right prior: under its limit
+    corr = np.array(doc["correlation"])
+    assert corr.shape == (2, 2) and np.allclose(np.diag(corr), 1.0)
+    assert corr[0, 1] == pytest.approx(corr[1, 0]) and abs(corr[0, 1]) < 1
     assert abs(doc["prior_pull"]["J_L"]) < 3.29
     assert ("J_M, k_sh, f_M, f_L, f_sh held at the prior's values: [uncertainty] lists J_L "
             "only") in " ".join(doc["notes"])

@@ -535,6 +535,8 @@ def _fit_joint(args: argparse.Namespace, prior: Any, records: list[Record],
         "params": est.params_,
         "estimated": list(est.estimated_),
         "param_std": est.param_std_,
+        # fc_M and fc_L are often determined mostly by their sum: their stds alone hide it
+        "correlation": _correlation(est.covariance_),
         "prior_rel_std": est.prior_rel_std,
         "far_from_prior": est.far_from_prior_,
         "prior_pull": est.prior_pull_,
@@ -555,6 +557,14 @@ def _terms_json(est: Any) -> dict[str, Any]:
     out["model_choices"] = [c.reason() for c in est.choices_]
     out["measured"] = list(est.measured_)
     return out
+
+
+def _correlation(cov: Any) -> list[list[float | None]]:
+    """The estimates' correlation matrix (order ``estimated``; None where a std is 0)."""
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
+    return [[_num(x) for x in row] for row in corr]
 
 
 def _given(args: argparse.Namespace, **names: str) -> dict[str, Any]:
