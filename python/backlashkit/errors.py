@@ -162,7 +162,9 @@ class PriorMismatchWarning(Diagnostic, UserWarning):
     than a prior that wrong, the speeds are in other units (rpm read as rad/s) or, for
     the joint fit, the speed columns are swapped; the estimate of ``theta`` then means
     nothing. Beyond :data:`backlashkit.identify.REFUSE_FROM_PRIOR` times the
-    estimators refuse to answer unless ``allow_far_from_prior=True``.
+    estimators refuse to answer unless ``allow_far_from_prior=True``. Also emitted
+    where a joint fit pulls against a prior std (a prior-data conflict) or the data
+    refute a known current loop's lag.
 
     Parameters
     ----------

@@ -564,6 +564,8 @@ def _correlation(cov: Any) -> list[list[float | None]]:
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
+    corr = (corr + corr.T) / 2  # symmetric and 1 on the diagonal to the last digit
+    np.fill_diagonal(corr, np.where(std > 0, 1.0, np.nan))
     return [[_num(x) for x in row] for row in corr]
 
 
@@ -612,7 +614,8 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
     after theta, and the ``notes`` of ``--json``)."""
     out = []
     if getattr(est, "std_", None) is None:  # two-step, regression: a bounded search
-        return _noted(caught, flags, (SearchEdgeWarning,)) + _unread_table(args)
+        return (_noted(caught, flags, (SearchEdgeWarning,)) + _unread_table(args)
+                + _unused_torques(est))
     for end, bounded in zip(("lower", "upper"), est.ci95_bounded_, strict=True):
         if not bounded:
             out.append(f"the likelihood does not rise to the 95% level on the {end} side "
@@ -622,7 +625,7 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
         out.append("in the identified model the shaft leaves its flank after no step-down: "
                    "these records hardly show the backlash (theta rests on the model alone; "
                    "a step-down to 0 that the speeds follow shows it)")
-    out += _held_notes(est)
+    out += _held_notes(est) + _dropped_prior(est)
     out += _noted(caught, flags, (PriorMismatchWarning,))
     out += _noted(caught, flags, (CorrelatedResidualsWarning,))
     out += _noted(caught, flags, (QuantisedSpeedsWarning,))
@@ -643,6 +646,25 @@ def _unread_table(args: argparse.Namespace) -> list[str]:
             "(paper A's method)"]
 
 
+def _unused_torques(est: Any) -> list[str]:
+    """Paper A's viscous model leaves out the Coulomb torques a drive file gives."""
+    if est.friction_ != "viscous" or not (est.prior.fc_M or est.prior.fc_L):
+        return []
+    return ["the Coulomb torques fc_M, fc_L of the [drive] table are not in paper A's "
+            "viscous model (--friction coulomb or auto fits them from there)"]
+
+
+def _dropped_prior(est: Any) -> list[str]:
+    """A prior on the Coulomb torques leaves with the friction the test dropped."""
+    rel = est.prior_rel_std
+    given = [n for n in ("fc_M", "fc_L") if isinstance(rel, dict) and n in rel]
+    if not given or est.friction_ != "viscous" or est.friction == "viscous":
+        return []
+    return [f"the prior on {', '.join(given)} ([uncertainty]) was dropped with the Coulomb "
+            "friction: the data do not call for it (its likelihood-ratio test); --friction "
+            "coulomb keeps it"]
+
+
 def _held_notes(est: Any) -> list[str]:
     """Which linear parameters the [uncertainty] table held at the prior's values."""
     rel = est.prior_rel_std
@@ -659,5 +681,6 @@ def _held_notes(est: Any) -> list[str]:
     exact = [n for n in held if n in rel]
     if exact:
         out.append(f"{', '.join(exact)} held at the prior's values: [uncertainty] gives "
-                   "them a relative std of 0 (known exactly)")
+                   f"{'it' if len(exact) == 1 else 'them'} a relative std of 0 (known "
+                   "exactly)")
     return out

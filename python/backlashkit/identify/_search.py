@@ -21,7 +21,7 @@ from functools import partial
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, Option
 from ..plants import TwoMassDrive
 from ._lm import LMState
 from ._model import LINEAR_PARAMS, Span, model_angles
@@ -32,7 +32,7 @@ from .intervals import Z_95, IntervalInputs, ThetaInterval, quantisation_interva
 from .noise import sample_noise
 from .record import Record
 from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
-from .terms import Term, TermChoice
+from .terms import TERM_NAMES, Term, TermChoice
 from .two_step import TwoStepIdentifier
 
 #: First-window solutions costing more than this times the best one's are not
@@ -384,15 +384,22 @@ def residuals_and_fit(spans: Sequence[Span], sims: list[np.ndarray]):
     return residuals, np.array(fits)
 
 
-def refuse_unexplained(recs: list[Record], fits: np.ndarray) -> None:
-    """Raise when the model explains a speed worse than its mean (fit % <= 0)."""
+def refuse_unexplained(recs: list[Record], fits: np.ndarray, terms: Sequence[Term] = ()
+                       ) -> None:
+    """Raise when the model explains a speed worse than its mean (fit % <= 0); a
+    term fixed by the user (a known current loop) is named as a suspect too."""
     worst = np.unravel_index(int(np.argmin(fits)), fits.shape)
     if not fits[worst] > 0:
+        fixed: list[str | Option] = []
+        for term in terms:
+            if term.mode == "fixed":
+                fixed += [f", and the fixed {TERM_NAMES[term.name]} (try ",
+                          Option(term.name, "auto"), ")"]
         raise InputError(
             f"{recs[worst[0]].name}: the identified model does not explain "
             f"{('w_motor', 'w_load')[worst[1]]} (fit {fits[worst]:.3g} %, worse than its "
             "mean): these speeds do not show a two-mass drive responding to this torque; "
-            "check the columns, units and the prior"
+            "check the columns, units and the prior", *fixed
         )
 
 
@@ -505,6 +512,7 @@ class Outcome:
     two_step: tuple[float, float] | None
     ambiguous: bool
     choices: list[TermChoice]  # the likelihood-ratio tests of the "auto" terms
+    fixed: dict[str, FixedScore] = field(default_factory=dict)  # fixed terms' tests
 
 
 #: Stages of :func:`run` reported to its ``stage`` callback: the starts, the first
@@ -542,7 +550,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     # a model that explains a speed worse than its mean has fitted nothing: say so
     # before the uncertainty (whose refits at such a point can take minutes)
     checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
-    refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1])
+    refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1], terms)
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
     # a term added after the search (a loop's lag) trades against the linear parameters
     # along a curved valley, and theta's profile can fall again past a crossing
@@ -557,7 +565,38 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     stage(7)
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
         sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
-    return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices)
+    fixed = {t.params[0]: fixed_score(pb, unc.best, t, recs, final_h, sig, search.max_iter)
+             for t in terms if t.mode == "fixed"}
+    return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices,
+                   fixed)
+
+
+@dataclass(frozen=True)
+class FixedScore:
+    """The test of a term the user fixed (a known current loop's ``tau_i``): the fall
+    of ``-2 log L`` when it is fitted too (chi-square, one degree of freedom where the
+    fixed value is right), and the value it is fitted to."""
+
+    fall: float
+    value: float
+
+
+def fixed_score(pb: Problem, best: LMState, term: Term, recs: list[Record],
+                final_h: float | None, sig: np.ndarray, max_iter: int) -> FixedScore:
+    """:class:`FixedScore` of the one-parameter fixed ``term``: the model refitted with
+    it free from the estimate (a fit's cost). A score test there would not do: the
+    other parameters have made up for a wrong lag, so its linearised fall understates
+    the refit's."""
+    (name,) = term.params
+    big = pb.with_params([name], term.floors(recs), {})
+    res = big.residual(big.final_spans(final_h), final_h, sig)
+    z_fixed = np.r_[best.z, math.log(term.fixed[0])]
+    r = res.at(z_fixed)
+    cost = float(r @ r)
+    if not math.isfinite(cost):
+        return FixedScore(math.nan, math.nan)
+    st = big.refine(res, z_fixed, max_iter)
+    return FixedScore(max(cost - st.cost, 0.0), math.exp(float(st.z[-1])))
 
 
 def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],

@@ -83,6 +83,11 @@ Fitted attributes besides those in the class docstring
     prior is right). Beyond :data:`PRIOR_CONFLICT_Z` :meth:`fit` warns
     (:class:`~backlashkit.errors.PriorMismatchWarning`): the prior's value or its std
     is likely wrong, and it pulls the other estimates too.
+``fixed_tests_``
+    Per parameter the user fixed (a known loop's ``tau_i``): ``(fall, value)``, the
+    fall of ``-2 log L`` when the estimate is refitted with it free, and its value
+    there. A fall beyond the threshold of the terms' likelihood-ratio test warns
+    (:class:`~backlashkit.errors.PriorMismatchWarning`).
 ``far_from_prior_``
     Estimated linear parameters more than
     :data:`~backlashkit.identify.FAR_FROM_PRIOR` times off the prior; :meth:`fit`
@@ -139,7 +144,14 @@ from .quantum import speed_quantum
 from .record import as_records, check_prior
 from .search import JointSearch
 from .step import check_fit_near_prior, check_step_downs, held_speed_gain
-from .terms import PRIOR_PARAMS, Term, actuator_term, friction_term
+from .terms import (
+    KEEP_LEVEL,
+    PRIOR_PARAMS,
+    Term,
+    actuator_term,
+    check_known_loop,
+    friction_term,
+)
 
 __all__ = ["JointIdentifier", "LINEAR_PARAMS"]
 
@@ -281,7 +293,7 @@ class JointIdentifier:
         if not (isinstance(self.progress, bool) or callable(self.progress)):
             raise InputError("progress must be True, False or a callable "
                              f"progress(done, total), got {self.progress!r}")
-        self._terms()
+        check_known_loop(self._terms()[1], self.prior)
         self.noise_model._check_with(self.noise, self.search.final_horizon)
         if self.noise is not None:
             try:
@@ -328,6 +340,7 @@ class JointIdentifier:
         far = self._far_from_prior(fitted, records, prior)
         _warn_prior_conflicts(fitted["prior_pull_"],
                               rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
+        _warn_fixed_loop(fitted["fixed_tests_"], self._terms()[1])
         self.__dict__.update(fitted, misfit_restarted_=restarted, misfit_restart_won_=won,
                              far_from_prior_=far)
         parts = self._correlation_parts()
@@ -407,10 +420,12 @@ class JointIdentifier:
             fix = ("check the prior (a wrong basin of the fit) and whether a two-mass drive "
                    "with backlash describes the record; ",
                    Option("noise_model", "ar", python="ARNoise"), " would hide the misfit")
+        missing = self._missing_terms()  # a term the drive has may be what misfits
+        lacks = ("; or the model lacks a term the drive has: try ", *missing) if missing else ()
         return (f"the residual of {('w_M', 'w_L')[c]} in {self._record_names[k]} (record "
                 f"{k + 1}) has lag-1 "
                 f"autocorrelation {rho:.2f} (white noise: about 0): {what}, so the standard "
-                "error and interval of theta are too narrow; ", *fix)
+                "error and interval of theta are too narrow; ", *fix, *lacks)
 
     def _fit(self, records, anchor: TwoMassDrive | None = None,
              anchor_extra: Mapping[str, float] | None = None,
@@ -464,8 +479,8 @@ class JointIdentifier:
     def _missing_terms(self) -> tuple[str | Option, ...]:
         """How to add the terms the model leaves out, as message parts."""
         parts: list[str | Option] = []
-        for term in self._terms():
-            if term.mode == "off":
+        for term in self._terms():  # a term left out, or fixed (maybe wrongly)
+            if term.mode in ("off", "fixed"):
                 parts += [" or ", Option(term.name, "auto")] if parts else [
                     Option(term.name, "auto")]
         return tuple(parts)
@@ -600,6 +615,7 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
         "t_c_": [c[1] for c in commutations], "t_b_": [c[2] for c in commutations],
         "ambiguous_": out.ambiguous,
         "prior_pull_": _prior_pulls(pb, unc),
+        "fixed_tests_": {n: (f.fall, f.value) for n, f in out.fixed.items()},
     }
 
 
@@ -615,6 +631,21 @@ def _prior_pulls(pb, unc: _search.Uncertain) -> dict[str, float]:
         move = float(unc.values[i]) - pb.p_prior[i - 1]
         out[name] = float(move / math.sqrt(var)) if var > 0 else 0.0
     return out
+
+
+def _warn_fixed_loop(tests: dict[str, tuple[float, float]], term: Term) -> None:
+    """Warn where the data call for another lag than a known loop's (its score test
+    beyond the likelihood-ratio test's threshold, :data:`~.terms.KEEP_LEVEL`)."""
+    if "tau_i" not in tests or not tests["tau_i"][0] > term.threshold:
+        return
+    fall, value = tests["tau_i"]
+    warnings.warn(PriorMismatchWarning(
+        f"the data call for another current loop than the one given (tau_i "
+        f"{term.fixed[0] * 1e3:.3g} ms): refitted with its lag free, the model moves it to "
+        f"{value * 1e3:.2g} ms and lowers -2 log L by {fall:.3g} (the terms' test: "
+        f"{term.threshold:.3g} at {KEEP_LEVEL:.0%}); check it, or fit it with ",
+        Option("actuator", "auto")),
+        stacklevel=3)
 
 
 def _warn_prior_conflicts(pulls: dict[str, float], rel: dict) -> None:

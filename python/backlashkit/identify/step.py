@@ -398,7 +398,8 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     held_gains : sequence of float, optional
         :func:`held_speed_gain` of every record (NaN: unknown); default none known.
     missing : sequence of str or Option, optional
-        How to add the terms the model was fitted without, as message parts.
+        How to add the terms the model was fitted without (or with fixed values), as
+        message parts.
 
     Returns
     -------
@@ -442,7 +443,7 @@ def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option]
             f"{spread:.2g}, so the units are likely right: check the columns (w_motor and "
             "w_load swapped?); else ")
     if missing:
-        return (said, "the model likely lacks what the drive has (try ", *missing,
-                ") or the prior is wrong")
+        return (said, "the model likely lacks what the drive has, or fixes it wrongly (try ",
+                *missing, "), or the prior is wrong")
     return (said, "the prior is likely wrong, or a two-mass drive with backlash does not "
                   "describe the records")

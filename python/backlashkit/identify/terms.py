@@ -47,7 +47,8 @@ from .step import find_step_down
 __all__ = [
     "ESTIMATED_FALL", "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "PRIOR_PARAMS",
     "SCREEN_DROP", "Term", "prior_std_option",
-    "TermChoice", "actuator_term", "friction_term",
+    "TermChoice", "actuator_term", "check_known_loop", "friction_term",
+    "MAX_LOOP_RINGING",
 ]
 
 #: Confidence of the likelihood-ratio test that keeps a term: at 0.99 a term the data
@@ -111,6 +112,12 @@ TAU_START_SAMPLES = (0.5, 1.0, 2.0, 4.0)
 #: Faster loops are stiff modes that make every simulation several times slower; the
 #: fit sees a flat cost below this floor, and the likelihood-ratio test then drops it.
 TAU_FLOOR_SAMPLES = 0.25
+#: A known current loop's time constant must be below this many periods of the prior's
+#: shaft ringing (``2 pi / sqrt(k_sh (1 / J_M + 1 / J_L))``): a current loop is the fast
+#: inner loop of the drive, far faster than the mechanics it drives, and a lag as long
+#: as the ringing is a unit slip (1 for 1 ms). The fit with such a loop wandered to
+#: parameters the kernel simulates slowly, or was refused for another cause.
+MAX_LOOP_RINGING = 1.0
 #: Smallest Coulomb torque simulated, relative to the largest torque: the fit moves a
 #: Coulomb torque in natural units down to 0, yet the kernel needs every simulated row
 #: of a batch to have the same friction switches (a breakaway torque > 0), and one of
@@ -462,6 +469,34 @@ def actuator_term(actuator) -> Term:
     if actuator.exact:
         return Term("actuator", ("tau_i",), "off")
     return Term("actuator", ("tau_i",), "fixed", (actuator.tau_i,))
+
+
+def check_known_loop(term: Term, prior: TwoMassDrive) -> None:
+    """Refuse a known current loop no faster than the drive's shaft ringing
+    (:data:`MAX_LOOP_RINGING`).
+
+    Parameters
+    ----------
+    term : Term
+        The actuator's term.
+    prior : TwoMassDrive
+        The prior (its shaft ringing).
+
+    Raises
+    ------
+    InputError
+        If ``term`` is a fixed loop whose time constant is too long.
+    """
+    if term.mode != "fixed":
+        return
+    period = 2 * math.pi / math.sqrt(prior.k_sh * (1 / prior.J_M + 1 / prior.J_L))
+    tau = term.fixed[0]
+    if tau >= MAX_LOOP_RINGING * period:
+        raise InputError(
+            f"the current loop's time constant {tau:g} s is not below the drive's shaft "
+            f"ringing period ({period * 1e3:.3g} ms, from the prior): a current loop is far "
+            "faster than the mechanics it drives; give its time constant in s (1 ms = "
+            "0.001), or fit it with ", Option("actuator", "auto"))
 
 
 def torque_scale(recs: Sequence[Record]) -> float:
