@@ -226,3 +226,20 @@ def test_noise_model_note(tmp_path, record):
     page = check_page(write_identification_report(tmp_path / "a", record, result, prior=PRIOR))
     assert "Noise model: autoregressive of order 3." in page
     assert "<b>Note:</b> the residual of w_L in exp (record 1) has lag-1 x." in page
+
+
+def test_notes_and_the_prior_as_read(tmp_path, record):
+    """The page lists the command's notes on the answer, and the prior as the fit read
+    it: its Coulomb torques where it gives them, and the relative stds (a QA pass found
+    both missing)."""
+    prior = bk.TwoMassDrive(**P, fc_M=0.013, fc_L=0.02)
+    result = SimpleNamespace(theta_=0.03, prior_rel_std={"k_sh": 0.1, "fc_M": 0.01})
+    notes = ["the data pull fc_M 9.2 standard deviations from the prior's values <sic>"]
+    page = check_page(write_identification_report(tmp_path / "n", record, result,
+                                                  prior=prior, notes=notes))
+    assert ("<h2>Notes</h2><ul class=\"note\"><li>the data pull fc_M 9.2 standard "
+            "deviations from the prior&#x27;s values &lt;sic&gt;</li></ul>") in page
+    assert "fc_M = 0.013, fc_L = 0.02; relative stds k_sh 0.1, fc_M 0.01." in page
+    page = check_page(write_identification_report(tmp_path / "e", record, result,
+                                                  prior=PRIOR))
+    assert "<h2>Notes</h2>" not in page and "fc_M =" not in page

@@ -409,9 +409,9 @@ def _run(args: argparse.Namespace, flags: dict[str, Any]) -> int:
     # the record's notes first; the joint fit's distance to the prior with its result
     first = (StepDownWarning,) if args.method == "joint" else (StepDownWarning,
                                                               PriorMismatchWarning)
-    notes = read_notes + _noted(caught, flags, first)
-    report = maybe_write_report(args, records, est, prior, final_records=finals)
-    notes += _notes(args, est, caught, flags)
+    notes = read_notes + _noted(caught, flags, first) + _notes(args, est, caught, flags)
+    report = maybe_write_report(args, records, est, prior, final_records=finals,
+                                notes=notes)
     result = {
         "command": "identify",
         "method": args.method,

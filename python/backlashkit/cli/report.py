@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +48,7 @@ def maybe_write_report(
     result: Any,
     prior: TwoMassDrive,
     final_records: Any = None,
+    notes: Sequence[str] = (),
 ) -> Path | None:
     """Write the report if ``--report`` was given.
 
@@ -62,6 +64,8 @@ def maybe_write_report(
         The prior drive.
     final_records : Record or sequence of Record, optional
         Experiments of the final least squares, when given separately.
+    notes : sequence of str, optional
+        The command's notes on the answer, listed in the report.
 
     Returns
     -------
@@ -73,7 +77,7 @@ def maybe_write_report(
     with flag_names({"force": "--force"}):
         index = write_identification_report(
             args.report, records, result, prior=prior, force=bool(args.force),
-            final_records=final_records,
+            final_records=final_records, notes=notes,
         )
     print(f"backlashkit: wrote {index}", file=sys.stderr)
     return index

@@ -37,6 +37,7 @@ from __future__ import annotations
 import html
 import math
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -185,6 +186,7 @@ def write_identification_report(
     force: bool = False,
     final_records: Any = None,
     title: str = "Backlash identification report",
+    notes: Sequence[str] = (),
 ) -> Path:
     """Write an HTML report of a fitted identifier into ``directory``.
 
@@ -211,6 +213,9 @@ def write_identification_report(
         (paper A's step 2); the fits, cost curve and residuals use them.
     title : str, optional
         Heading of the page.
+    notes : sequence of str, optional
+        What the reader must know of the answer (the command line's notes), listed
+        under the estimates.
 
     Returns
     -------
@@ -247,8 +252,8 @@ def write_identification_report(
     shown = _Shown.of(result, theta, recs, finals)
     fits = _draw_fits(out, prior, recs, finals, shown, result)
     _draw_criterion(out, prior, finals, shown, result)
-    index.write_text(page(title, _sections(title, prior, recs, fits, shown, result)),
-                     encoding="utf-8")
+    index.write_text(page(title, _sections(title, prior, recs, fits, shown, result,
+                                           notes)), encoding="utf-8")
     return index
 
 
@@ -442,8 +447,28 @@ def _noise_note(result: Any) -> str:
     return f'<p class="note">Noise model: {model}. {said}</p>'
 
 
+def _prior_text(prior: TwoMassDrive, result: Any) -> str:
+    """The prior as the fit read it: its parameters, and their relative stds."""
+    names = ["J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh"]
+    names += [n for n in ("fc_M", "fc_L") if getattr(prior, n)]
+    text = ", ".join(f"{k} = {getattr(prior, k):.4g}" for k in names)
+    rel = getattr(result, "prior_rel_std", None)
+    if isinstance(rel, Mapping):
+        text += "; relative stds " + ", ".join(f"{k} {x:g}" for k, x in rel.items())
+    elif rel is not None:
+        text += f"; relative std {rel:g} on each linear parameter"
+    return text
+
+
+def _notes_list(notes: Sequence[str]) -> str:
+    if not notes:
+        return ""
+    items = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
+    return f'<h2>Notes</h2><ul class="note">{items}</ul>'
+
+
 def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_Fit],
-              shown: _Shown, result: Any) -> list[str]:
+              shown: _Shown, result: Any, notes: Sequence[str] = ()) -> list[str]:
     """The page's HTML sections."""
     bounds, dt4, method = shown.bounds, shown.dt4, shown.method
     profile = getattr(result, "profile_", None)
@@ -454,10 +479,7 @@ def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_F
                  "error or interval of theta.</p>")
     fit_rows = [(f.record.name, f"{f.fit_motor:.2f}", f"{f.fit_load:.2f}", str(f.t.size))
                 for f in fits]
-    p = prior
-    prior_txt = ", ".join(
-        f"{k} = {getattr(p, k):.4g}" for k in ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
-    )
+    prior_txt = _prior_text(prior, result)
     shaded = (f"; shaded: the search interval theta_ini (1 ± n_theta), n_theta = "
               f"{_fmt(n_theta)}" if n_theta is not None and bounds is not None
               else "; shaded: the method's search interval" if bounds is not None else "")
@@ -470,6 +492,7 @@ def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_F
         "<h2>Estimates</h2>",
         table(("quantity", "rad", "deg"), _estimate_rows(shown, result)),
         no_spread,
+        _notes_list(notes),
         _cost_sentence(shown, result),
         _record_table(recs, shown, result),
         "<h2>Measured and simulated speeds</h2>",
