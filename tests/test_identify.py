@@ -525,3 +525,16 @@ def test_cli_reads_npz(clean, tmp_path, capsys):
                           "regression", "--json"], capsys)
     assert code == 0, err
     assert json.loads(out)["theta"] == pytest.approx(THETA, rel=0.02)
+
+
+@pytest.mark.parametrize("a", [1.0, 0.9999, 0.5, 1e-3])
+def test_first_order_matches_its_recurrence(a):
+    """The held speeds' rigid-body response, vectorised in blocks (several blocks at
+    the fast decays), against the recurrence it replaces, on a random input."""
+    from backlashkit.identify.step import first_order
+
+    x = np.random.default_rng(7).normal(size=5000)
+    want = np.zeros(x.size + 1)
+    for k in range(1, want.size):
+        want[k] = a * want[k - 1] + x[k - 1]
+    np.testing.assert_allclose(first_order(x, a), want, rtol=1e-10, atol=1e-12)

@@ -150,8 +150,6 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
         (``f_M + f_L = 0``: no steady speed), or the record has no step-down (see
         :func:`find_step_down`).
     """
-    from itertools import accumulate
-
     if not isinstance(record, Record):
         raise InputError(f"record must be a Record, got {type(record).__name__}")
     check_prior(prior)
@@ -164,9 +162,7 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
         return math.nan
     a = math.exp(-friction * record.ts / inertia)
     b = (1.0 - a) / friction
-    # r[k] = a r[k-1] + b u[k-1], r[0] = 0 (scipy.signal.lfilter would cost its import)
-    rest = np.fromiter(accumulate((b * float(x) for x in record.torque[: i_s - 1]),
-                                  lambda r, x: a * r + x, initial=0.0), float, i_s)
+    rest = first_order(b * record.torque[: i_s - 1], a)
     v = (prior.J_M * record.w_motor[:i_s] + prior.J_L * record.w_load[:i_s]) / inertia
     basis = np.column_stack([rest, a ** np.arange(i_s)])
     # both sides scaled to 1 (speeds of 1e300 would overflow the squares, a torque of
@@ -175,6 +171,39 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
     col = float(np.max(np.abs(rest))) or 1.0
     (gain, _), *_ = np.linalg.lstsq(basis / [col, 1.0], v / scale, rcond=None)
     return float(gain) * scale / col
+
+
+#: :func:`first_order` sums its input in blocks over which the decay spans at most
+#: ``e**FIRST_ORDER_RANGE``: far from overflow, and the block's sum rounds to a
+#: relative error of about its length times the machine epsilon.
+FIRST_ORDER_RANGE = 30.0
+
+
+def first_order(x: np.ndarray, a: float) -> np.ndarray:
+    """``r[0] = 0``, ``r[k] = a r[k-1] + x[k-1]`` for ``0 < a <= 1``, vectorised
+    (``scipy.signal.lfilter`` would cost its import; a Python loop is slow on long holds):
+    within a block from ``r[s]``, ``r[s+1+j] = a^j (a r[s] + sum_{i<=j} a^-i x[s+i])``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The input, ``n - 1`` samples.
+    a : float
+        The decay per sample, in (0, 1].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``r``, ``n`` samples.
+    """
+    out = np.zeros(x.size + 1)
+    rate = -math.log(a)
+    block = x.size if rate == 0 else max(1, int(FIRST_ORDER_RANGE / rate))
+    for s in range(0, x.size, block):
+        seg = x[s : s + block]
+        grow = np.exp(rate * np.arange(seg.size))  # a^-j
+        out[s + 1 : s + 1 + seg.size] = (a * out[s] + np.cumsum(seg * grow)) / grow
+    return out
 
 
 def is_far(ratio: float, factor: float = FAR_FROM_PRIOR) -> bool:
