@@ -421,7 +421,8 @@ class JointIdentifier:
                    "with backlash describes the record; ",
                    Option("noise_model", "ar", python="ARNoise"), " would hide the misfit")
         missing = self._missing_terms()  # a term the drive has may be what misfits
-        lacks = ("; or the model lacks a term the drive has: try ", *missing) if missing else ()
+        lacks = (("; or the model lacks a term of the drive, or fixes it wrongly: try ",
+                  *missing) if missing else ())
         return (f"the residual of {('w_M', 'w_L')[c]} in {self._record_names[k]} (record "
                 f"{k + 1}) has lag-1 "
                 f"autocorrelation {rho:.2f} (white noise: about 0): {what}, so the standard "
@@ -477,7 +478,7 @@ class JointIdentifier:
                 "_record_names": [r.name for r in recs]}
 
     def _missing_terms(self) -> tuple[str | Option, ...]:
-        """How to add the terms the model leaves out, as message parts."""
+        """How to fit the terms the model leaves out or fixes, as message parts."""
         parts: list[str | Option] = []
         for term in self._terms():  # a term left out, or fixed (maybe wrongly)
             if term.mode in ("off", "fixed"):

@@ -38,7 +38,7 @@ import html
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -89,7 +89,8 @@ def _simulate_fit(prior: TwoMassDrive, rec: Record, theta: float, dt4: float,
     seg = criterion_window(rec, dt4, level_window)
     i_s = find_step_down(rec)[0]
     sl = slice(i_s, i_s + seg.t.size)
-    x0 = np.array([[seg.w0, seg.w0, theta + prior.f_L * seg.w0 / prior.k_sh]])
+    # the shaft carries the load's friction, as in W_1's start
+    x0 = np.array([[seg.w0, seg.w0, theta + (prior.f_L * seg.w0 + prior.fc_L) / prior.k_sh]])
     (r,) = simulate_batch([prior.with_theta(theta)], seg.t, seg.torque, initial_state=x0,
                           workers=1)
     wm, wl = rec.w_motor[sl], rec.w_load[sl]
@@ -310,8 +311,11 @@ def _draw_fits(out: Path, prior: TwoMassDrive, recs: list[Record], finals: list[
     from matplotlib.figure import Figure
 
     fits = _fitted_model(result, recs, finals)
-    if fits is None:
-        fits = [_simulate_fit(prior, r, shown.theta, shown.dt4, shown.level_window)
+    if fits is None:  # paper A's methods: the prior with the friction of their model
+        model = replace(prior, fc_M=float(getattr(result, "fc_M_", prior.fc_M)),
+                        fc_L=float(getattr(result, "fc_L_", prior.fc_L)), fs_M=None,
+                        fs_L=None)
+        fits = [_simulate_fit(model, r, shown.theta, shown.dt4, shown.level_window)
                 for r in finals]
     fig = Figure(figsize=(9, 4.4 * len(fits) + 0.4), layout="constrained")
     axes = fig.subplots(2 * len(fits), 1, squeeze=False)[:, 0]
