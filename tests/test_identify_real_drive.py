@@ -810,6 +810,58 @@ def test_a_known_loop_the_data_refute_is_flagged():
             assert said[0].endswith("check it, or fit it with actuator='auto'")
 
 
+def test_a_prior_on_the_loop_fits_it_about_the_known_value(tmp_path, capsys):
+    """A known loop with a relative std (issue 20: the prior may give the terms with
+    their uncertainty): held through the search, then fitted about its value. A 1.5 ms
+    loop at 50 % on records of a 1 ms one ends near the truth; a 3 ms one at 5 % is
+    pulled towards it and the fit says the prior and the data conflict. The command
+    line reads the value from [actuator] and its std from [uncertainty]."""
+    recs = _records(P_TRUE, THETA, fc=(0.01, 0.02), tau_i=1e-3)
+    linear = dict.fromkeys(P_TRUE, 0.3)
+    loose = _fit(recs, P_TRUE, actuator=bk.CurrentLoop(1.5e-3),
+                 prior_rel_std={**linear, "tau_i": 0.5})
+    assert "tau_i" in loose.estimated_ and loose.tau_i_ == pytest.approx(1e-3, rel=0.2)
+    assert loose.theta_ == pytest.approx(THETA, rel=THETA_RTOL)
+    assert abs(loose.prior_pull_["tau_i"]) < PRIOR_CONFLICT_Z
+    with pytest.warns(PriorMismatchWarning, match=r"^the data pull tau_i [\d.]+ standard "
+                                                  r"deviations from the prior's values"):
+        tight = _fit(recs, P_TRUE, actuator=bk.CurrentLoop(3e-3),
+                     prior_rel_std={**linear, "tau_i": 0.05})
+    assert 1e-3 < tight.tau_i_ < 3e-3
+    paths, toml = _files(recs, tmp_path)
+    with open(toml, "a") as f:
+        f.write("[actuator]\ntau_i = 0.0015\n[uncertainty]\n"
+                + "".join(f"{n} = 0.3\n" for n in P_TRUE) + "tau_i = 0.5\n")
+    assert cli_main(["identify", *paths, "--drive", toml, "--interval", "fisher",
+                     "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["tau_i"] == pytest.approx(loose.tau_i_, rel=1e-6)
+    assert "tau_i" in doc["estimated"] and "tau_i" in doc["prior_pull"]
+
+
+@pytest.mark.parametrize("actuator, std, match", [
+    ("auto", 0.3, r"^a relative std of tau_i is given \(prior_rel_std\['tau_i'\] = 0.3\), "
+                  r"but no known loop to fit it about: give its time constant "
+                  r"\(actuator=CurrentLoop\(tau_i\)\)$"),
+    (bk.CurrentLoop(1e-3), 0.0, r"a std of 0 is the known loop itself; give a std > 0"),
+])
+def test_a_loop_prior_without_a_loop_to_fit_is_refused(coulomb, actuator, std, match):
+    with pytest.raises(InputError, match=match):
+        bk.JointIdentifier(bk.TwoMassDrive(**P_TRUE), actuator=actuator,
+                           prior_rel_std={"k_sh": 0.1, "tau_i": std}).fit(coulomb)
+
+
+def test_cli_names_the_flag_for_a_loop_prior_without_a_loop(coulomb, tmp_path, capsys):
+    paths, toml = _files(coulomb, tmp_path)
+    with open(toml, "a") as f:
+        f.write("[uncertainty]\nk_sh = 0.1\ntau_i = 0.3\n")
+    assert cli_main(["identify", *paths, "--drive", toml]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"a relative std of tau_i is given ({toml}: [uncertainty] tau_i = "
+                        "0.3), but no known loop to fit it about: give its time constant "
+                        "(--current-loop S)")
+
+
 def test_a_fixed_loop_is_named_where_the_fit_fails():
     """A fixed loop may be the wrong one: the refusals name it beside the prior."""
     from backlashkit.identify._search import refuse_unexplained

@@ -76,13 +76,17 @@ def test_uncertainty_table_is_accepted_and_read(tmp_path):
     path = write(tmp_path, text, "c.toml")
     assert read_drive_toml(path).fc_M == 0.01
     assert read_uncertainty_toml(path) == {"fc_M": 0.5}
+    # and a current loop's time constant, whose value the [actuator] table gives
+    path = write(tmp_path, toml_text(extra="[actuator]\ntau_i = 0.001\n[uncertainty]\n"
+                                           "tau_i = 0.3\n"), "d.toml")
+    assert read_uncertainty_toml(path) == {"tau_i": 0.3}
 
 
 @pytest.mark.parametrize(
     ("extra", "culprit"),
     [
         ("[uncertainty]\nJ_X = 0.1\n", r"unknown key\(s\) J_X in \[uncertainty\]; allowed keys: "
-         r"J_M, J_L, k_sh, f_M, f_L, f_sh, fc_M, fc_L$"),
+         r"J_M, J_L, k_sh, f_M, f_L, f_sh, fc_M, fc_L, tau_i$"),
         ("[uncertainty]\ntheta = 0.1\n", r"\[uncertainty\] theta: the backlash is what identify "
          r"estimates"),
         ("[uncertainty]\nJ_L = -0.1\n", "J_L must be >= 0"),

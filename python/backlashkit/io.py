@@ -70,6 +70,9 @@ FRICTION_KEYS = ("fc_M", "fc_L", "fs_M", "fs_L")
 #: The friction keys an ``[uncertainty]`` table may give: the Coulomb torques, which
 #: the joint estimator fits (the breakaway torque is tied to them).
 UNCERTAIN_FRICTION_KEYS = ("fc_M", "fc_L")
+#: The terms' keys an ``[uncertainty]`` table may give: the Coulomb torques, and a
+#: known current loop's time constant (about the ``[actuator]`` table's).
+UNCERTAIN_TERM_KEYS = (*UNCERTAIN_FRICTION_KEYS, "tau_i")
 #: Keys of the optional ``[actuator]`` table.
 ACTUATOR_KEYS = ("tau_i",)
 #: Top-level tables a drive file may hold.
@@ -278,9 +281,11 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
 
     Each entry is the relative (fractional) uncertainty of one linear drive parameter
     (``J_M``, ``J_L``, ``k_sh``, ``f_M``, ``f_L``, ``f_sh``; not ``theta``, which is
-    estimated), e.g. ``J_L = 0.1`` for +-10 %, or of a Coulomb torque (``fc_M``,
-    ``fc_L``) whose value the ``[drive]`` table gives. Linear parameters not listed are
-    taken as exact; a Coulomb torque not listed is fitted without a prior.
+    estimated), e.g. ``J_L = 0.1`` for +-10 %, of a Coulomb torque (``fc_M``,
+    ``fc_L``) whose value the ``[drive]`` table gives, or of a current loop's time
+    constant (``tau_i``) whose value the ``[actuator]`` table gives. Linear parameters
+    not listed are taken as exact; a Coulomb torque not listed is fitted without a
+    prior, a loop not listed is known exactly.
 
     Parameters
     ----------
@@ -296,8 +301,8 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     ------
     InputError
         If the file does not parse, the table is empty, holds a key that is not a
-        linear drive parameter or a Coulomb torque, or a value that is not a finite
-        number >= 0.
+        linear drive parameter, a Coulomb torque or ``tau_i``, or a value that is not a
+        finite number >= 0.
     """
     doc = load_toml(path)
     _check_top_level(doc, path)
@@ -311,7 +316,7 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
             "data"
         )
     # theta has no prior: it is what identification estimates
-    allowed = DRIVE_KEYS[:-1] + UNCERTAIN_FRICTION_KEYS
+    allowed = DRIVE_KEYS[:-1] + UNCERTAIN_TERM_KEYS
     if "theta" in table:
         raise InputError(
             f"{path}: [uncertainty] theta: the backlash is what identify estimates, without "

@@ -134,18 +134,20 @@ class Problem:
         return nested, keep
 
     def with_params(self, add: Sequence[str], floors: dict[str, float],
-                    scales: dict[str, float]) -> Problem:
-        """The larger problem with the parameters ``add`` estimated too (no prior on
-        them; ``floors``: their smallest values simulated; ``scales``: those
-        estimated in natural units)."""
+                    scales: dict[str, float],
+                    priors: dict[str, tuple[float, float]] | None = None) -> Problem:
+        """The larger problem with the parameters ``add`` estimated too (``floors``:
+        their smallest values simulated; ``scales``: those estimated in natural units;
+        ``priors``: name -> (value, relative std) of those with a prior, else none)."""
+        priors = priors or {}
         base = self.base
         if base.size == len(PACKED):
             base = np.r_[base, np.zeros(len(PACKED_LONG) - len(PACKED))]
         names = (*self.names, *add)
         return replace(self, free=list(names[1:]), names=names, base=base,
                        cols=[PACKED_LONG.index(n) for n in names],
-                       p_prior=np.r_[self.p_prior, np.ones(len(add))],
-                       pen=np.r_[self.pen, np.full(len(add), np.inf)],
+                       p_prior=np.r_[self.p_prior, [priors.get(n, (1.0,))[0] for n in add]],
+                       pen=np.r_[self.pen, [priors.get(n, (0.0, np.inf))[1] for n in add]],
                        scales=np.r_[self.scales, [scales.get(n, 0.0) for n in add]],
                        floors={**self.floors,
                                **{PACKED_LONG.index(n): x for n, x in floors.items()}})

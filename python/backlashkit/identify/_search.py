@@ -541,6 +541,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
                                  search.max_iter)
     stage(5)
     pb, best, choices = select_terms(pb, best, sig, final_h, terms, recs, search.max_iter)
+    pb, best = prior_terms(pb, best, sig, final_h, terms, recs, search.max_iter)
     if joined_terms(terms, choices):
         pb, best, sig, choices = research(pb, best, sig, search, sigma, recs, start_drive,
                                           anchor, terms, choices, two_step, noise_passes)
@@ -556,7 +557,8 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     # along a curved valley, and theta's profile can fall again past a crossing
     unc = uncertainty(pb, best, rows_unc, interval, search.max_iter,
                       partial(resample, pb, sig, ar), refit,
-                      look_past=bool(joined_terms(terms, choices)))
+                      look_past=bool(joined_terms(terms, choices))
+                      or any(t.mode == "prior" for t in terms))
     if quantised(rows_unc):
         errors = quantisation_errors(unc, rows_unc)
         unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)
@@ -654,6 +656,23 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     best = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
                    search.restarts, max_iter)
     return best, starts, two_step, ambiguous
+
+
+def prior_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
+                terms: Sequence[Term], recs: list[Record], max_iter: int
+                ) -> tuple[Problem, LMState]:
+    """The terms with a prior std (a known loop's ``tau_i``), held at their values
+    through the search, now fitted about them with that prior (a penalty row, as the
+    linear parameters'), from the search's point; always kept."""
+    for term in terms:
+        if term.mode != "prior":
+            continue
+        priors = {n: (x, term.prior_std) for n, x in zip(term.params, term.fixed,
+                                                          strict=True)}
+        pb = pb.with_params(term.params, term.floors(recs), term.scales(recs), priors)
+        res = pb.residual(pb.final_spans(final_h), final_h, sig)
+        best = pb.refine(res, np.r_[best.z, pb.z_of(term.params, term.fixed)], max_iter)
+    return pb, best
 
 
 def joined_terms(terms: Sequence[Term], choices: Sequence[TermChoice]) -> list[Term]:

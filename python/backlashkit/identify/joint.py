@@ -190,7 +190,7 @@ class JointIdentifier:
     prior_rel_std : None, float or dict, optional
         None (default): all six linear parameters estimated freely; a float: all six
         with that relative prior std; a non-empty dict without ``theta``: only those it
-        gives a std > 0 (and ``fc_M``, ``fc_L``, about the prior's values, which are > 0).
+        gives a std > 0 (and ``fc_M``, ``fc_L``, ``tau_i`` about the prior's values).
     noise : tuple of float, optional
         Noise std ``(s_M, s_L)`` in rad/s of every record; default estimated.
     search : JointSearch, optional
@@ -488,7 +488,8 @@ class JointIdentifier:
 
     def _terms(self) -> tuple[Term, Term]:
         """The friction and actuator terms of the model (checked)."""
-        return friction_term(self.friction), actuator_term(self.actuator)
+        rel = rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS)
+        return friction_term(self.friction), actuator_term(self.actuator, rel.get("tau_i"))
 
     def _refit_params(self) -> dict[str, Any]:
         """The hyperparameters of a bootstrap refit: these, with Fisher's interval."""

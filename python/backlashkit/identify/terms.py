@@ -10,8 +10,9 @@ linear parameters. Each is chosen by a :class:`Term` setting:
 * ``friction``: ``"viscous"`` (none), ``"coulomb"`` (``fc_M``, ``fc_L`` fitted) or
   ``"auto"`` (fitted, then kept only where the data call for it);
 * ``actuator``: ``None`` (the set-point applied exactly), a
-  :class:`~backlashkit.CurrentLoop` (its ``tau_i`` fixed), or ``"auto"`` (``tau_i``
-  fitted, then kept only where the data call for it).
+  :class:`~backlashkit.CurrentLoop` (its ``tau_i`` fixed, or fitted about it where
+  ``prior_rel_std`` gives ``tau_i`` a std), or ``"auto"`` (``tau_i`` fitted, then kept
+  only where the data call for it).
 
 "Where the data call for it" is a likelihood-ratio test: the term is kept if it lowers
 ``-2 log L`` by more than the chi-square quantile :data:`KEEP_LEVEL` for its number
@@ -39,7 +40,7 @@ from scipy.special import chdtri
 
 from ..actuator import CurrentLoop
 from ..errors import InputError, Option
-from ..io import UNCERTAIN_FRICTION_KEYS
+from ..io import UNCERTAIN_TERM_KEYS
 from ..plants import TwoMassDrive
 from .record import Record
 from .step import find_step_down
@@ -56,11 +57,12 @@ __all__ = [
 #: the statistic is a mixture of chi-squares with fewer degrees of freedom), so paper A's
 #: ideal records keep the viscous model in at least 99 % of fits.
 KEEP_LEVEL = 0.99
-#: The terms' parameters a prior may give with a relative std (``prior_rel_std``): the
-#: Coulomb torques, which a :class:`~backlashkit.TwoMassDrive` holds, as the drive
-#: file's ``[uncertainty]`` table may. A current loop's lag is not a drive parameter; a
-#: known one is given as a ``CurrentLoop``.
-PRIOR_PARAMS = UNCERTAIN_FRICTION_KEYS
+#: The terms' parameters a prior may give with a relative std (``prior_rel_std``), as
+#: the drive file's ``[uncertainty]`` table may: the Coulomb torques, about the values
+#: of the :class:`~backlashkit.TwoMassDrive` prior, and a current loop's time constant,
+#: about a known loop's (``actuator=CurrentLoop(tau_i)``: the loop is then fitted, with
+#: that prior, instead of held).
+PRIOR_PARAMS = UNCERTAIN_TERM_KEYS
 #: A term the test would drop is kept anyway where it is estimated (it lowers
 #: ``-2 log L`` and the data pin it down) and dropping it moves ``theta`` by more than
 #: this many of its standard errors (in the model without it). Keeping a term the
@@ -135,13 +137,16 @@ class Term:
         ``"friction"`` or ``"actuator"`` (the hyperparameter that set it).
     params : tuple of str
         The packed names of the parameters it adds.
-    mode : {"off", "fixed", "fit", "auto"}
-        Absent, present with fixed values, fitted, or fitted and tested.
+    mode : {"off", "fixed", "prior", "fit", "auto"}
+        Absent, present with fixed values, fitted about them with a prior std (after
+        the search, which holds them), fitted, or fitted and tested.
     fixed : tuple of float
-        The values when ``mode == "fixed"``.
+        The values when ``mode`` is ``"fixed"`` or ``"prior"``.
     searched : bool
         Whether an ``"auto"`` term is in the whole search (then tested by removing
         it) or only added after it (then tested by adding it).
+    prior_std : float or None
+        The relative prior std of a ``"prior"`` term's parameters.
     """
 
     name: str
@@ -149,6 +154,7 @@ class Term:
     mode: str
     fixed: tuple[float, ...] = ()
     searched: bool = True
+    prior_std: float | None = None
 
     @property
     def fitted(self) -> bool:
@@ -222,11 +228,14 @@ class Term:
             if n not in rel:
                 continue
             given = (f"a relative std of {n} is given (", prior_std_option(n, rel[n]), ")")
+            if self.name == "actuator":
+                _check_loop_prior(self, given, rel[n])
+                continue
             if rel[n] == 0:
                 raise InputError(
                     *given, ": a Coulomb torque is fitted, not held at the prior's value; "
                     "give a std > 0 (0.01 for 1 %), or remove it to fit it freely")
-            if not self.fitted:  # only friction's parameters are in PRIOR_PARAMS
+            if not self.fitted:
                 raise InputError(
                     *given, ", but ", Option(self.name, "viscous"), " does not fit it: use ",
                     Option(self.name, "coulomb"), " or ", Option(self.name, "auto"),
@@ -444,13 +453,16 @@ def friction_term(friction: str) -> Term:
     return Term("friction", ("fc_M", "fc_L"), mode)
 
 
-def actuator_term(actuator) -> Term:
+def actuator_term(actuator, prior_std: float | None = None) -> Term:
     """The :class:`Term` of the ``actuator`` hyperparameter.
 
     Parameters
     ----------
     actuator : "auto", None or CurrentLoop
         The joint estimator's ``actuator``.
+    prior_std : float, optional
+        A relative prior std of ``tau_i`` (``prior_rel_std``): a known loop is then
+        fitted about its value (mode ``"prior"``) instead of held.
 
     Returns
     -------
@@ -468,7 +480,20 @@ def actuator_term(actuator) -> Term:
                          f"{type(actuator).__name__}")
     if actuator.exact:
         return Term("actuator", ("tau_i",), "off")
-    return Term("actuator", ("tau_i",), "fixed", (actuator.tau_i,))
+    mode = "prior" if prior_std else "fixed"
+    return Term("actuator", ("tau_i",), mode, (actuator.tau_i,), searched=False,
+                prior_std=prior_std or None)
+
+
+def _check_loop_prior(term: Term, given: tuple, std: float) -> None:
+    """Refuse a prior std of ``tau_i`` without a known loop to hold it about, or of 0."""
+    if std == 0:
+        raise InputError(*given, ": a std of 0 is the known loop itself; give a std > 0 "
+                         "(0.3 for 30 %), or remove it to hold the loop")
+    if term.mode != "prior":
+        raise InputError(*given, ", but no known loop to fit it about: give its time "
+                         "constant (", Option("actuator", "S",
+                                              python="actuator=CurrentLoop(tau_i)"), ")")
 
 
 def check_known_loop(term: Term, prior: TwoMassDrive) -> None:
@@ -487,7 +512,7 @@ def check_known_loop(term: Term, prior: TwoMassDrive) -> None:
     InputError
         If ``term`` is a fixed loop whose time constant is too long.
     """
-    if term.mode != "fixed":
+    if term.mode not in ("fixed", "prior"):
         return
     period = 2 * math.pi / math.sqrt(prior.k_sh * (1 / prior.J_M + 1 / prior.J_L))
     tau = term.fixed[0]
