@@ -18,7 +18,8 @@ UNITS = {"J_M": "kg m^2", "J_L": "kg m^2", "k_sh": "N m/rad", "f_M": "N m s/rad"
 
 def _to_prior(est: Any, name: str) -> str:
     """The ratio of an estimate to the prior's value, or that the prior has none."""
-    prior = getattr(est.prior, name, None)
+    # a loop's lag is not a drive parameter: a known loop's is the prior's
+    prior = getattr(est.prior, name, None) or getattr(est.actuator, name, None)
     if not prior:
         return "not in the prior"
     return f"x{est.params_[name] / prior:.3g} the prior"
