@@ -89,6 +89,9 @@ EXTENDED = {"coulomb x0.5": ((0.005, 0.01), 0.0, 0), "coulomb x3": ((0.03, 0.06)
 #: Errors are judged against max(ERR_FLOOR, CRB_FACTOR x the Cramér-Rao bound of the
 #: model with the scenario's terms (issue 20's bar).
 ERR_FLOOR, CRB_FACTOR = 0.05, 3.0
+#: The median of |z| for a standard normal z (its 75 % point): what the median of
+#: ``|theta - truth| / std_`` is where the standard errors are right.
+NORMAL_MEDIAN_ABS = 0.674
 #: Entropy word of the extended scenarios' seeds.
 EXTENDED_STREAM = 1
 #: The drives of the study: paper A's and the second one, with their backlash (rad).
@@ -378,6 +381,11 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
             print(f"  theta's standard deviation over the trials "
                   f"{statistics.stdev(r['theta'] for r in ok):.3g} rad, median std_ "
                   f"{statistics.median(r['std'] for r in ok):.3g} rad", flush=True)
+            # a bias, or errors wider than std_ says, for every trial or for a few
+            z = [abs(r["theta"] - theta) / r["std"] for r in ok if r["std"] > 0]
+            print(f"  mean error {statistics.fmean(r['theta'] / theta - 1 for r in ok):+.2%}, "
+                  f"median |theta - truth| / std_ {statistics.median(z):.3g} (a normal's: "
+                  f"{NORMAL_MEDIAN_ABS})", flush=True)
     for r in res:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)
