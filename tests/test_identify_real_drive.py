@@ -887,7 +887,7 @@ def test_a_fixed_loop_is_named_where_the_fit_fails():
      r"friction='viscous' does not fit it: use friction='coulomb' or friction='auto', or "
      r"remove it"),
     ((0.01, 0.02), {"fc_M": 0.0}, {}, r"fitted, not held at the prior's value; give a std > 0"),
-    ((0.01, 0.02), {"tau_i": 0.1}, {}, r"prior_rel_std has unknown parameter 'tau_i'"),
+    ((0.01, 0.02), {"fs_M": 0.1}, {}, r"prior_rel_std has unknown parameter 'fs_M'"),
 ])
 def test_a_prior_std_the_fit_cannot_use_is_refused(coulomb, fc, rel, kw, match):
     prior = bk.TwoMassDrive(**P_TRUE, fc_M=fc[0], fc_L=fc[1])
