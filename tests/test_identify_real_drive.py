@@ -851,17 +851,6 @@ def test_a_loop_prior_without_a_loop_to_fit_is_refused(coulomb, actuator, std, m
                            prior_rel_std={"k_sh": 0.1, "tau_i": std}).fit(coulomb)
 
 
-def test_cli_names_the_flag_for_a_loop_prior_without_a_loop(coulomb, tmp_path, capsys):
-    paths, toml = _files(coulomb, tmp_path)
-    with open(toml, "a") as f:
-        f.write("[uncertainty]\nk_sh = 0.1\ntau_i = 0.3\n")
-    assert cli_main(["identify", *paths, "--drive", toml]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.endswith(f"a relative std of tau_i is given ({toml}: [uncertainty] tau_i = "
-                        "0.3), but no known loop to fit it about: give its time constant "
-                        "(--current-loop S)")
-
-
 def test_a_fixed_loop_is_named_where_the_fit_fails():
     """A fixed loop may be the wrong one: the refusals name it beside the prior."""
     from backlashkit.identify._search import refuse_unexplained
@@ -895,16 +884,23 @@ def test_a_prior_std_the_fit_cannot_use_is_refused(coulomb, fc, rel, kw, match):
         bk.JointIdentifier(prior, prior_rel_std=rel, **kw).fit(coulomb)
 
 
-def test_cli_names_the_drive_file_where_a_coulomb_prior_is_wrong(coulomb, tmp_path, capsys):
+@pytest.mark.parametrize("table, ending", [
+    ("J_M = 0.1\nfc_M = 0.5\n",
+     "a relative std of fc_M is given ({toml}: [uncertainty] fc_M = 0.5), but the prior's "
+     "fc_M is 0: give its value in N m (fc_M in the [drive] table of {toml})"),
+    ("k_sh = 0.1\ntau_i = 0.3\n",
+     "a relative std of tau_i is given ({toml}: [uncertainty] tau_i = 0.3), but no known "
+     "loop to fit it about: give its time constant (--current-loop S)"),
+])
+def test_cli_names_the_drive_file_where_a_term_prior_is_wrong(coulomb, tmp_path, capsys,
+                                                              table, ending):
     """The refusals above in the command line's words: the table's entry and the file."""
-    paths, prior = _files(coulomb, tmp_path)
-    with open(prior, "a") as f:
-        f.write("[uncertainty]\nJ_M = 0.1\nfc_M = 0.5\n")
-    assert cli_main(["identify", *paths, "--drive", prior]) == 2
+    paths, toml = _files(coulomb, tmp_path)
+    with open(toml, "a") as f:
+        f.write("[uncertainty]\n" + table)
+    assert cli_main(["identify", *paths, "--drive", toml]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"a relative std of fc_M is given ({prior}: [uncertainty] fc_M = 0.5), "
-                        f"but the prior's fc_M is 0: give its value in N m (fc_M in the "
-                        f"[drive] table of {prior})")
+    assert err.endswith(ending.format(toml=toml))
     assert len(err.splitlines()) == 1
 
 
