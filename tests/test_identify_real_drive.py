@@ -745,10 +745,11 @@ def test_a_wrong_tight_prior_is_flagged_as_a_conflict(coulomb):
 
 
 def test_a_known_loop_slower_than_the_mechanics_is_refused(coulomb, tmp_path, capsys):
-    """A current loop of 1 s (1 for 1 ms?) ran the fit for over ten minutes; one of
-    50 ms was refused for another cause. Both are refused at once now, the
-    command line's from the flag or the drive file's [actuator] table alike; a 10 ms
-    loop, slow but below the shaft's ringing (48 ms on paper A's drive), is fitted."""
+    """A current loop of 1 s (1 for 1 ms?) did not finish in a QA pass; one of 50 ms
+    was refused for another cause. Both are refused at once now, the command line's
+    from the flag or the drive file's [actuator] table alike; a 10 ms loop, slow but
+    below the shaft's ringing period (the refusal gives it: 48 ms on paper A's drive),
+    is accepted."""
     prior = bk.TwoMassDrive(**P_TRUE)
     for tau in (1.0, 0.05):
         with pytest.raises(InputError, match=(
