@@ -320,3 +320,13 @@ def test_assess_sensitivity_separates_well_and_ill_conditioned_runs():
     assert rattle.sensitive and rattle.speed_rel_diff > 1e-6
     with pytest.raises(bk.InputError, match="refine must be an integer >= 2"):
         bk.assess_sensitivity(drive, t, np.zeros(t.size), refine=1)
+
+
+def test_ringing_frequency_is_the_contact_modes_undamped_frequency():
+    """``TwoMassDrive.ringing_frequency`` (used by the sampling checks and the current
+    loop's bound) against the eigenvalues of the undamped contact mode's matrix in
+    ``[w_M, w_L, phi_d]``."""
+    d = bk.TwoMassDrive(**PAPER)
+    a = np.array([[0.0, 0.0, -d.k_sh / d.J_M], [0.0, 0.0, d.k_sh / d.J_L], [1.0, -1.0, 0.0]])
+    assert np.max(np.abs(np.linalg.eigvals(a).imag)) == pytest.approx(d.ringing_frequency,
+                                                                      rel=1e-12)

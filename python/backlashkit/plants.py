@@ -22,6 +22,7 @@ on inertia 1 (the motor).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -316,6 +317,12 @@ class TwoMassDrive(_Simulates):
     def n_states(self) -> int:
         """Dimension of the state ``[w_M, w_L, phi_d]``: 3."""
         return 3
+
+    @property
+    def ringing_frequency(self) -> float:
+        """Angular frequency in rad/s of the shaft's ringing in contact (undamped):
+        ``sqrt(k_sh (1 / J_M + 1 / J_L))``."""
+        return math.sqrt(self.k_sh * (1.0 / self.J_M + 1.0 / self.J_L))
 
     def with_theta(self, theta: float) -> TwoMassDrive:
         """A copy of the drive with another backlash.

@@ -532,7 +532,7 @@ def _noisy_speeds(args: argparse.Namespace, w_motor: np.ndarray, w_load: np.ndar
 def _note_sampling(drive, response) -> None:
     """Notes on what the samples cannot show: ringing faster than the sample rate and
     near-grazing contacts."""
-    omega = math.sqrt(drive.k_sh * (1.0 / drive.J_M + 1.0 / drive.J_L))
+    omega = drive.ringing_frequency
     ts_out = float(response.t[1] - response.t[0])
     if ts_out * omega > math.pi:  # exact at the samples, but no sample shows it
         _note(

@@ -512,7 +512,7 @@ class Outcome:
     two_step: tuple[float, float] | None
     ambiguous: bool
     choices: list[TermChoice]  # the likelihood-ratio tests of the "auto" terms
-    fixed: dict[str, FixedScore] = field(default_factory=dict)  # fixed terms' tests
+    fixed: dict[str, FixedTest] = field(default_factory=dict)  # fixed terms' tests
 
 
 #: Stages of :func:`run` reported to its ``stage`` callback: the starts, the first
@@ -567,14 +567,14 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     stage(7)
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
         sims = pb.simulate(unc.best.z[np.newaxis, :], pb.spans)
-    fixed = {t.params[0]: fixed_score(pb, unc.best, t, recs, final_h, sig, search.max_iter)
+    fixed = {t.params[0]: fixed_test(pb, unc.best, t, recs, final_h, sig, search.max_iter)
              for t in terms if t.mode == "fixed"}
     return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices,
                    fixed)
 
 
 @dataclass(frozen=True)
-class FixedScore:
+class FixedTest:
     """The test of a term the user fixed (a known current loop's ``tau_i``): the fall
     of ``-2 log L`` when it is fitted too (chi-square, one degree of freedom where the
     fixed value is right), and the value it is fitted to."""
@@ -583,9 +583,9 @@ class FixedScore:
     value: float
 
 
-def fixed_score(pb: Problem, best: LMState, term: Term, recs: list[Record],
-                final_h: float | None, sig: np.ndarray, max_iter: int) -> FixedScore:
-    """:class:`FixedScore` of the one-parameter fixed ``term``: the model refitted with
+def fixed_test(pb: Problem, best: LMState, term: Term, recs: list[Record],
+              final_h: float | None, sig: np.ndarray, max_iter: int) -> FixedTest:
+    """:class:`FixedTest` of the one-parameter fixed ``term``: the model refitted with
     it free from the estimate (a fit's cost). A score test there would not do: the
     other parameters have made up for a wrong lag, so its linearised fall understates
     the refit's."""
@@ -596,9 +596,9 @@ def fixed_score(pb: Problem, best: LMState, term: Term, recs: list[Record],
     r = res.at(z_fixed)
     cost = float(r @ r)
     if not math.isfinite(cost):
-        return FixedScore(math.nan, math.nan)
+        return FixedTest(math.nan, math.nan)
     st = big.refine(res, z_fixed, max_iter)
-    return FixedScore(max(cost - st.cost, 0.0), math.exp(float(st.z[-1])))
+    return FixedTest(max(cost - st.cost, 0.0), math.exp(float(st.z[-1])))
 
 
 def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],

@@ -127,7 +127,7 @@ from ._model import (
     model_commutation,
     rel_std,
 )
-from ._problem import build_problem
+from ._problem import Problem, build_problem
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -621,7 +621,7 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
     }
 
 
-def _prior_pulls(pb, unc: _search.Uncertain) -> dict[str, float]:
+def _prior_pulls(pb: Problem, unc: _search.Uncertain) -> dict[str, float]:
     """``prior_pull_``: where the prior is right, the move from its value has the
     variance of the prior less that of the estimate (a Gaussian update)."""
     out = {}
@@ -636,8 +636,8 @@ def _prior_pulls(pb, unc: _search.Uncertain) -> dict[str, float]:
 
 
 def _warn_fixed_loop(tests: dict[str, tuple[float, float]], term: Term) -> None:
-    """Warn where the data call for another lag than a known loop's (its score test
-    beyond the likelihood-ratio test's threshold, :data:`~.terms.KEEP_LEVEL`)."""
+    """Warn where the data call for another lag than a known loop's: the refit with it
+    free falls beyond the terms' likelihood-ratio threshold (:data:`~.terms.KEEP_LEVEL`)."""
     if "tau_i" not in tests or not tests["tau_i"][0] > term.threshold:
         return
     fall, value = tests["tau_i"]

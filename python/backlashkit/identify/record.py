@@ -269,7 +269,7 @@ def check_sampling(prior: TwoMassDrive, rec: Record) -> None:
     InputError
         If ``Ts`` is longer than half the ringing period.
     """
-    omega = math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    omega = prior.ringing_frequency
     if rec.ts * omega > math.pi:
         raise InputError(
             f"{rec.name}: the sample time {rec.ts:.6g} s cannot resolve the drive's ringing "

@@ -254,7 +254,7 @@ def check_step_down(record: Record, prior: TwoMassDrive) -> int:
         :data:`MAX_STEP_DOWNS` times.
     """
     i_s, t_s, _, _ = find_step_down(record)
-    period = 2.0 * math.pi / math.sqrt(prior.k_sh * (1.0 / prior.J_M + 1.0 / prior.J_L))
+    period = 2.0 * math.pi / prior.ringing_frequency
     need = max(RINGING_PERIODS_AFTER * period, MIN_SAMPLES_AFTER * record.ts)
     if record.t[-1] - t_s < need:
         raise InputError(

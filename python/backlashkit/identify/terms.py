@@ -115,7 +115,7 @@ TAU_START_SAMPLES = (0.5, 1.0, 2.0, 4.0)
 #: fit sees a flat cost below this floor, and the likelihood-ratio test then drops it.
 TAU_FLOOR_SAMPLES = 0.25
 #: A known current loop's time constant must be below this many periods of the prior's
-#: shaft ringing (``2 pi / sqrt(k_sh (1 / J_M + 1 / J_L))``): a current loop is the fast
+#: shaft ringing (``TwoMassDrive.ringing_frequency``): a current loop is the fast
 #: inner loop of the drive, far faster than the mechanics it drives, and a lag as long
 #: as the ringing is a unit slip (1 for 1 ms). The fit with such a loop wandered to
 #: parameters the kernel simulates slowly, or was refused for another cause.
@@ -514,7 +514,7 @@ def check_known_loop(term: Term, prior: TwoMassDrive) -> None:
     """
     if term.mode not in ("fixed", "prior"):
         return
-    period = 2 * math.pi / math.sqrt(prior.k_sh * (1 / prior.J_M + 1 / prior.J_L))
+    period = 2 * math.pi / prior.ringing_frequency
     tau = term.fixed[0]
     if tau >= MAX_LOOP_RINGING * period:
         raise InputError(
