@@ -227,22 +227,36 @@ def whole_record(pb: Problem, ends: list[LMState], rows_full: Residual, max_iter
     return min(finals, key=lambda st: st.cost)
 
 
+def restart_start(kind: str, shift: float, z: np.ndarray, free: Sequence[str],
+                  z_anchor: np.ndarray) -> np.ndarray | None:
+    """The start of one restart (:meth:`~.search.Restarts.shifts`) of the solution
+    ``z``: its linear parameters at the prior's ``z_anchor`` (in ``free``'s order),
+    ``k_sh`` shifted, or the friction split shifted; None where there is none."""
+    if kind == "prior":
+        z0 = z.copy()
+        linear = [i for i, n in enumerate(free) if n in LINEAR_PARAMS]
+        z0[[1 + i for i in linear]] = z_anchor[linear]
+        return z0
+    if kind == "k_sh":
+        z0 = z.copy()
+        z0[1 + free.index("k_sh")] += shift
+        return z0
+    return resplit(z, free, ("f_M", "f_L"), shift)
+
+
 def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residual,
-            cfg: Restarts, max_iter: int) -> LMState:
-    """Stage 5: the best solution restarted with ``k_sh`` and the friction split shifted;
-    a restart is kept if it lowers the final cost (:class:`~.search.Restarts`)."""
+            cfg: Restarts, max_iter: int, z_anchor: np.ndarray) -> LMState:
+    """Stage 5: the best solution restarted from the prior's linear parameters
+    ``z_anchor``, with ``k_sh`` and with the friction split shifted; a restart is kept
+    if it lowers the final cost (:class:`~.search.Restarts`)."""
     shifts = cfg.shifts(pb.free)
     if not shifts:
         return best
     ref = pb.refine(rows_short, best.z, max_iter)
     for kind, d_ in shifts:  # each from the best solution so far
-        if kind == "k_sh":
-            z0 = best.z.copy()
-            z0[1 + pb.free.index("k_sh")] += d_
-        else:
-            z0 = resplit(best.z, pb.free, ("f_M", "f_L"), d_)
-            if z0 is None:
-                continue
+        z0 = restart_start(kind, d_, best.z, pb.free, z_anchor)
+        if z0 is None:
+            continue
         st = pb.refine(rows_short, z0, min(RESTART_SCREEN_ITER, max_iter))
         if not st.cost < ref.cost:
             continue
@@ -654,7 +668,7 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
     best = whole_record(pb, ends, rows_full, max_iter)
     best = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
-                   search.restarts, max_iter)
+                   search.restarts, max_iter, z_anchor)
     return best, starts, two_step, ambiguous
 
 
