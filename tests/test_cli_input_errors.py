@@ -202,6 +202,21 @@ def test_paper_a_methods_say_they_do_not_read_the_uncertainty_table(exp_csv, tmp
             f"{method} holds the linear parameters at the prior's values") in notes
 
 
+@pytest.mark.parametrize("method", ["two-step", "regression"])
+def test_paper_a_methods_print_their_friction_model(exp_csv, capsys, method):
+    """The text output says which friction model paper A's methods fitted, as --json
+    does: viscous, or the Coulomb torques it found."""
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method", method]) == 0
+    assert "friction  = viscous (no Coulomb torques)" in capsys.readouterr().out
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method", method,
+                 "--friction", "coulomb", "--json"]) == 0
+    extra = json.loads(capsys.readouterr().out)
+    assert main(["identify", str(exp_csv), "--drive", DRIVE_TOML, "--method", method,
+                 "--friction", "coulomb"]) == 0
+    assert (f"friction  = coulomb: fc_M = {extra['fc_M']:.4g} N m, fc_L = "
+            f"{extra['fc_L']:.4g} N m") in capsys.readouterr().out
+
+
 def test_time_in_ms_is_refused_for_every_method(exp_csv, tmp_path, capsys):
     t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
     path = tmp_path / "ms.csv"

@@ -385,6 +385,32 @@ def test_the_best_start_is_continued_past_the_first_window():
     assert fit.fc_M_ > 0.5 * fc[0]
 
 
+#: Trial 129 of ``python benchmarks/real_drive.py --snr 30 --drives other --effects
+#: coulomb`` (seed 2020: drive 1, scenario 1, trial 129).
+TRIAL_129 = np.random.SeedSequence(2020, spawn_key=(1, 1, 129))
+
+
+def test_the_search_restarts_from_the_priors_linear_parameters():
+    """The second drive with Coulomb friction at 30 dB, a trial whose windows carried
+    ``k_sh`` 13 % low, into a neighbouring ringing phase's basin, where the whole
+    records cost more than around the prior's point: theta stopped 6.1 % low, its
+    interval [-8.8, -3.5] % leaving the truth out. Restarted from the prior's linear
+    parameters (``Restarts(prior=True)``, the default) the fit ends more likely and
+    near the truth (``-s`` prints both)."""
+    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=TRIAL_129, snr=30.0)
+    kw = {"friction": "coulomb", "actuator": None, "interval": bk.FisherInterval()}
+    stuck = _fit(recs, OTHER, search=bk.JointSearch(restarts=bk.Restarts(prior=False)), **kw)
+    fit = _fit(recs, OTHER, **kw)
+    rise = _m2ll(fit, recs) - _m2ll(stuck, recs)
+    print(f"theta {100 * (fit.theta_ / 0.02 - 1):+.2f} % against "
+          f"{100 * (stuck.theta_ / 0.02 - 1):+.2f} % without the restart, -2 log L "
+          f"{rise:+.4g} from its")
+    assert stuck.theta_ < 0.95 * 0.02  # the search alone still stops in that basin
+    assert rise < -5.0
+    assert fit.theta_ == pytest.approx(0.02, rel=THETA_RTOL)
+    assert fit.params_["k_sh"] == pytest.approx(OTHER["k_sh"], rel=0.05)
+
+
 def test_a_search_again_from_a_fit_whose_friction_underflowed(coulomb):
     """The misfit restart searches again from the first fit's linear parameters; a
     friction that fit drove to 0 (its logarithm below the floats' range) raised ``math

@@ -44,6 +44,14 @@ def _record_table(per_record: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _friction_line(extra: dict[str, Any]) -> str:
+    """Paper A's methods' friction model: viscous, or its fitted Coulomb torques."""
+    if extra["friction"] != "coulomb":
+        return "friction  = viscous (no Coulomb torques)"
+    return (f"friction  = coulomb: fc_M = {extra['fc_M']:.4g} N m, fc_L = "
+            f"{extra['fc_L']:.4g} N m (no standard errors for this method)")
+
+
 def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes: list[str],
                   everything: list[Record]) -> None:
     """Print the result as text on stdout.
@@ -73,6 +81,7 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
               "method")
+        print(_friction_line(out["extra"]))
         for note in notes:
             print(f"note: {note}")
         return
