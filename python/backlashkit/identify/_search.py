@@ -227,16 +227,24 @@ def whole_record(pb: Problem, ends: list[LMState], rows_full: Residual, max_iter
     return min(finals, key=lambda st: st.cost)
 
 
+def prior_point(z: np.ndarray, free: Sequence[str], anchor: dict[str, float]
+                ) -> np.ndarray:
+    """Log-parameters ``z`` (theta first, then ``free``) with the linear parameters
+    at the prior's, ``anchor`` (z units by name); theta and the terms kept."""
+    z0 = z.copy()
+    for i, name in enumerate(free):
+        if name in LINEAR_PARAMS and name in anchor:
+            z0[1 + i] = anchor[name]
+    return z0
+
+
 def restart_start(kind: str, shift: float, z: np.ndarray, free: Sequence[str],
-                  z_anchor: np.ndarray) -> np.ndarray | None:
+                  anchor: dict[str, float]) -> np.ndarray | None:
     """The start of one restart (:meth:`~.search.Restarts.shifts`) of the solution
-    ``z``: its linear parameters at the prior's ``z_anchor`` (in ``free``'s order),
+    ``z``: its linear parameters at the prior's ``anchor`` (:func:`prior_point`),
     ``k_sh`` shifted, or the friction split shifted; None where there is none."""
     if kind == "prior":
-        z0 = z.copy()
-        linear = [i for i, n in enumerate(free) if n in LINEAR_PARAMS]
-        z0[[1 + i for i in linear]] = z_anchor[linear]
-        return z0
+        return prior_point(z, free, anchor)
     if kind == "k_sh":
         z0 = z.copy()
         z0[1 + free.index("k_sh")] += shift
@@ -245,16 +253,16 @@ def restart_start(kind: str, shift: float, z: np.ndarray, free: Sequence[str],
 
 
 def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residual,
-            cfg: Restarts, max_iter: int, z_anchor: np.ndarray) -> LMState:
+            cfg: Restarts, max_iter: int, anchor: dict[str, float]) -> LMState:
     """Stage 5: the best solution restarted from the prior's linear parameters
-    ``z_anchor``, with ``k_sh`` and with the friction split shifted; a restart is kept
-    if it lowers the final cost (:class:`~.search.Restarts`)."""
+    ``anchor`` (z units by name), with ``k_sh`` and with the friction split shifted; a
+    restart is kept if it lowers the final cost (:class:`~.search.Restarts`)."""
     shifts = cfg.shifts(pb.free)
     if not shifts:
         return best
     ref = pb.refine(rows_short, best.z, max_iter)
     for kind, d_ in shifts:  # each from the best solution so far
-        z0 = restart_start(kind, d_, best.z, pb.free, z_anchor)
+        z0 = restart_start(kind, d_, best.z, pb.free, anchor)
         if z0 is None:
             continue
         st = pb.refine(rows_short, z0, min(RESTART_SCREEN_ITER, max_iter))
@@ -323,12 +331,14 @@ class Uncertain:
 
 def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_iter: int,
                 draw: Callable[[np.ndarray, np.random.Generator], list[Record]],
-                refit: Callable[[list[Record]], float], *, look_past: bool = False
-                ) -> Uncertain:
+                refit: Callable[[list[Record]], float], *, look_past: bool = False,
+                anchor: dict[str, float] | None = None) -> Uncertain:
     """Stage 8: Gauss-Newton covariance and the interval object's interval; a profile
     refit well below the estimate's cost moves the estimate there (at most
     :data:`RECENTRE_MAX` times). ``draw(z, rng)``: a bootstrap resample at ``z``;
-    ``refit(records)``: its ``theta``; ``look_past``: :attr:`IntervalInputs.look_past`."""
+    ``refit(records)``: its ``theta``; ``look_past``: :attr:`IntervalInputs.look_past`;
+    ``anchor``: the prior's point (z units by name), a second start of the profile's
+    end refits (:attr:`IntervalInputs.anchor`)."""
     for k_centre in range(RECENTRE_MAX + 1):
         z = best.z
         # the prior's rows are in the residual: its information is in J^T J
@@ -345,7 +355,8 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
         found = interval._interval(IntervalInputs(
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
             pb.fd_step, partial(draw, z), refit,
-            partial(rows_unc.exact_jacobian, with_theta=False), look_past))
+            partial(rows_unc.exact_jacobian, with_theta=False), look_past,
+            None if anchor is None else prior_point(z, pb.free, anchor)[1:]))
         if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
             break
         st = pb.refine(rows_unc, found.lowest_z, max_iter)
@@ -572,7 +583,8 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     unc = uncertainty(pb, best, rows_unc, interval, search.max_iter,
                       partial(resample, pb, sig, ar), refit,
                       look_past=bool(joined_terms(terms, choices))
-                      or any(t.mode == "prior" for t in terms))
+                      or any(t.mode == "prior" for t in terms),
+                      anchor=anchor if search.restarts.prior else None)
     if quantised(rows_unc):
         errors = quantisation_errors(unc, rows_unc)
         unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)
@@ -668,7 +680,7 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
     best = whole_record(pb, ends, rows_full, max_iter)
     best = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
-                   search.restarts, max_iter, z_anchor)
+                   search.restarts, max_iter, dict(zip(pb.free, z_anchor, strict=True)))
     return best, starts, two_step, ambiguous
 
 

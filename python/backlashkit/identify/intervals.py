@@ -75,7 +75,10 @@ class IntervalInputs:
     ``residual`` instead. ``look_past``: whether the profile may rise and fall again
     past its first crossing (a current loop's lag, fitted after the search, trading
     against the linear parameters along a curved valley), so that its ends are looked
-    past (:data:`LOOK_PAST`).
+    past (:data:`LOOK_PAST`). ``anchor``, where given, is a second start of the
+    other log-parameters for the refits at the profile's ends (the prior's linear
+    parameters, the added terms as estimated): the refits continued from the estimate
+    keep to its basin, and another basin can lie lower there.
     """
 
     theta: float
@@ -89,6 +92,7 @@ class IntervalInputs:
     refit: Callable[[list], float]
     jacobian: Callable[[np.ndarray], np.ndarray | None] | None = None
     look_past: bool = False
+    anchor: np.ndarray | None = None
 
 
 @dataclass
@@ -191,8 +195,11 @@ class ProfileLikelihood:
         search = _HeldTheta(fit, self.max_iter)
         ends, bounded = [], []
         for sign in (-1.0, 1.0):
-            d, ok = self._end(partial(search.rise, sign, {}),
-                              Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP, fit.look_past)
+            memo: dict[float, np.ndarray] = {}
+            recheck = None if fit.anchor is None else partial(search.recheck, sign, memo)
+            d, ok = self._end(partial(search.rise, sign, memo),
+                              Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP, fit.look_past,
+                              recheck)
             ends.append(math.exp(z[0] + sign * d))
             bounded.append(ok)
         lowest = min(search.evaluated, key=lambda e: e[0])
@@ -201,13 +208,16 @@ class ProfileLikelihood:
                              profile=points, lowest_rise=float(lowest[0]),
                              lowest_z=lowest[1])
 
-    def _end(self, rise: Callable[[float], float], first: float, look_past: bool
-             ) -> tuple[float, bool]:
-        """One side's end: its distance (log theta) and whether it is bounded."""
+    def _end(self, rise: Callable[[float], float], first: float, look_past: bool,
+             recheck: Callable[[float], float] | None = None) -> tuple[float, bool]:
+        """One side's end: its distance (log theta) and whether it is bounded.
+        ``recheck(d)``: the rise at ``d`` refitted from a second start too."""
         search = partial(profile_crossing, rise, tol=self.tol,
                          max_evaluations=self.max_evaluations,
                          largest=math.log(self.max_factor))
         d, ok = search(first)
+        if ok and recheck is not None and recheck(d) < CHI2_95 - self.tol:
+            d, ok = search(d)  # a lower basin at the end: on outwards from there
         for _ in range(LOOKS_PAST if look_past else 0):
             past = d * (1.0 + LOOK_PAST)
             if not ok or past >= math.log(self.max_factor) or rise(past) > CHI2_95 + self.tol:
@@ -257,6 +267,20 @@ class _HeldTheta:
         if (sign, d) in self._rises:  # a look past an end is where the search goes on
             return self._rises[sign, d]
         self._rises[sign, d] = self._rise(sign, memo, d)
+        return self._rises[sign, d]
+
+    def recheck(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
+        """The rise at an end ``d`` already refitted, refitted again from the fit's
+        ``anchor``; the lower refit is kept (in ``memo`` too, so that the search
+        continues from it)."""
+        zt = self.fit.z[0] + sign * d
+        st = lm(partial(self._residual, zt), partial(self._jacobian, zt), self.fit.anchor,
+                max_iter=self.max_iter)
+        rise = st.cost - self.fit.cost
+        if rise < self.rise(sign, memo, d):
+            memo[d] = st.z
+            self._rises[sign, d] = rise
+            self.evaluated.append((rise, np.r_[zt, st.z]))
         return self._rises[sign, d]
 
     def _rise(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
