@@ -411,6 +411,28 @@ def test_the_search_restarts_from_the_priors_linear_parameters():
     assert fit.params_["k_sh"] == pytest.approx(OTHER["k_sh"], rel=0.05)
 
 
+def test_the_profiles_ends_are_refitted_from_the_priors_point(monkeypatch):
+    """Trial 146 of the same row: the search and its restarts end at theta 2.55 % low,
+    and the profile's refits, each continued from the last, keep to that basin: the
+    interval [-5.07, -0.20] % left the truth out, while from the prior's point the
+    refit held at the truth is 9.3 below the estimate in chi-square units. Each end is
+    now refitted from there too: the lower basin moves the estimate, and the interval
+    covers the truth. Without that refit (``recheck`` dropped) it does not."""
+    from backlashkit.identify.intervals import ProfileLikelihood
+
+    recs = _records(OTHER, 0.02, fc=(0.01, 0.02),
+                    seed=np.random.SeedSequence(2020, spawn_key=(1, 1, 146)), snr=30.0)
+    fit = _fit(recs, OTHER, friction="coulomb", actuator=None)
+    lo, hi = fit.ci95_
+    assert lo <= 0.02 <= hi
+    end = ProfileLikelihood._end
+    monkeypatch.setattr(ProfileLikelihood, "_end",
+                        lambda self, rise, first, look_past, recheck=None:
+                        end(self, rise, first, look_past))
+    lo, hi = _fit(recs, OTHER, friction="coulomb", actuator=None).ci95_
+    assert not lo <= 0.02 <= hi
+
+
 def test_a_search_again_from_a_fit_whose_friction_underflowed(coulomb):
     """The misfit restart searches again from the first fit's linear parameters; a
     friction that fit drove to 0 (its logarithm below the floats' range) raised ``math
