@@ -301,6 +301,8 @@ def main() -> None:
                        args.repeats)
     t_nofric = _median(lambda: fit_with(search={"restarts": Restarts(friction=())}),
                        args.repeats)
+    t_noprior = _median(lambda: fit_with(search={"restarts": Restarts(prior=False)}),
+                        args.repeats)
     t_ar = _median(lambda: fit_with(noise_model=ARNoise(2)), args.repeats)
     t_two = _median(lambda: TwoStepIdentifier(prior, workers=1).fit(rec1, final_records=rec2),
                     args.repeats)
@@ -314,6 +316,8 @@ def main() -> None:
           "(the same fit with interval=FisherInterval())")
     print(f"{'    with stiffness_restarts=(0.15,) (before 0.4, 0.8)':<55} {t_narrow:7.2f} s")
     print(f"{'    with friction_restarts=() (before them)':<55} {t_nofric:7.2f} s")
+    print(f"{'    with Restarts(prior=False) (no restart, no profile':<55} {t_noprior:7.2f} s")
+    print(f"{'    end refits from the prior)':<55}")
     print(f"{'    with noise_model=ARNoise(2)':<55} {t_ar:7.2f} s")
     print(f"{'  TwoStepIdentifier.fit (paper A), workers=1':<55} {t_two:7.2f} s")
     print(f"{'  RegressionIdentifier.fit (Table 2 baseline), workers=1':<55} {t_reg:7.2f} s")

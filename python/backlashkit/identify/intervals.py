@@ -57,6 +57,11 @@ PROFILE_FIRST_STEP = 0.05
 LOOK_PAST = 0.25
 #: Looks past an end at most, per side.
 LOOKS_PAST = 2
+#: Iterations of an end's refit from the prior's point before it must be below the
+#: refit continued from the estimate: one climbing back to the same basin is still
+#: far above it then (paper A's records from a prior 30 % off), one falling into a
+#: lower basin already below (as the search's restarts, ``_search.RESTART_SCREEN_ITER``).
+RECHECK_SCREEN_ITER = 5
 
 
 @dataclass
@@ -281,9 +286,14 @@ class _HeldTheta:
         ``anchor``; the lower refit is kept (in ``memo`` too, so that the search
         continues from it)."""
         zt = self.fit.z[0] + sign * d
-        st = lm(partial(self._residual, zt), partial(self._jacobian, zt), self.fit.anchor,
-                max_iter=self.max_iter)
+        fun, jac = partial(self._residual, zt), partial(self._jacobian, zt)
+        st = lm(fun, jac, self.fit.anchor, max_iter=min(RECHECK_SCREEN_ITER, self.max_iter))
         rise = st.cost - self.fit.cost
+        if not rise < self.rise(sign, memo, d):  # climbing back: the same basin
+            return self._rises[sign, d]
+        if not st.done and self.max_iter > RECHECK_SCREEN_ITER:
+            st = lm(fun, jac, st.z, max_iter=self.max_iter - RECHECK_SCREEN_ITER, state=st)
+            rise = st.cost - self.fit.cost
         if rise < self.rise(sign, memo, d):
             memo[d] = st.z
             self._rises[sign, d] = rise
