@@ -414,23 +414,27 @@ def test_the_search_restarts_from_the_priors_linear_parameters():
 def test_the_profiles_ends_are_refitted_from_the_priors_point(monkeypatch):
     """Trial 146 of the same row: the search and its restarts end at theta 2.55 % low,
     and the profile's refits, each continued from the last, keep to that basin: the
-    interval [-5.07, -0.20] % left the truth out, while from the prior's point the
-    refit held at the truth is 9.3 below the estimate in chi-square units. Each end is
-    now refitted from there too: the lower basin moves the estimate, and the interval
-    covers the truth. Without that refit (``recheck`` dropped) it does not."""
+    interval [-5.07, -0.20] % left the truth out. Each end is now refitted from the
+    prior's point too, where a lower basin lies: the estimate moves there (the
+    profile's recentring), near the truth, and the interval covers it. Without that
+    refit (``recheck`` dropped) it does not (``-s`` prints both)."""
     from backlashkit.identify.intervals import ProfileLikelihood
 
     recs = _records(OTHER, 0.02, fc=(0.01, 0.02),
                     seed=np.random.SeedSequence(2020, spawn_key=(1, 1, 146)), snr=30.0)
     fit = _fit(recs, OTHER, friction="coulomb", actuator=None)
-    lo, hi = fit.ci95_
-    assert lo <= 0.02 <= hi
     end = ProfileLikelihood._end
     monkeypatch.setattr(ProfileLikelihood, "_end",
                         lambda self, rise, first, look_past, recheck=None:
                         end(self, rise, first, look_past))
-    lo, hi = _fit(recs, OTHER, friction="coulomb", actuator=None).ci95_
-    assert not lo <= 0.02 <= hi
+    stuck = _fit(recs, OTHER, friction="coulomb", actuator=None)
+    for name, f in (("rechecked", fit), ("not", stuck)):
+        print(f"{name}: theta {100 * (f.theta_ / 0.02 - 1):+.2f} %, interval "
+              f"[{100 * (f.ci95_[0] / 0.02 - 1):+.2f}, {100 * (f.ci95_[1] / 0.02 - 1):+.2f}] %")
+    assert fit.ci95_[0] <= 0.02 <= fit.ci95_[1]
+    assert not stuck.ci95_[0] <= 0.02 <= stuck.ci95_[1]
+    assert abs(fit.theta_ / 0.02 - 1) < 0.5 * abs(stuck.theta_ / 0.02 - 1)
+    assert _m2ll(fit, recs) < _m2ll(stuck, recs) - 1.0
 
 
 def test_a_search_again_from_a_fit_whose_friction_underflowed(coulomb):
