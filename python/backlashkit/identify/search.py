@@ -288,11 +288,12 @@ class Restarts(_Config):
         coloured; keep the fit of higher likelihood (default True).
     prior : bool, optional
         Restart first from the prior's linear parameters, ``theta`` and the added
-        terms as found (default True). The windows of the search can carry the
-        linear parameters into the basin of a neighbouring ringing phase, ``k_sh``
-        10-20 % off, whose whole-record cost is a few chi-square units above the
-        basin around the prior's; with Coulomb friction at 30 dB that moved ``theta``
-        by several standard errors (docs/validation/real-drives.md).
+        terms as found, and refit the profile interval's ends from there too
+        (default True). The windows of the search can carry the linear parameters
+        into the basin of a neighbouring ringing phase, ``k_sh`` 10-20 % off, whose
+        whole-record cost is above the basin around the prior's (13.3 chi-square
+        units in a trial with Coulomb friction at 30 dB, where ``theta`` stopped
+        6.1 % low; docs/design/joint-search.md, item 8).
 
     Notes
     -----
