@@ -113,9 +113,9 @@ def _looks_past(monkeypatch) -> list[bool]:
 
     seen, end = [], ProfileLikelihood._end
 
-    def recorded(self, rise, first, look_past):
+    def recorded(self, rise, first, look_past, recheck=None):
         seen.append(look_past)
-        return end(self, rise, first, look_past)
+        return end(self, rise, first, look_past, recheck)
 
     monkeypatch.setattr(ProfileLikelihood, "_end", recorded)
     return seen
