@@ -313,7 +313,9 @@ class Residual:
 
         first = 0 if with_theta else 1
         names = pb.names[first:]
-        per_z = pb.exact_scale(z)[first:]  # dp/dz
+        scale = pb.exact_scale(z)  # dp/dz
+        # the residual is data - model: its rows move as -S (negating a factor is exact)
+        minus_per_z = -scale[first:]
         out = np.empty((self.n_res, len(names)))
         pos = 0
         for sp, s_, m, end in zip(self.spans, self.sels, self.sizes, self.ends, strict=True):
@@ -326,17 +328,16 @@ class Residual:
                         initial_sensitivity=s0, params=names)
             except ValueError:
                 return None
-            for c in (0, 1):  # the residual is data - model: its rows move as -S
+            for c in (0, 1):
                 rows = out[pos : pos + m - self.lag]
                 if self.ar is None:  # weigh's arithmetic in place (the spans are speeds)
-                    np.multiply(sens[s_, c, :], per_z, out=rows)
+                    np.multiply(sens[s_, c, :], minus_per_z, out=rows)
                     np.divide(rows, self.sig[sp.k, c], out=rows)
-                    np.negative(rows, out=rows)
                 else:
-                    rows[...] = self.weigh(sp, c, -(sens[s_, c, :] * per_z).T).T
+                    rows[...] = self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T
                 pos += m - self.lag
         with np.errstate(invalid="ignore"):  # no penalty (inf) on the terms' parameters
-            prior = np.nan_to_num(pb.exact_scale(z)[1:] / (pb.pen * pb.p_prior))
+            prior = np.nan_to_num(scale[1:] / (pb.pen * pb.p_prior))
         out[pos:] = 0.0
         out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
         return out

@@ -291,9 +291,9 @@ class Restarts(_Config):
         terms as found, and refit the profile interval's ends from there too
         (default True). The windows of the search can carry the linear parameters
         into the basin of a neighbouring ringing phase, ``k_sh`` 10-20 % off, whose
-        whole-record cost is above the basin around the prior's (13.3 chi-square
-        units in a trial with Coulomb friction at 30 dB, where ``theta`` stopped
-        6.1 % low; docs/design/joint-search.md, item 8).
+        whole-record cost is above the basin around the prior's (by 13.3 in
+        ``-2 log L`` in a trial with Coulomb friction at 30 dB, where ``theta``
+        stopped 6.1 % low; docs/design/joint-search.md, item 8).
 
     Notes
     -----
