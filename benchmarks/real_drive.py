@@ -26,7 +26,9 @@
    against the standard error of the quantisation (``std_``) and of white noise.
 3. ``--speed``: paper A's two 80 s records (its protocol at Err_p 0.3, one seed) fitted
    with ``friction="viscous"``, ``"coulomb"`` and the default ``"auto"`` (the last two
-   against the first, as ratios of medians), one worker thread, in one process.
+   against the first, as ratios of medians), one worker thread, in one process; in
+   wall time and in the process's CPU time (which other jobs on a busy machine do not
+   lengthen).
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
@@ -445,7 +447,8 @@ def offset_trial(task, seed):
 
 def speed(args) -> None:
     r1, r2, prior = protocol_records(0.3, np.random.SeedSequence(args.seed))
-    times: dict[str, list[float]] = {}
+    wall: dict[str, list[float]] = {}
+    cpu: dict[str, list[float]] = {}
     for _ in range(args.repeats):
         for name in ("viscous", "coulomb", "auto"):
             kw = {"friction": name}
@@ -453,14 +456,16 @@ def speed(args) -> None:
                 kw["actuator"] = None
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 bk.JointIdentifier(prior, workers=1, **kw).fit([r1, r2])
-                times.setdefault(name, []).append(time.perf_counter() - t0)
-    base = statistics.median(times["viscous"])
-    for name, ts in times.items():
-        med = statistics.median(ts)
+                wall.setdefault(name, []).append(time.perf_counter() - t0)
+                cpu.setdefault(name, []).append(time.process_time() - c0)
+    base, base_cpu = statistics.median(wall["viscous"]), statistics.median(cpu["viscous"])
+    for name, ts in wall.items():
+        med, med_cpu = statistics.median(ts), statistics.median(cpu[name])
         print(f"friction={name!r:<10} median {med:6.2f} s over {len(ts)} "
-              f"(x{med / base:.2f} the viscous fit)")
+              f"(x{med / base:.2f} the viscous fit); CPU {med_cpu:6.2f} s "
+              f"(x{med_cpu / base_cpu:.2f})")
 
 
 def main(argv=None) -> int:
