@@ -38,7 +38,9 @@ against the truth, each term test's reason, the profile's refits (``theta`` and 
 rise of the cost at each) and (analogue speeds) ``-2 log L`` of the
 true drive against the estimate's; on analogue records of a drive with a
 current loop it also refits them with the loop's lag held at its true value, a check
-of the profile interval (:func:`held_loop_check`). ``--snr DB`` sets the analogue
+of the profile interval (:func:`held_loop_check`). ``--profile-grid N`` adds the
+profile's rise at ``N`` held ``theta`` each side of the estimate, against the parabola
+of its standard error (:class:`GridProfile`). ``--snr DB`` sets the analogue
 speeds' noise (default 40 dB).
 
 A row too long for one run is measured in slices, each of one scenario (one
@@ -59,12 +61,14 @@ import subprocess
 import sys
 import time
 import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 import backlashkit as bk
 from backlashkit.identify.crb import LINEAR_PARAMS, cramer_rao_bound
+from backlashkit.identify.intervals import ProfileLikelihood, _HeldTheta
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA, protocol_records
 from backlashkit.parallel import ProgressBar, map_tasks, task_seeds
 from backlashkit.verify import reference_angles, reference_simulate
@@ -259,9 +263,12 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     if args.trial is not None:  # the trial's own seed, as in the whole study's
         recs = trial_records((linear, theta, clean, counts, args.snr),
                              task_seeds(seed, args.trial + 1)[-1])
-        fit = _fit(linear, recs)
+        grid = GridProfile(n=args.profile_grid) if args.profile_grid else None
+        fit = _fit(linear, recs, **({"interval": grid} if grid else {}))
         print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(_summary(fit), theta)}",
               flush=True)
+        if grid is not None and not isinstance(fit, str):
+            print(_grid_lines(grid, fit, theta), flush=True)
         if not isinstance(fit, str):
             print(_fitted_line(fit, linear, fc, tau), flush=True)
             for c in fit.choices_:
@@ -394,6 +401,45 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
             break
 
 
+#: ``--profile-grid``: the grid spans this many Fisher standard errors either side.
+GRID_SPAN = 3.5
+
+
+@dataclass(frozen=True)
+class GridProfile(ProfileLikelihood):
+    """The default profile interval, and besides it the profile's rise at ``n`` held
+    ``theta`` on each side, evenly up to :data:`GRID_SPAN` Fisher standard errors of
+    ``log theta`` (``--profile-grid N``): whether the profile is a parabola there or
+    rougher than its curvature. ``points`` gets ``(theta, rise)`` pairs."""
+
+    n: int = 0
+    points: list = field(default_factory=list, compare=False)
+
+    def _interval(self, fit):
+        found = super()._interval(fit)
+        s_z = math.sqrt(fit.cov_z[0, 0])
+        for sign in (-1.0, 1.0):
+            held, memo = _HeldTheta(fit, self.max_iter), {}
+            for d in np.arange(1, self.n + 1) * GRID_SPAN * s_z / self.n:
+                self.points.append((math.exp(fit.z[0] + sign * d), held.rise(sign, memo, d)))
+        self.points.sort()
+        return found
+
+
+def _grid_lines(grid: GridProfile, fit, theta) -> str:
+    """The grid's rises against the parabola of the Fisher standard error, and where
+    the truth lies in those errors."""
+    lines = [f"  the profile on a grid (z = (theta - estimate) / std_; a parabola rises z^2); "
+             f"the truth at z = {(theta - fit.theta_) / fit.std_:+.2f}:"]
+    worst = 0.0
+    for th, rise in grid.points:
+        z = (th - fit.theta_) / fit.std_
+        worst = max(worst, abs(rise - z * z))
+        lines.append(f"    theta {th:.6g} rad  z {z:+5.2f}  rise {rise:7.3f}  z^2 {z * z:7.3f}")
+    lines.append(f"  largest |rise - z^2| on the grid: {worst:.3g}")
+    return "\n".join(lines)
+
+
 def _profile_line(profile, theta) -> str:
     """The profile's refits, by ``theta``: where each held ``theta`` lies from the truth,
     and the rise of the cost (chi-square units) there above the estimate's."""
@@ -482,6 +528,9 @@ def main(argv=None) -> int:
                         f"'extended': {', '.join(EXTENDED)})")
     p.add_argument("--trial", type=int, default=None,
                    help="run only this trial (from 0) of each scenario, as in the study")
+    p.add_argument("--profile-grid", type=int, default=0, metavar="N",
+                   help="with --trial: the profile's rise at N held theta each side, up to "
+                        f"{GRID_SPAN:g} standard errors")
     p.add_argument("--speed", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--crb", action="store_true",
