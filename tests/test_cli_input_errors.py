@@ -239,6 +239,9 @@ def test_speeds_in_rpm_read_as_rad_per_s_are_refused(exp_csv, tmp_path, capsys):
                                    "--interval", "fisher"])
     assert "the fit moved J_M x0.1" in err and "rpm read as rad/s?" in err
     assert "pass --allow-far-from-prior" in err
+    # the record whose held speeds are off is named, and the flag that reads rpm
+    assert "far from the prior's in " in err and "rpm.csv (x9.5" in err
+    assert "pass --speed-unit rpm" in err
     assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
                  "--allow-far-from-prior"]) == 0
     out, _ = capsys.readouterr()
@@ -321,7 +324,9 @@ def test_the_library_warns_of_a_prior_mismatch(exp):
             warnings.simplefilter("error", PriorMismatchWarning)
             assert cls(prior).fit(exp).held_speed_gains_ == [pytest.approx(gain, rel=1e-9)]
     joint = JointIdentifier(prior, interval=FisherInterval())
-    with pytest.raises(InputError, match=r"^the fit moved J_M x0\.1.*allow_far_from_prior=True$"):
+    with pytest.raises(InputError, match=r"^the fit moved J_M x0\.1.* in rpm\.csv \(x9\.5.*"
+                                         r"speed_unit='rpm' to read_records.*"
+                                         r"allow_far_from_prior=True$"):
         joint.fit(bad)
     assert not hasattr(joint, "theta_")  # refused before it holds an answer
     with pytest.warns(PriorMismatchWarning, match=r"the fit moved J_M x0\.1"):

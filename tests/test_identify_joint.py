@@ -923,7 +923,8 @@ def test_search_configuration_defaults_and_repr():
 def test_repr_after_fit_is_one_line(trials):
     text = repr(trials[0])
     assert "\n" not in text and f"theta_ = {trials[0].theta_:.4g} rad" in text
-    assert text.endswith("[profile]") and "prior_rel_std=0.1" in text
+    assert f"std_ = {trials[0].std_:.3g} rad" in text and "prior_rel_std=0.1" in text
+    assert text.endswith(f"[profile], friction_ = {trials[0].friction_!r}")
 
 
 def test_help_is_short_and_has_examples():

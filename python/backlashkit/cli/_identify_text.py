@@ -76,7 +76,10 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
     for line in _record_table(out["per_record"]):
         print(line)
     if theta_ini is not None:
-        print(f"theta_ini = {theta_ini:.5g} rad ({math.degrees(theta_ini):.4g} deg)")
+        # the joint method only starts from it: without a word it reads as a second answer
+        start = ("; the area pre-estimate, one start of the search" if args.method == "joint"
+                 else "")
+        print(f"theta_ini = {theta_ini:.5g} rad ({math.degrees(theta_ini):.4g} deg{start})")
     if std is None:
         print(f"theta     = {est.theta_:.5g} rad ({math.degrees(est.theta_):.4g} deg), "
               f"searched in [{bounds[0]:.4g}, {bounds[1]:.4g}] rad; no uncertainty for this "
@@ -102,6 +105,10 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
         print(f"model: {choice.reason()}")
     for rec, (a, b), (sm, sl), what in zip(everything, est.fit_percent_, est.noise_std_,
                                             est.measured_, strict=True):
-        unit = "rad (of the encoder angles fitted)" if what == "angles" else "rad/s"
+        angles = what == "angles"
+        unit = "rad (of the encoder angles fitted)" if angles else "rad/s"
+        # speeds recognised as an encoder's differenced counts are fitted as its angles
+        counts = "; its speeds are differenced encoder counts" if (
+            angles and not rec.has_positions) else ""
         print(f"{rec.name[-30:]:<30} fit % (w_M, w_L) = ({a:.1f}, {b:.1f}); noise std = "
-              f"({sm:.3g}, {sl:.3g}) {unit}")
+              f"({sm:.3g}, {sl:.3g}) {unit}{counts}")

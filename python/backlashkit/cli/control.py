@@ -106,8 +106,8 @@ def run(args: argparse.Namespace) -> int:
         c = summary["controller"]
         print(f"inverse: {summary['inverse']}")
         print(
-            f"controller: theta_1 = {c['theta_1']}, theta_2 = {c['theta_2']}, "
-            f"theta_3 = {c['theta_3']:g}"
+            f"controller: theta_1 = {_vector(c['theta_1'])}, "
+            f"theta_2 = {_vector(c['theta_2'])}, theta_3 = {c['theta_3']:g}"
         )
         print(
             "theta_b final (mc_r, m, mc_l): "
@@ -122,3 +122,8 @@ def run(args: argparse.Namespace) -> int:
               + ("none, unstable without delay" if h_max == 0 else
                  "stable for every delay" if h_max is None else f"{h_max:.6g} s"))
     return 0
+
+
+def _vector(values) -> str:
+    """A gain vector to 6 significant digits (``-5.5``, not its rounding error)."""
+    return "[" + ", ".join(f"{x:.6g}" for x in values) + "]"

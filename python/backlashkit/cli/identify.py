@@ -295,6 +295,7 @@ FLAGS = {
     "allow_far_from_prior": "--allow-far-from-prior",
     "method": "--method", "torque_levels": "--torque-levels", "noise_model": _noise_model_flag,
     "force": "--force", "friction": "--friction", "actuator": "--current-loop",
+    "speed_unit": "--speed-unit", "counts_per_rev": "--counts-per-rev",
 }
 
 #: Warnings of the library that ``identify`` says as notes (printed after theta, and

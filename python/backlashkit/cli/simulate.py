@@ -124,7 +124,9 @@ def _add_input(p: argparse.ArgumentParser) -> None:
         "drive",
         metavar="DRIVE.toml",
         help="drive parameters: a [drive] table with J_M, J_L, k_sh, f_M, f_L, f_sh, theta "
-        "(SI; theta is the backlash HALF-width in rad)",
+        "(SI; theta is the backlash HALF-width in rad), optionally the Coulomb and breakaway "
+        "torques fc_M, fc_L, fs_M, fs_L (N m), and an [actuator] table with the current "
+        "loop's tau_i (s)",
     )
     src = p.add_argument_group("input (give exactly one)")
     src.add_argument(

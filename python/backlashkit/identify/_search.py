@@ -448,6 +448,8 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             st = other.refine(res, best.z[keep], max_iter)
             (small, st_small), st_big = (other, st), best
             std_small = linearised(seen, small, st_small, sig, final_h).std
+            if not st.done:  # stopped far from its optimum: its theta says nothing
+                std_small = np.r_[math.nan, std_small[1:]]
         else:
             other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
             res = other.residual(other.final_spans(final_h), final_h, sig)

@@ -188,11 +188,10 @@ class JointIdentifier:
     prior : TwoMassDrive
         Prior linear parameters (its ``theta`` is ignored).
     prior_rel_std : None, float or dict, optional
-        None (default): all six linear parameters estimated freely; a float: all six
-        with that relative prior std; a non-empty dict without ``theta``: only those it
-        gives a std > 0 (and ``fc_M``, ``fc_L``, ``tau_i`` about the prior's values).
+        None (default): the six linear parameters free; a float: their relative prior std;
+        a dict without ``theta``: those with a std > 0 (``fc_M``, ``fc_L``, ``tau_i`` too).
     noise : tuple of float, optional
-        Noise std ``(s_M, s_L)`` in rad/s of every record; default estimated.
+        Noise std ``(s_M, s_L)`` of every record, rad/s (rad: angles); default estimated.
     search : JointSearch, optional
         The search (:mod:`backlashkit.identify.search`); the default is the tested one.
     interval : ProfileLikelihood, FisherInterval or ParametricBootstrap, optional
@@ -208,19 +207,20 @@ class JointIdentifier:
     allow_far_from_prior : bool, optional
         Answer even where a parameter ends over 5 times off the prior (default False).
     workers, progress : int; bool or callable, optional
-        Threads for the simulations (default all cores); the fit's stages on a
-        ProgressBar (True) or reported as ``progress(done, total)`` (default none).
+        Threads for the simulations (default all cores); the stages on a ProgressBar
+        (True) or as ``progress(done, total)`` (default none).
 
     Attributes
     ----------
     theta_, std_, ci95_ : float, float, tuple of float
         Estimate of ``theta``, its standard error and 95 % interval (``interval_``), rad.
-    params_, drive_, estimated_ : dict, TwoMassDrive, tuple of str
-        The linear parameters, the identified drive, the names estimated (theta first).
+    params_, param_std_, drive_, estimated_ : dict, dict, TwoMassDrive, tuple of str
+        Linear parameters, standard errors of all estimates (SI), drive, names (theta first).
     noise_std_, fit_percent_ : numpy.ndarray
-        Noise std in rad/s and NRMSE fit in % per record and channel ``(w_M, w_L)``.
-    friction_, fc_M_, fc_L_, tau_i_ : str, float
-        ``"viscous"`` or ``"coulomb"``, Coulomb torques (N m), loop lag (s; 0: none).
+        Noise std (rad/s; rad: angles), speeds' NRMSE fit % per record and ``(w_M, w_L)``.
+    friction_, fc_M_, fc_L_, tau_i_, choices_ : str, float, list of TermChoice
+        ``"viscous"`` or ``"coulomb"``, Coulomb torques (N m), loop lag (s; 0: none);
+        why each ``"auto"`` term was kept (``choice.reason()``).
 
     Examples
     --------
@@ -280,8 +280,10 @@ class JointIdentifier:
         if not hasattr(self, "theta_"):
             return text
         lo, hi = self.ci95_
-        return (f"{text}: theta_ = {self.theta_:.4g} rad, std_ = {self.std_:.3g}, "
-                f"ci95_ = ({lo:.4g}, {hi:.4g}) [{self.interval_}]")
+        loop = f", tau_i_ = {self.tau_i_:.3g} s" if self.tau_i_ > 0 else ""
+        return (f"{text}: theta_ = {self.theta_:.4g} rad, std_ = {self.std_:.3g} rad, "
+                f"ci95_ = ({lo:.4g}, {hi:.4g}) rad [{self.interval_}], "
+                f"friction_ = {self.friction_!r}{loop}")
 
     def _check(self) -> None:
         check_prior(self.prior)
@@ -377,7 +379,7 @@ class JointIdentifier:
             {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS},
             self.prior, allow_far_from_prior=self.allow_far_from_prior, stacklevel=3,
             held_gains=[held_speed_gain(r, prior) for r in records],
-            missing=self._missing_terms())
+            missing=self._missing_terms(), names=[r.name for r in records])
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.

@@ -142,8 +142,9 @@ def read_records(
         angles = True
     if angles:
         if speed_unit != "rad/s":
-            raise InputError("speed_unit does not apply to angles (in rad, or in counts with "
-                             f"counts_per_rev), got speed_unit={speed_unit!r}")
+            raise InputError(Option("speed_unit", None), " does not apply to angles (in "
+                             "rad, or in counts with ", Option("counts_per_rev", None),
+                             "): leave it out, got ", Option("speed_unit", speed_unit))
         return [Record.from_positions(t, data["torque"], data["phi_motor"], data["phi_load"],
                                       counts_per_rev=counts_per_rev, name=rec_name)
                 for rec_name, t, data in _read(path, ANGLE_FIELDS, columns, sample_time,

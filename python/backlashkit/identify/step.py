@@ -63,6 +63,9 @@ SEPARATE_DROP = 0.1
 CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
                "columns (w_motor and w_load swapped?) and the prior")
 
+#: The remedy for speeds logged in rpm (a reader's option; the command line's flag).
+SPEED_IN_RPM = Option("speed_unit", "rpm", python="speed_unit='rpm' to read_records")
+
 #: Fewest samples before the step-down that :func:`held_speed_gain` fits (else NaN).
 HELD_MIN_SAMPLES = 10
 
@@ -405,7 +408,8 @@ def ratios_to_prior(params: Mapping[str, float], prior: TwoMassDrive) -> str:
 def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
                          allow_far_from_prior: bool = False, stacklevel: int = 2,
                          held_gains: Sequence[float] = (),
-                         missing: Sequence[str | Option] = ()) -> list[str]:
+                         missing: Sequence[str | Option] = (),
+                         names: Sequence[str] = ()) -> list[str]:
     """Refuse or warn about fitted linear parameters far from the prior.
 
     The message names the likely cause. Where the speeds held before the step-downs
@@ -429,6 +433,9 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     missing : sequence of str or Option, optional
         How to add the terms the model was fitted without (or with fixed values), as
         message parts.
+    names : sequence of str, optional
+        The records' names, in the order of ``held_gains``: the message names those
+        whose held speeds are far from the prior's.
 
     Returns
     -------
@@ -448,7 +455,7 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     """
     ratio = {n: x / getattr(prior, n) for n, x in params.items()}
     very_far = {n: params[n] for n in params if is_far(ratio[n], REFUSE_FROM_PRIOR)}
-    cause = _far_fit_cause(held_gains, missing)
+    cause = _far_fit_cause(held_gains, missing, names)
     if very_far and not allow_far_from_prior:
         raise InputError(
             f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: ", *cause,
@@ -461,11 +468,20 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     return far
 
 
-def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option]
-                   ) -> tuple[str | Option, ...]:
+def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option],
+                   names: Sequence[str] = ()) -> tuple[str | Option, ...]:
     """The likely cause of a fit far from the prior, as message parts."""
     known = [g for g in held_gains if math.isfinite(g)]
-    if not known or any(is_far(g) for g in known):
+    if not known:
+        return (CHECK_UNITS,)
+    far = [(name, g) for name, g in zip(names, held_gains, strict=False)
+           if math.isfinite(g) and is_far(g)]
+    if far:  # the records whose units are suspect, by name
+        said = ", ".join(f"{name} (x{g:.3g})" for name, g in far)
+        return (f"the speeds held before the step-down are far from the prior's in {said}: "
+                "check their units (rpm read as rad/s? then pass ", SPEED_IN_RPM,
+                ") and the time's, the columns (w_motor and w_load swapped?) and the prior")
+    if any(is_far(g) for g in known):
         return (CHECK_UNITS,)
     spread = max(max(g, 1.0 / g) for g in known)
     said = (f"the speeds held before the step-downs match the prior's to within x"

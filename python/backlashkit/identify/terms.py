@@ -303,7 +303,8 @@ class TermChoice:
     shift : float
         How far ``theta`` moves when the term is removed, in standard errors of
         ``theta`` without it (a term below the threshold is kept where this exceeds
-        :data:`KEEP_SHIFT`).
+        :data:`KEEP_SHIFT`); NaN where the fit without it stopped before converging
+        (its ``theta`` is then no answer to compare with).
     other_ci95 : tuple of float or None
         Where the test cannot tell the two models apart (the term estimated, lowering
         ``-2 log L``, but by no more than the threshold): the Fisher 95 % interval of
@@ -388,8 +389,10 @@ class TermChoice:
         both = ("; the data cannot tell, so the 95 % interval spans the other model's too"
                 if self.other_ci95 is not None else "")
         if self.screened:
+            # rounded down, so that a drop just under the limit does not print as it
+            drop = math.floor(self.rise * 1e3) / 1e3
             return (f"{name} dropped without fitting it: at the fit without it, a score "
-                    f"test predicts it would lower -2 log L by {self.rise:.2g}, less than "
+                    f"test predicts it would lower -2 log L by {drop:.3g}, less than "
                     f"{SCREEN_DROP} (too little to pin it down): the data do not call for it")
         if self.rise <= 0:
             # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
@@ -397,7 +400,10 @@ class TermChoice:
             return (f"{name} dropped: the fit with it ends no lower in -2 log L ({test}): "
                     "the data do not call for it")
         gain = f"it lowers -2 log L by {self.rise:.3g}"
-        moves = f"without it theta moves by {self.shift:.2g} of its standard errors"
+        moves = (f"without it theta moves by {self.shift:.2g} of its standard errors"
+                 if math.isfinite(self.shift) else
+                 "the fit without it stopped before converging, so how far theta moves "
+                 "without it is not known")
         if self.kept and self.rise <= self.threshold:
             return (f"{name} kept: {gain}, not above {self.threshold:.3g} ({test}), but "
                     f"{moves} (> {KEEP_SHIFT}){both}")
