@@ -66,6 +66,7 @@ from backlashkit.identify import (
     TwoStepIdentifier,
     commutation_instants,
 )
+from backlashkit.identify._search import STAGE_NAMES
 from backlashkit.identify.crb import cramer_rao_bound
 from backlashkit.identify.intervals import FisherInterval
 from backlashkit.identify.joint import JointIdentifier
@@ -81,12 +82,6 @@ def _median(fn, repeats: int) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
-
-
-#: The stages of a joint fit, as its ``progress`` callback reports them
-#: (``backlashkit.identify._search.STAGES``).
-STAGE_NAMES = ("starts (theta grid)", "first window", "continuation", "whole records",
-               "noise levels", "model terms (friction, loop)", "uncertainty and interval")
 
 
 #: Kernel calls over fewer of the records' samples than this are the search's windows

@@ -108,11 +108,14 @@ class ProgressBar:
         Draw nothing (the command line's ``--quiet``).
     stream : file object, optional
         Where to draw (default ``sys.stderr``, looked up at construction).
+    labels : sequence of str, optional
+        What each task is (``labels[k]`` for the ``k``-th): shown after the bar while it
+        runs, for a few long steps of different kinds (a fit's stages).
     """
 
     def __init__(self, desc: str, *, unit: str = "fit", quiet: bool = False,
-                 stream: IO[str] | None = None) -> None:
-        self.desc, self.unit = desc, unit
+                 stream: IO[str] | None = None, labels: Sequence[str] = ()) -> None:
+        self.desc, self.unit, self.labels = desc, unit, tuple(labels)
         self.stream = sys.stderr if stream is None else stream
         isatty = getattr(self.stream, "isatty", None)
         self.shown = not quiet and callable(isatty) and bool(isatty())
@@ -142,6 +145,9 @@ class ProgressBar:
             if total != self._bar.total:  # the work grew (e.g. a second search)
                 self._bar.total = total
             self._bar.update(done - self._bar.n)
+        if self.labels:  # the task now running; none once all are done
+            self._bar.set_postfix_str(self.labels[done] if done < min(total, len(
+                self.labels)) else "")
 
     def _width(self) -> dict[str, Any]:
         """Follow the terminal's width, or take :data:`FALLBACK_COLUMNS` where the
@@ -436,7 +442,8 @@ def dask_client(
 
 @contextmanager
 def reporter(progress: bool | Callable[[int, int], None], desc: str, *,
-             unit: str = "fit") -> Iterator[Callable[[int, int], None]]:
+             unit: str = "fit", labels: Sequence[str] = ()
+             ) -> Iterator[Callable[[int, int], None]]:
     """The ``progress(done, total)`` callable that a ``progress=`` option asks for.
 
     Parameters
@@ -446,6 +453,8 @@ def reporter(progress: bool | Callable[[int, int], None], desc: str, *,
         terminal; a callable: the caller's own, left open; False: one that does nothing.
     desc, unit : str
         The bar's label and the name of one step, when it is made here.
+    labels : sequence of str, optional
+        What each step is (:class:`ProgressBar`'s ``labels``), when it is made here.
 
     Yields
     ------
@@ -455,7 +464,7 @@ def reporter(progress: bool | Callable[[int, int], None], desc: str, *,
     if callable(progress):
         yield progress
     elif progress:
-        with ProgressBar(desc, unit=unit) as bar:
+        with ProgressBar(desc, unit=unit, labels=labels) as bar:
             yield bar
     else:
         yield lambda done, total: None

@@ -542,10 +542,11 @@ class Outcome:
     fixed: dict[str, FixedTest] = field(default_factory=dict)  # fixed terms' tests
 
 
-#: Stages of :func:`run` reported to its ``stage`` callback: the starts, the first
-#: window, the continuation, the whole records, the noise, the model's terms and the
-#: uncertainty.
-STAGES = 7
+#: Stages of :func:`run` reported to its ``stage`` callback, by name (a progress bar
+#: shows the one running).
+STAGE_NAMES = ("starts (theta grid)", "first window", "continuation", "whole records",
+               "noise levels", "model terms (friction, loop)", "uncertainty and interval")
+STAGES = len(STAGE_NAMES)
 #: ``locate``'s default: make the two-step start (None: there is none).
 _UNSET = object()
 

@@ -337,7 +337,9 @@ class JointIdentifier:
         with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="blas"), \
                 np.errstate(over="ignore", invalid="ignore"):
             warnings.simplefilter("ignore", SensitivityWarning)
-            with reporter(self.progress, "identify", unit="stage") as bar:
+            # a second search (Restarts.misfit) runs the stages again
+            labels = (*_search.STAGE_NAMES, *(f"{n}, again" for n in _search.STAGE_NAMES))
+            with reporter(self.progress, "identify", unit="stage", labels=labels) as bar:
                 fitted, restarted, won = self._fit_and_restart(records, bar)
         far = self._far_from_prior(fitted, records, prior)
         _warn_prior_conflicts(fitted["prior_pull_"],
