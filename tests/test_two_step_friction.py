@@ -130,6 +130,17 @@ def test_auto_keeps_coulomb_on_coulomb_records(coulomb):
     assert fit.friction_lr_ > bk.identify.two_step.FRICTION_LR
 
 
+def test_short_repr_before_and_after_the_fit(coulomb):
+    """As JointIdentifier's: the options given, then what the fit chose (the QA pass
+    met ``<TwoStepIdentifier object at 0x...>``)."""
+    est = RegressionIdentifier(PRIOR, friction="auto", workers=1)
+    assert repr(est) == f"RegressionIdentifier({PRIOR!r}, friction='auto', workers=1)"
+    est.fit(noisy(coulomb[1], SNR_DB, 3, "step2"))
+    assert repr(est).endswith(f": theta_ = {est.theta_:.4g} rad, friction_ = 'coulomb'")
+    assert repr(TwoStepIdentifier(PRIOR, n_theta=0.2)) == (
+        f"TwoStepIdentifier({PRIOR!r}, n_theta=0.2)")
+
+
 def test_auto_keeps_viscous_on_viscous_records(viscous):
     """No Coulomb friction and the true prior: "auto" answers the viscous fit itself."""
     rec = noisy(viscous[1], SNR_DB, 1, "step2")

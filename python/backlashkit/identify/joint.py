@@ -128,6 +128,7 @@ from ._model import (
     rel_std,
 )
 from ._problem import Problem, build_problem
+from .hyper import init_repr
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -271,12 +272,7 @@ class JointIdentifier:
         self.progress = progress
 
     def __repr__(self) -> str:
-        sig = inspect.signature(type(self).__init__).parameters
-        args = [repr(self.prior)] + [
-            f"{name}={getattr(self, name)!r}" for name in _INIT_NAMES[1:]
-            if not _same(getattr(self, name), sig[name].default)
-        ]
-        text = f"{type(self).__name__}({', '.join(args)})"
+        text = init_repr(self)
         if not hasattr(self, "theta_"):
             return text
         lo, hi = self.ci95_
@@ -515,14 +511,6 @@ class _BootstrapRefit:
 #: Names of :class:`JointIdentifier`'s hyperparameters (its ``__init__`` arguments).
 _INIT_NAMES = tuple(n for n in inspect.signature(JointIdentifier.__init__).parameters
                     if n != "self")
-
-
-def _same(value, default) -> bool:
-    """Whether a hyperparameter is its default (anything incomparable differs)."""
-    try:
-        return bool(value is default or value == default)
-    except (TypeError, ValueError):
-        return False
 
 
 def _warn_quantised(records) -> None:

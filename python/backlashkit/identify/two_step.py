@@ -122,6 +122,7 @@ from .decay import (
     search_edges,
     viscous_fit,
 )
+from .hyper import init_repr
 from .record import as_records, check_prior
 from .step import check_held_speeds, check_step_downs, find_step_down
 
@@ -314,6 +315,12 @@ class TwoStepIdentifier:
         self.friction = friction
         self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
+
+    def __repr__(self) -> str:
+        text = init_repr(self)
+        if not hasattr(self, "theta_"):
+            return text
+        return f"{text}: theta_ = {self.theta_:.4g} rad, friction_ = {self.friction_!r}"
 
     def fit(self, records, final_records=None) -> TwoStepIdentifier:
         """Identify the backlash.
@@ -514,6 +521,12 @@ class RegressionIdentifier:
         self.friction = friction
         self.allow_far_from_prior = allow_far_from_prior
         self.workers = workers
+
+    def __repr__(self) -> str:
+        text = init_repr(self)
+        if not hasattr(self, "theta_"):
+            return text
+        return f"{text}: theta_ = {self.theta_:.4g} rad, friction_ = {self.friction_!r}"
 
     def fit(self, records) -> RegressionIdentifier:
         """Identify the backlash.
