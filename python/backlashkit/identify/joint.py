@@ -221,7 +221,7 @@ class JointIdentifier:
         Noise std (rad/s; rad: angles), speeds' NRMSE fit % per record and ``(w_M, w_L)``.
     friction_, fc_M_, fc_L_, tau_i_, choices_ : str, float, list of TermChoice
         ``"viscous"`` or ``"coulomb"``, Coulomb torques (N m), loop lag (s; 0: none);
-        why each ``"auto"`` term was kept (``choice.reason()``).
+        why each ``"auto"`` term was kept or dropped (``choice.reason()``).
 
     Examples
     --------
