@@ -33,7 +33,8 @@
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
 [--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial ``K``
-alone (the study prints its trial of largest error) and prints its fitted parameters
+alone (the study prints its trial of largest error; ``--trial A:B`` each of trials ``A``
+to ``B - 1`` in turn) and prints its fitted parameters
 against the truth, each term test's reason, the profile's refits (``theta`` and the
 rise of the cost at each) and (analogue speeds) ``-2 log L`` of the
 true drive against the estimate's; on analogue records of a drive with a
@@ -260,25 +261,10 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     clean = clean_records(linear, theta, fc, tau, counts)
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau, args.snr)
-    if args.trial is not None:  # the trial's own seed, as in the whole study's
-        recs = trial_records((linear, theta, clean, counts, args.snr),
-                             task_seeds(seed, args.trial + 1)[-1])
-        grid = GridProfile(n=args.profile_grid) if args.profile_grid else None
-        fit = _fit(linear, recs, **({"interval": grid} if grid else {}))
-        print(f"{dname}, {ename}, trial {args.trial}: {_trial_line(_summary(fit), theta)}",
-              flush=True)
-        if grid is not None and not isinstance(fit, str):
-            print(_grid_lines(grid, fit, theta), flush=True)
-        if not isinstance(fit, str):
-            print(_fitted_line(fit, linear, fc, tau), flush=True)
-            for c in fit.choices_:
-                print(f"  {c.reason()}", flush=True)
-            if fit.profile_ is not None:
-                print(_profile_line(fit.profile_, theta), flush=True)
-            if not counts and fit.noise_ar_ is None:
-                print(truth_line(linear, theta, fc, tau, recs, fit), flush=True)
-        if tau and not counts:
-            print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
+    if args.trial is not None:  # each trial's own seed, as in the whole study's (spawned
+        seeds = task_seeds(seed, args.trial[1])  # once: a SeedSequence spawns anew each call)
+        for k in range(*args.trial):
+            _trial_alone(args, k, (dname, ename), linear, theta, effect, clean, seeds[k])
         return
     first, stop = args.slice or (0, args.trials)
     task = (linear, theta, clean, counts, args.snr)
@@ -292,6 +278,28 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
         save_slice(args, {"drive": dname, "effect": ename, "first": first, "crb": crb,
                           "seconds": seconds, "results": res})
     _print_row(dname, ename, theta, res, crb, seconds, first)
+
+
+def _trial_alone(args, k, names, linear, theta, effect, clean, seed) -> None:
+    """Rerun trial ``k`` of a scenario from its ``seed``, as in the whole study, and
+    print its fit, its term tests, its profile and the truth's likelihood."""
+    fc, tau, counts = effect
+    recs = trial_records((linear, theta, clean, counts, args.snr), seed)
+    grid = GridProfile(n=args.profile_grid) if args.profile_grid else None
+    fit = _fit(linear, recs, **({"interval": grid} if grid else {}))
+    print(f"{names[0]}, {names[1]}, trial {k}: {_trial_line(_summary(fit), theta)}", flush=True)
+    if grid is not None and not isinstance(fit, str):
+        print(_grid_lines(grid, fit, theta), flush=True)
+    if not isinstance(fit, str):
+        print(_fitted_line(fit, linear, fc, tau), flush=True)
+        for c in fit.choices_:
+            print(f"  {c.reason()}", flush=True)
+        if fit.profile_ is not None:
+            print(_profile_line(fit.profile_, theta), flush=True)
+        if not counts and fit.noise_ar_ is None:
+            print(truth_line(linear, theta, fc, tau, recs, fit), flush=True)
+    if tau and not counts:
+        print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
 
 
 def seeded_trial(pair):
@@ -526,8 +534,9 @@ def main(argv=None) -> int:
     p.add_argument("--effects", default=",".join(EFFECTS),
                    help=f"comma-separated scenarios (default: {', '.join(EFFECTS)}; "
                         f"'extended': {', '.join(EXTENDED)})")
-    p.add_argument("--trial", type=int, default=None,
-                   help="run only this trial (from 0) of each scenario, as in the study")
+    p.add_argument("--trial", type=_trials, default=None, metavar="K or A:B",
+                   help="run only trial K (from 0), or trials A to B-1, of each scenario, "
+                        "each alone as in the study")
     p.add_argument("--profile-grid", type=int, default=0, metavar="N",
                    help="with --trial: the profile's rise at N held theta each side, up to "
                         f"{GRID_SPAN:g} standard errors")
@@ -554,6 +563,19 @@ def main(argv=None) -> int:
     (merge if args.merge else speed if args.speed else bounds if args.crb
      else offsets if args.offsets else coverage)(args)
     return 0
+
+
+def _trials(text: str) -> tuple[int, int]:
+    """``K`` as trials ``(K, K + 1)``, or ``A:B`` as :func:`_slice`."""
+    if ":" in text:
+        return _slice(text)
+    try:
+        k = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected K or A:B (integers), got {text!r}") from None
+    if k < 0:
+        raise argparse.ArgumentTypeError(f"expected a trial >= 0, got {k}")
+    return k, k + 1
 
 
 def _slice(text: str) -> tuple[int, int]:
