@@ -356,9 +356,14 @@ def merge(args) -> None:
                              f"{sorted({str(d[key]) for d in docs})}")
     starts = [d["first"] for d in docs]
     ends = [d["first"] + len(d["results"]) for d in docs]
-    if starts[0] != 0 or ends[-1] != docs[0]["trials"] or starts[1:] != ends[:-1]:
+    # --partial: the first trials of a row not finished (said as such; a band for fewer)
+    whole = ends[-1] == docs[0]["trials"] or args.partial
+    if starts[0] != 0 or not whole or starts[1:] != ends[:-1]:
         raise SystemExit("real_drive.py: the slices do not tile the trials: "
-                         f"{list(zip(starts, ends, strict=True))} of {docs[0]['trials']}")
+                         f"{list(zip(starts, ends, strict=True))} of {docs[0]['trials']} "
+                         "(--partial takes the first trials alone)")
+    if ends[-1] != docs[0]["trials"]:
+        print(f"trials 0 to {ends[-1] - 1} of {docs[0]['trials']} only (--partial)")
     theta = DRIVES[docs[0]["drive"]][1]
     res = [r for d in docs for r in d["results"]]
     print(f"{docs[0]['drive']}, {docs[0]['effect']}: {len(docs)} slices, code "
@@ -403,10 +408,27 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
             print(f"  mean error {statistics.fmean(r['theta'] / theta - 1 for r in ok):+.2%}, "
                   f"median |theta - truth| / std_ {statistics.median(z):.3g} (a normal's: "
                   f"{NORMAL_MEDIAN_ABS})", flush=True)
+            _print_by_loop(ok, theta)
     for r in res:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)
             break
+
+
+def _print_by_loop(ok, theta) -> None:
+    """Coverage and mean error of the fits that kept the loop and of those that
+    dropped it, where the test chose either way (a wrong choice biases theta)."""
+    split = {kept: [r for r in ok if r["kept"].get("actuator", False) == kept]
+             for kept in (True, False)}
+    if not all(split.values()):
+        return
+    parts = []
+    for kept, rs in split.items():
+        cover = sum(r["ci95"][0] <= theta <= r["ci95"][1] for r in rs) / len(rs)
+        bias = statistics.fmean(r["theta"] / theta - 1 for r in rs)
+        parts.append(f"{'kept' if kept else 'dropped'} the loop: {len(rs)}, covers "
+                     f"{cover:.1%}, mean error {bias:+.2%}")
+    print(f"  fits that {'; '.join(parts)}", flush=True)
 
 
 #: ``--profile-grid``: the grid spans this many Fisher standard errors either side.
@@ -552,6 +574,8 @@ def main(argv=None) -> int:
                    help="write the trials' results to FILE (JSON), for --merge")
     p.add_argument("--merge", nargs="+", default=None, metavar="FILE",
                    help="print the row of one scenario from its saved slices")
+    p.add_argument("--partial", action="store_true",
+                   help="with --merge: slices that tile only the first trials of the row")
     args = p.parse_args(argv)
     args.drives = args.drives.split(",")
     args.effects = [e for name in args.effects.split(",")
