@@ -379,7 +379,7 @@ def _write(path, text):
         ("missing", r"no column 'w_load'"),
         ("flat", r"w_motor is constant"),  # the record checks come before the step-down's
         ("garbage", r"line 3, column 'torque': 'abc' is not a number"),
-        ("nofile", r"file not found"),
+        ("nofile", r"file not found: .*absent\.csv \(one of the records\): check the path"),
     ],
 )
 def test_cli_bad_inputs(tmp_path, capsys, kind, pattern):
@@ -402,6 +402,16 @@ def test_cli_bad_inputs(tmp_path, capsys, kind, pattern):
     assert len(lines) == 1 and lines[0].startswith("backlashkit: error: ")
     assert "Traceback" not in err
     assert re.search(pattern, lines[0]), lines[0]
+
+
+def test_cli_names_the_argument_of_a_missing_file(tmp_path, capsys, experiment_csv):
+    """The missing file's message says which argument gave it, option or record."""
+    absent = str(tmp_path / "absent.toml")
+    for flag in (["--drive", absent], [f"--drive={absent}"]):
+        code, out, err = cli(["identify", str(experiment_csv), *flag], capsys)
+        assert code == 2 and out == ""
+        assert err.strip() == (f"backlashkit: error: file not found: {absent} (given to "
+                               "--drive): check the path")
 
 
 @pytest.mark.parametrize(

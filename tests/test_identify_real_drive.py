@@ -263,6 +263,24 @@ def test_cli_reads_a_known_loop_from_the_drive_file(coulomb, tmp_path, capsys):
     assert [c.split()[0] for c in doc["model_choices"]] == ["Coulomb"]
 
 
+@pytest.mark.parametrize("estimated, friction, tau_i, words", [
+    (["theta", "J_M"], "viscous", 0.0,
+     "viscous friction, no current loop (torque applied as recorded)"),
+    (["theta", "J_M", "fc_M", "fc_L", "tau_i"], "coulomb", 7e-4,
+     "viscous friction and Coulomb torques (fitted), a current loop (its lag fitted)"),
+    (["theta", "J_M"], "coulomb", 5e-4, "viscous friction and Coulomb torques (held at "
+     "the prior's), a current loop (its lag held at 0.0005 s)"),
+])
+def test_joint_text_says_the_model_in_one_line(estimated, friction, tau_i, words):
+    """The joint text output's ``model =`` line: friction and loop, fitted or held."""
+    from types import SimpleNamespace
+
+    from backlashkit.cli._identify_text import _model_line
+
+    est = SimpleNamespace(estimated_=estimated, friction_=friction, tau_i_=tau_i)
+    assert _model_line(est) == f"model     = two-mass drive with backlash, {words}"
+
+
 def test_cli_current_loop_flag_refuses_nonsense(coulomb, tmp_path, capsys):
     (path,), prior = _files(coulomb[1:], tmp_path)
     code = cli_main(["identify", path, "--drive", prior, "--current-loop", "fast"])

@@ -44,6 +44,23 @@ def _record_table(per_record: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _model_line(est) -> str:
+    """The joint fit's model in one line: its friction and current loop, each fitted
+    or held (the ``model:`` lines after the parameters say why)."""
+    fitted = set(est.estimated_)
+    friction = "viscous friction"
+    if est.friction_ == "coulomb":
+        how = "fitted" if fitted & {"fc_M", "fc_L"} else "held at the prior's"
+        friction += f" and Coulomb torques ({how})"
+    if "tau_i" in fitted:
+        loop = "a current loop (its lag fitted)"
+    elif est.tau_i_ > 0:
+        loop = f"a current loop (its lag held at {est.tau_i_:.3g} s)"
+    else:
+        loop = "no current loop (torque applied as recorded)"
+    return f"model     = two-mass drive with backlash, {friction}, {loop}"
+
+
 def _friction_line(extra: dict[str, Any]) -> str:
     """Paper A's methods' friction model: viscous, or its fitted Coulomb torques."""
     if extra["friction"] != "coulomb":
@@ -98,6 +115,7 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
           f"std {std:.3g} rad, 95% interval [{ci95[0]:.5g}, {ci95[1]:.5g}] rad{how}")
     for note in notes:
         print(f"note: {note}")
+    print(_model_line(est))
     for name in est.estimated_[1:]:
         print(f"{name:<9} = {est.params_[name]:.5g} {UNITS[name]} (std "
               f"{est.param_std_[name]:.3g}; {_to_prior(est, name)})")

@@ -158,6 +158,23 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"backlashkit: note: {' '.join(str(message).split())}", file=sys.stderr)
 
 
+def given_as(args: argparse.Namespace, argv: Sequence[str], path) -> str | None:
+    """Which argument of the command line gave ``path``: ``"given to --drive"`` for
+    an option, ``"one of the records"`` for a positional argument's (the parser's
+    name of it), or None where no argument holds it (a file named inside another)."""
+    given = {token.split("=", 1)[0] for token in argv if token.startswith("--")}
+    for dest, value in vars(args).items():
+        values = value if isinstance(value, (list, tuple)) else [value]
+        if not any(isinstance(v, (str, os.PathLike)) and os.fspath(v) == os.fspath(path)
+                   for v in values):
+            continue
+        flag = "--" + dest.replace("_", "-")
+        if flag in given:
+            return f"given to {flag}"
+        return f"one of the {dest}" if isinstance(value, (list, tuple)) else f"the {dest}"
+    return None
+
+
 def fail(message: str) -> int:
     """Print a one-line error on stderr and return exit status 2."""
     print(f"backlashkit: error: {message}", file=sys.stderr)
@@ -191,7 +208,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         _silence_stdout()
         return 1
     except FileNotFoundError as exc:
-        return fail(f"file not found: {exc.filename}" if exc.filename else str(exc))
+        if not exc.filename:
+            return fail(str(exc))
+        given = given_as(args, sys.argv[1:] if argv is None else argv, exc.filename)
+        return fail(f"file not found: {exc.filename}{f' ({given})' if given else ''}: "
+                    "check the path")
     except IsADirectoryError as exc:
         return fail(f"expected a file, got a directory: {exc.filename}")
     except NotADirectoryError as exc:
