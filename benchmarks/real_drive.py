@@ -42,7 +42,10 @@ current loop it also refits them with the loop's lag held at its true value, a c
 of the profile interval (:func:`held_loop_check`). ``--profile-grid N`` adds the
 profile's rise at ``N`` held ``theta`` each side of the estimate, against the parabola
 of its standard error (:class:`GridProfile`). ``--snr DB`` sets the analogue
-speeds' noise (default 40 dB).
+speeds' noise (default 40 dB). ``--prior-rel-std S`` gives each fit a prior of the
+linear parameters with relative std ``S`` instead of the truth without one: each
+trial's prior values drawn about the truth with that std (:func:`trial_prior`), as a
+prior that says what it knows.
 
 A row too long for one run is measured in slices, each of one scenario (one
 ``--drives`` and one ``--effects``): ``--slice A:B --save FILE`` runs trials ``A`` to
@@ -99,6 +102,14 @@ ERR_FLOOR, CRB_FACTOR = 0.05, 3.0
 #: The median of |z| for a standard normal z (its 75 % point): what the median of
 #: ``|theta - truth| / std_`` is where the standard errors are right.
 NORMAL_MEDIAN_ABS = 0.674
+#: Last word of the spawn key of a trial's prior draw (``--prior-rel-std``): past the
+#: children its records spawn, so they are the same with a prior or without.
+PRIOR_STREAM = 1 << 20
+#: A drawn prior value stays within this many of its relative std of the truth (a
+#: positive value at every std the option takes, up to 0.3).
+PRIOR_CLIP = 3.0
+#: Largest ``--prior-rel-std``: PRIOR_CLIP of it stays below 1.
+MAX_PRIOR_REL_STD = 0.3
 #: Entropy word of the extended scenarios' seeds.
 EXTENDED_STREAM = 1
 #: The drives of the study: paper A's and the second one, with their backlash (rad).
@@ -136,8 +147,24 @@ def clean_records(linear, theta, fc, tau_i, counts=0):
 
 
 def one_trial(task, seed):
-    """One trial of a scenario: the fit's theta, interval and choices."""
-    return _summary(_fit(task[0], trial_records(task, seed)))
+    """One trial of a scenario: the fit's theta, interval and choices (with
+    ``--prior-rel-std``, about its drawn prior)."""
+    prior, kw = trial_prior(task[0], task[5], seed)
+    return _summary(_fit(prior, trial_records(task, seed), **kw))
+
+
+def trial_prior(linear, rel, seed) -> tuple[dict, dict]:
+    """The prior's linear parameters of one trial and the fit's options for it: the
+    truth with no prior std (``rel`` 0), else each value drawn about the truth with
+    relative std ``rel`` (clipped at :data:`PRIOR_CLIP` of them), from a stream of the
+    trial's seed that its records do not use, and given as ``prior_rel_std``."""
+    if not rel:
+        return linear, {}
+    rng = np.random.default_rng(np.random.SeedSequence(seed.entropy,
+                                                       spawn_key=(*seed.spawn_key, PRIOR_STREAM)))
+    eps = np.clip(rng.standard_normal(len(linear)), -PRIOR_CLIP, PRIOR_CLIP)
+    drawn = {n: x * (1.0 + rel * e) for (n, x), e in zip(linear.items(), eps, strict=True)}
+    return drawn, {"prior_rel_std": rel}
 
 
 def _fit(linear, recs, **kw):
@@ -195,13 +222,15 @@ def truth_line(linear, theta, fc, tau_i, recs, fit) -> str:
             f"level; {'below: the search stopped short' if rise < 0 else 'above it'})")
 
 
-def held_loop_check(linear, theta, recs, fit, tau_i) -> str:
+def held_loop_check(linear, theta, recs, fit, tau_i, prior=None, **kw) -> str:
     """The records refitted with Coulomb friction and the loop's lag held at its true
     value. The profile of ``theta`` at that fit's ``theta`` lies at most its rise of
     ``-2 log L`` above the estimate (it minimises over the lag too), so where the rise
     is below 3.84 and that ``theta`` is outside the interval, the profile's refits
-    missed a lower valley."""
-    held = _fit(linear, recs, friction="coulomb", actuator=bk.CurrentLoop(tau_i=tau_i))
+    missed a lower valley. ``prior`` and ``kw``: the fit's prior (default the truth's
+    linear parameters) and its prior options."""
+    held = _fit(prior or linear, recs, friction="coulomb", actuator=bk.CurrentLoop(tau_i=tau_i),
+                **kw)
     if isinstance(held, str) or isinstance(fit, str) or fit.noise_ar_ is not None:
         return "  (no check: a refusal or coloured noise)"
     rise = concentrated_m2ll(held) - concentrated_m2ll(fit)
@@ -215,7 +244,7 @@ def held_loop_check(linear, theta, recs, fit, tau_i) -> str:
 def trial_records(task, seed) -> list:
     """The records of one trial of a scenario: analogue speeds get their noise;
     encoders start at a uniformly random angle within a count."""
-    _, _, clean, counts, snr = task
+    _, _, clean, counts, snr = task[:5]
     recs = []
     for (t, u, y_m, y_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
         s_m, s_l = ss.spawn(2)
@@ -267,7 +296,7 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
             _trial_alone(args, k, (dname, ename), linear, theta, effect, clean, seeds[k])
         return
     first, stop = args.slice or (0, args.trials)
-    task = (linear, theta, clean, counts, args.snr)
+    task = (linear, theta, clean, counts, args.snr, args.prior_rel_std)
     bar = ProgressBar(f"{dname}, {ename}", quiet=False)
     # trial i's seed is child i of the scenario's, whatever the slice
     res = map_tasks(seeded_trial, [(task, s) for s in task_seeds(seed, stop)[first:]],
@@ -285,8 +314,9 @@ def _trial_alone(args, k, names, linear, theta, effect, clean, seed) -> None:
     print its fit, its term tests, its profile and the truth's likelihood."""
     fc, tau, counts = effect
     recs = trial_records((linear, theta, clean, counts, args.snr), seed)
+    prior, kw = trial_prior(linear, args.prior_rel_std, seed)
     grid = GridProfile(n=args.profile_grid) if args.profile_grid else None
-    fit = _fit(linear, recs, **({"interval": grid} if grid else {}))
+    fit = _fit(prior, recs, **kw, **({"interval": grid} if grid else {}))
     print(f"{names[0]}, {names[1]}, trial {k}: {_trial_line(_summary(fit), theta)}", flush=True)
     if grid is not None and not isinstance(fit, str):
         print(_grid_lines(grid, fit, theta), flush=True)
@@ -299,7 +329,7 @@ def _trial_alone(args, k, names, linear, theta, effect, clean, seed) -> None:
         if not counts and fit.noise_ar_ is None:
             print(truth_line(linear, theta, fc, tau, recs, fit), flush=True)
     if tau and not counts:
-        print(held_loop_check(linear, theta, recs, fit, tau), flush=True)
+        print(held_loop_check(linear, theta, recs, fit, tau, prior, **kw), flush=True)
 
 
 def seeded_trial(pair):
@@ -308,7 +338,7 @@ def seeded_trial(pair):
 
 
 #: What must agree between the slices of one row (``--merge``).
-SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code")
+SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code", "prior_rel_std")
 
 
 #: What a slice ran, as paths of the repository: the package, the compiled core and
@@ -338,7 +368,7 @@ def save_slice(args, row: dict) -> None:
     if path.exists():
         raise SystemExit(f"real_drive.py: {path} exists: choose another --save file")
     doc = {"snr": args.snr, "seed": args.seed, "trials": args.trials,
-           "code": code_version(), **row}
+           "prior_rel_std": args.prior_rel_std, "code": code_version(), **row}
     # numpy scalars (a choice's kept flag) as Python values
     path.write_text(json.dumps(doc, indent=1, default=lambda x: x.item()) + "\n")
     print(f"wrote {path} (trials {row['first']} to {row['first'] + len(row['results']) - 1})",
@@ -351,9 +381,10 @@ def merge(args) -> None:
     docs = sorted((json.loads(Path(f).read_text()) for f in args.merge),
                   key=lambda d: d["first"])
     for key in SLICE_KEYS:
-        if len({str(d[key]) for d in docs}) > 1:
+        # slices saved before --prior-rel-std had no prior std: 0
+        if len({str(d.get(key, 0.0)) for d in docs}) > 1:
             raise SystemExit(f"real_drive.py: the slices differ in {key}: "
-                             f"{sorted({str(d[key]) for d in docs})}")
+                             f"{sorted({str(d.get(key, 0.0)) for d in docs})}")
     starts = [d["first"] for d in docs]
     ends = [d["first"] + len(d["results"]) for d in docs]
     # --partial: the first trials of a row not finished (said as such; a band for fewer)
@@ -366,8 +397,10 @@ def merge(args) -> None:
         print(f"trials 0 to {ends[-1] - 1} of {docs[0]['trials']} only (--partial)")
     theta = DRIVES[docs[0]["drive"]][1]
     res = [r for d in docs for r in d["results"]]
+    rel = docs[0].get("prior_rel_std", 0.0)
     print(f"{docs[0]['drive']}, {docs[0]['effect']}: {len(docs)} slices, code "
-          f"{docs[0]['code']}, SNR {docs[0]['snr']:g} dB, seed {docs[0]['seed']}")
+          f"{docs[0]['code']}, SNR {docs[0]['snr']:g} dB, seed {docs[0]['seed']}"
+          + (f", priors drawn with relative std {rel:g}" if rel else ""))
     _print_header()
     _print_row(docs[0]["drive"], docs[0]["effect"], theta, res, docs[0]["crb"],
                sum(d["seconds"] for d in docs))
@@ -562,6 +595,10 @@ def main(argv=None) -> int:
     p.add_argument("--profile-grid", type=int, default=0, metavar="N",
                    help="with --trial: the profile's rise at N held theta each side, up to "
                         f"{GRID_SPAN:g} standard errors")
+    p.add_argument("--prior-rel-std", type=float, default=0.0, metavar="S",
+                   help="give each fit a prior of the linear parameters with relative std "
+                        "S, its values drawn about the truth with that std (default 0: the "
+                        "truth as the prior, no prior std)")
     p.add_argument("--speed", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--crb", action="store_true",
@@ -582,6 +619,9 @@ def main(argv=None) -> int:
                     for e in (EXTENDED if name == "extended" else [name])]
     if args.save and len(args.drives) * len(args.effects) != 1:
         p.error("--save takes one scenario: one --drives and one --effects")
+    if not 0.0 <= args.prior_rel_std <= MAX_PRIOR_REL_STD:
+        p.error(f"--prior-rel-std must be in [0, {MAX_PRIOR_REL_STD:g}], got "
+                f"{args.prior_rel_std:g}")
     if args.slice and args.slice[1] > args.trials:
         p.error(f"--slice ends at trial {args.slice[1] - 1}, beyond --trials {args.trials}")
     (merge if args.merge else speed if args.speed else bounds if args.crb
