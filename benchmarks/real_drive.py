@@ -67,6 +67,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -146,10 +147,24 @@ def clean_records(linear, theta, fc, tau_i, counts=0):
     return out
 
 
-def one_trial(task, seed):
+class Task(NamedTuple):
+    """What every trial of one scenario shares: the truth (linear parameters in SI,
+    ``theta`` in rad), its clean records (:func:`clean_records`), the encoders' counts
+    per revolution (0: analogue speeds), the speeds' SNR in dB and the prior's
+    relative std (``--prior-rel-std``)."""
+
+    linear: dict
+    theta: float
+    clean: list
+    counts: int
+    snr: float
+    prior_rel_std: float
+
+
+def one_trial(task: Task, seed):
     """One trial of a scenario: the fit's theta, interval and choices (with
     ``--prior-rel-std``, about its drawn prior)."""
-    prior, kw = trial_prior(task[0], task[5], seed)
+    prior, kw = trial_prior(task.linear, task.prior_rel_std, seed)
     return _summary(_fit(prior, trial_records(task, seed), **kw))
 
 
@@ -241,12 +256,12 @@ def held_loop_check(linear, theta, recs, fit, tau_i, prior=None, **kw) -> str:
             f"{'inside' if lo <= held.theta_ <= hi else 'outside'} its 95 % interval")
 
 
-def trial_records(task, seed) -> list:
+def trial_records(task: Task, seed) -> list:
     """The records of one trial of a scenario: analogue speeds get their noise;
     encoders start at a uniformly random angle within a count."""
-    _, _, clean, counts, snr = task[:5]
+    counts, snr = task.counts, task.snr
     recs = []
-    for (t, u, y_m, y_l), ss in zip(clean, seed.spawn(len(clean)), strict=True):
+    for (t, u, y_m, y_l), ss in zip(task.clean, seed.spawn(len(task.clean)), strict=True):
         s_m, s_l = ss.spawn(2)
         if counts:  # the drives log differenced counts as speeds, as issue 20's did
             enc = bk.Encoder(counts)
@@ -290,13 +305,13 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     clean = clean_records(linear, theta, fc, tau, counts)
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau, args.snr)
+    task = Task(linear, theta, clean, counts, args.snr, args.prior_rel_std)
     if args.trial is not None:  # each trial's own seed, as in the whole study's (spawned
         seeds = task_seeds(seed, args.trial[1])  # once: a SeedSequence spawns anew each call)
         for k in range(*args.trial):
-            _trial_alone(args, k, (dname, ename), linear, theta, effect, clean, seeds[k])
+            _trial_alone(args, k, (dname, ename), task, effect, seeds[k])
         return
     first, stop = args.slice or (0, args.trials)
-    task = (linear, theta, clean, counts, args.snr, args.prior_rel_std)
     bar = ProgressBar(f"{dname}, {ename}", quiet=False)
     # trial i's seed is child i of the scenario's, whatever the slice
     res = map_tasks(seeded_trial, [(task, s) for s in task_seeds(seed, stop)[first:]],
@@ -309,12 +324,13 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     _print_row(dname, ename, theta, res, crb, seconds, first)
 
 
-def _trial_alone(args, k, names, linear, theta, effect, clean, seed) -> None:
+def _trial_alone(args, k, names, task: Task, effect, seed) -> None:
     """Rerun trial ``k`` of a scenario from its ``seed``, as in the whole study, and
     print its fit, its term tests, its profile and the truth's likelihood."""
+    linear, theta = task.linear, task.theta
     fc, tau, counts = effect
-    recs = trial_records((linear, theta, clean, counts, args.snr), seed)
-    prior, kw = trial_prior(linear, args.prior_rel_std, seed)
+    recs = trial_records(task, seed)
+    prior, kw = trial_prior(linear, task.prior_rel_std, seed)
     grid = GridProfile(n=args.profile_grid) if args.profile_grid else None
     fit = _fit(prior, recs, **kw, **({"interval": grid} if grid else {}))
     print(f"{names[0]}, {names[1]}, trial {k}: {_trial_line(_summary(fit), theta)}", flush=True)

@@ -89,7 +89,7 @@ def protocol_trial(task, seed):
 
 def drive_trial(task, seed):
     """One trial of a ``real_drive.py`` scenario (its records drawn the same way)."""
-    return fit_both_ways(rd.trial_records(task, seed), bk.TwoMassDrive(**task[0]))
+    return fit_both_ways(rd.trial_records(task, seed), bk.TwoMassDrive(**task.linear))
 
 
 def row(name: str, res: list[dict]) -> None:
@@ -127,8 +127,9 @@ def main(argv=None) -> int:
             fc, tau, _ = rd.EFFECTS[ename]
             clean = rd.clean_records(linear, theta, fc, tau)
             bar = ProgressBar(f"{dname}, {ename}", quiet=False)
-            res = map_tasks(drive_trial, [(linear, theta, clean, 0, rd.SNR)] * args.trials,
-                            jobs=args.jobs, seed=seeds[k], progress=bar)
+            task = rd.Task(linear, theta, clean, 0, rd.SNR, 0.0)
+            res = map_tasks(drive_trial, [task] * args.trials, jobs=args.jobs, seed=seeds[k],
+                            progress=bar)
             bar.close()
             row(f"{dname}, {ename}", res)
             k += 1
