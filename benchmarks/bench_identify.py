@@ -146,17 +146,22 @@ def count(recs, prior) -> None:
     samples = sum(r.t.size for r in recs)
     done, kernel = [0, 0], {"holds": [0.0, 0], "windows": [0.0, 0], "whole": [0.0, 0]}
     sens = [0, 0, 0.0]
-    marks = [(0, 0, 0.0, 0, time.perf_counter())]
+    marks = [(0, 0, 0.0, 0, 0.0, time.perf_counter())]
     fit = JointIdentifier(prior, workers=1, progress=lambda k, total: marks.append(
-        (k, total, done[0] / samples, sens[0], time.perf_counter()))).fit
+        (k, total, done[0] / samples, sens[0], sens[2], time.perf_counter()))).fit
     start = time.perf_counter()
     n_fit, calls = simulations(lambda: fit(recs), samples, done, kernel, sens)
     wall = time.perf_counter() - start
-    for (_, _, n0, s0, t0), (k, total, n, s, t) in zip(marks, marks[1:], strict=False):
+    # a sensitivity run weighed by its time, at the simulations' rate on whole spans
+    whole_sec, whole_work = kernel["whole"]
+    per_sim = whole_sec / max(whole_work, 1) * samples
+    for (_, _, n0, s0, c0, t0), (k, total, n, s, c, t) in zip(marks, marks[1:],
+                                                              strict=False):
         if k > 0:  # stage k ended (a misfit restart repeats the stages)
             name = STAGE_NAMES[(k - 1) % len(STAGE_NAMES)]
+            in_all = n - n0 + ((c - c0) / per_sim if whole_sec else 0.0)
             print(f"  stage {k}/{total}, {name}: {n - n0:.0f} simulations, "
-                  f"{s - s0} sensitivity runs, {t - t0:.2f} s")
+                  f"{s - s0} sensitivity runs, {in_all:.0f} in all, {t - t0:.2f} s")
     what = {"holds": "through the held torque on a coarse grid",
             "windows": f"of the records' samples, calls of < {WINDOW_SAMPLES}",
             "whole": f"of the records' samples, calls of >= {WINDOW_SAMPLES}"}
@@ -167,9 +172,7 @@ def count(recs, prior) -> None:
     print(f"  one fit's wall time: {wall:.2f} s, the kernel "
           f"{sum(sec for sec, _ in kernel.values()) + sens[2]:.2f} s of it")
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
-    # a sensitivity run weighed by its time, at the simulations' rate on whole spans
-    whole_sec, whole_work = kernel["whole"]
-    n_sens = sens[2] / (whole_sec / max(whole_work, 1)) / samples if whole_sec else 0.0
+    n_sens = sens[2] / per_sim if whole_sec else 0.0
     print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
           f"default) costs {n_fit:.0f} simulations of the records in {calls} kernel calls, "
           f"and {sens[0]} sensitivity runs over {sens[1] / samples:.0f} times the records' "

@@ -274,22 +274,31 @@ def trial_records(task: Task, seed) -> list:
     return recs
 
 
+def scenario_seeds(seed: int) -> dict[tuple[str, str], np.random.SeedSequence]:
+    """Every scenario's ``SeedSequence`` by ``(drive, effect)``, from the study's
+    ``--seed``; trial ``i`` draws from its child ``i`` (:func:`task_seeds`)."""
+    out = {}
+    root = np.random.SeedSequence(seed)
+    for i, (dname, ss) in enumerate(zip(DRIVES, root.spawn(len(DRIVES)), strict=True)):
+        # the extended scenarios draw from a stream of their own, so adding them left
+        # the first six rows' seeds as they were
+        extended = np.random.SeedSequence([seed, EXTENDED_STREAM, i])
+        for table, seeds in ((EFFECTS, ss.spawn(len(EFFECTS))),
+                             (EXTENDED, extended.spawn(len(EXTENDED)))):
+            out.update({(dname, ename): ss2 for ename, ss2 in zip(table, seeds, strict=True)})
+    return out
+
+
 def coverage(args) -> None:
     if args.trial is None:  # one trial alone prints a line, not a table
         _print_header()
-    root = np.random.SeedSequence(args.seed)
-    for i, ((dname, (linear, theta)), ss) in enumerate(zip(DRIVES.items(), root.spawn(2),
-                                                          strict=True)):
+    seeds = scenario_seeds(args.seed)
+    for dname, (linear, theta) in DRIVES.items():
         if dname not in args.drives:
             continue
-        # the extended scenarios draw from a stream of their own, so adding them left
-        # the first six rows' seeds as they were
-        extended = np.random.SeedSequence([args.seed, EXTENDED_STREAM, i])
-        for table, seeds in ((EFFECTS, ss.spawn(len(EFFECTS))),
-                             (EXTENDED, extended.spawn(len(EXTENDED)))):
-            for (ename, effect), ss2 in zip(table.items(), seeds, strict=True):
-                if ename in args.effects:
-                    _scenario(args, dname, linear, theta, ename, effect, ss2)
+        for ename, effect in {**EFFECTS, **EXTENDED}.items():
+            if ename in args.effects:
+                _scenario(args, dname, linear, theta, ename, effect, seeds[dname, ename])
 
 
 def _print_header() -> None:

@@ -20,6 +20,9 @@ STEP_TRIALS = 12
 #: Marquardt scaling floor relative to the largest diagonal of ``J^T J``: a parameter
 #: the residual does not see still gets a finite, damped step.
 SCALE_FLOOR = 1e-12
+#: An accepted step that lowers the cost by less than this (chi-square units) ends the
+#: run: a parameter change of about 0.03 standard errors.
+FINAL_ATOL = 1e-3
 
 
 @dataclass
@@ -36,7 +39,7 @@ class LMState:
 
 def lm(fun: Callable[[np.ndarray], np.ndarray],
        jac: Callable[[np.ndarray, np.ndarray], np.ndarray], z0: np.ndarray, *,
-       max_iter: int, state: LMState | None = None, rtol: float = 1e-10, atol: float = 1e-3,
+       max_iter: int, state: LMState | None = None, rtol: float = 1e-10, atol: float = FINAL_ATOL,
        max_step: float = 0.5, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> LMState:
     """Levenberg-Marquardt on the normal equations (Marquardt scaling).
 
@@ -44,7 +47,7 @@ def lm(fun: Callable[[np.ndarray], np.ndarray],
     so the step is solved from ``J^T J`` (n x n) rather than by an SVD of ``J``.
     Stops after ``max_iter`` Jacobians, or when an accepted step lowers the cost by
     less than ``rtol`` relative or ``atol`` absolute (the cost is in chi-square units:
-    1e-3 is a parameter change of about 0.03 standard errors), or when no step lowers
+    :data:`FINAL_ATOL`), or when no step lowers
     it. An accepted step is extrapolated (doubled while the cost keeps falling); no
     step changes a log-parameter by more than ``max_step``. ``state`` continues an
     earlier run that stopped at ``max_iter``.

@@ -41,6 +41,13 @@ from .two_step import TwoStepIdentifier
 CONTINUE_RATIO = 1.25
 #: Candidates closer than this in every log-parameter count as one point.
 SAME_POINT = 1e-3
+#: Candidates within :data:`DISTINCT` of each other whose costs differ by less than
+#: this (chi-square units) count as one point too: they lie along a flat direction of
+#: one basin. On paper A's records from a prior 30 % off, two first-window solutions
+#: 3e-3 apart in a Coulomb torque alone, at the same cost to 0.005, were continued
+#: side by side to the same end on every window (``benchmarks/bench_identify.py
+#: --count`` before and after).
+SAME_COST = 0.01
 #: End points of the continuation paths within this (chi-square units) of the best on
 #: the longest short window, and more than DISTINCT apart, make the search ambiguous.
 AMBIGUITY_MARGIN = 30.0
@@ -104,14 +111,21 @@ def resplit(z: np.ndarray, free: Sequence[str], pair: tuple[str, str],
 def distinct(states: Sequence[LMState], limit: float, worst: float,
              taken: Sequence[LMState] = ()) -> list[LMState]:
     """Up to ``limit`` of ``states`` (in order, until one costs more than ``worst``)
-    farther than :data:`SAME_POINT` from each other and from ``taken``."""
+    apart from each other and from ``taken`` (:func:`same_point`)."""
     out: list[LMState] = []
     for st in states:
         if len(out) == limit or st.cost > worst:
             break
-        if all(np.max(np.abs(st.z - c_.z)) > SAME_POINT for c_ in [*taken, *out]):
+        if not any(same_point(st, c_) for c_ in [*taken, *out]):
             out.append(st)
     return out
+
+
+def same_point(a: LMState, b: LMState) -> bool:
+    """Whether two states count as one point: within :data:`SAME_POINT` in every
+    log-parameter, or within :data:`DISTINCT` at a cost within :data:`SAME_COST`."""
+    dz = float(np.max(np.abs(a.z - b.z)))
+    return dz <= SAME_POINT or (dz <= DISTINCT and abs(a.cost - b.cost) <= SAME_COST)
 
 
 def basins(ends: Sequence[LMState], core: Sequence[int]) -> int:
