@@ -19,11 +19,12 @@ estimate's cost, for those that ended below and for the rest.
 
 Scenarios: one of ``benchmarks/real_drive.py`` (``--drive``, ``--effect``, ``--snr``,
 its trials ``--trials A:B`` drawn from the same seeds as its rows, the prior at the
-truth), or paper A's protocol (``--protocol N``: seeds ``0`` to ``N - 1`` at
-``Err_p = 0.3``).
+truth, or drawn about it with ``--prior-rel-std`` as there), or paper A's protocol
+(``--protocol N``: seeds ``0`` to ``N - 1`` at ``Err_p = 0.3``).
 
 Run: ``python benchmarks/screen_iterations.py --drive other --effect coulomb --snr 30
---trials 0:100 [--jobs 2]``, or ``python benchmarks/screen_iterations.py --protocol 6``.
+--trials 0:100 [--prior-rel-std S] [--jobs 2] [--no-far]``, or
+``python benchmarks/screen_iterations.py --protocol 10 [--no-far]``.
 """
 
 from __future__ import annotations
@@ -95,8 +96,8 @@ class Watch:
         return after
 
 
-def watched_fit(recs, prior, no_far: bool) -> dict:
-    """One default fit, its screens watched."""
+def watched_fit(recs, prior, no_far: bool, **kw) -> dict:
+    """One default fit (``kw``: its other options), its screens watched."""
     w = Watch()
     saved = (lm_mod._step, search_mod.restart, intervals_mod._HeldTheta.recheck,
              intervals_mod.RECHECK_FAR)
@@ -108,7 +109,7 @@ def watched_fit(recs, prior, no_far: bool) -> dict:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            bk.JointIdentifier(prior, workers=1).fit(recs)
+            bk.JointIdentifier(prior, workers=1, **kw).fit(recs)
     finally:
         (lm_mod._step, search_mod.restart, intervals_mod._HeldTheta.recheck,
          intervals_mod.RECHECK_FAR) = saved
@@ -123,8 +124,9 @@ def protocol_trial(no_far, seed):
 
 
 def drive_trial(task, no_far, seed):
-    """One trial of a ``real_drive.py`` scenario, its records drawn as there."""
-    return watched_fit(rd.trial_records(task, seed), bk.TwoMassDrive(**task.linear), no_far)
+    """One trial of a ``real_drive.py`` scenario, its records and prior drawn as there."""
+    prior, kw = rd.trial_prior(task.linear, task.prior_rel_std, seed)
+    return watched_fit(rd.trial_records(task, seed), bk.TwoMassDrive(**prior), no_far, **kw)
 
 
 def first_below(costs: list[float], screen: int) -> int | None:
@@ -133,7 +135,7 @@ def first_below(costs: list[float], screen: int) -> int | None:
     return next((i + 1 for i, c in enumerate(costs[:screen]) if c < 0), None)
 
 
-def report(res: list[dict]) -> None:
+def report(res: list[dict], no_far: bool) -> None:
     """Print the screens' counts, histograms and starts."""
     screen = search_mod.RESTART_SCREEN_ITER
     restarts = [c for r in res for c in r["restarts"]]
@@ -146,13 +148,13 @@ def report(res: list[dict]) -> None:
           f"{len(res)} fits")
     screen = intervals_mod.RECHECK_SCREEN_ITER
     rechecks = [c for r in res for c in r["rechecks"]]
-    ran = [c for c in rechecks if c["costs"]]
-    won = [c for c in ran if c["gain"] > SAME_POINT]
+    far = sum(c["start"] > intervals_mod.RECHECK_FAR for c in rechecks)
+    won = [c for c in rechecks if c["gain"] > SAME_POINT]
     hist = Counter(first_below(c["costs"], screen) for c in won)
-    print(f"rechecks: {len(rechecks)}, {len(ran)} run ({len(rechecks) - len(ran)} started "
-          f"more than RECHECK_FAR = {intervals_mod.RECHECK_FAR} times the estimate's "
-          f"cost above it); {len(won)} lowered an end by more than {SAME_POINT}, first "
-          f"below at iteration {dict(sorted(hist.items(), key=str))}")
+    print(f"rechecks: {len(rechecks)}, {far} of them starting more than RECHECK_FAR = "
+          f"{intervals_mod.RECHECK_FAR:g} times the estimate's cost above it "
+          f"({'run' if no_far else 'not run'}); {len(won)} lowered an end by more than "
+          f"{SAME_POINT}, first below at iteration {dict(sorted(hist.items(), key=str))}")
     for name, group in (("lowered an end", won),
                         ("did not", [c for c in rechecks if c not in won])):
         starts = [c["start"] for c in group]
@@ -171,6 +173,9 @@ def main(argv=None) -> int:
     ap.add_argument("--snr", type=float, default=rd.SNR)
     ap.add_argument("--trials", default="0:20", help="A:B, the scenario's trials A to B - 1")
     ap.add_argument("--seed", type=int, default=2020, help="real_drive.py's --seed")
+    ap.add_argument("--prior-rel-std", type=float, default=0.0,
+                    help="real_drive.py's: a prior of the linear parameters drawn about "
+                         "the truth with this relative std")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--no-far", action="store_true",
                     help="run the rechecks that start far above too (RECHECK_FAR = inf)")
@@ -187,14 +192,15 @@ def main(argv=None) -> int:
         linear, theta = rd.DRIVES[args.drive]
         fc, tau, counts = {**rd.EFFECTS, **rd.EXTENDED}[args.effect]
         task = rd.Task(linear, theta, rd.clean_records(linear, theta, fc, tau, counts),
-                       counts, args.snr, 0.0)
+                       counts, args.snr, args.prior_rel_std)
         seeds = rd.task_seeds(rd.scenario_seeds(args.seed)[args.drive, args.effect], stop)
         bar = ProgressBar(f"{args.drive}, {args.effect}", quiet=False)
         res = map_tasks(partial(drive_trial, task, args.no_far), seeds[first:],
                         jobs=args.jobs, progress=bar)
         bar.close()
-        print(f"{args.drive}, {args.effect}, {args.snr:g} dB, trials {first} to {stop - 1}")
-    report(res)
+        print(f"{args.drive}, {args.effect}, {args.snr:g} dB, trials {first} to {stop - 1}"
+              + (f", prior rel. std {args.prior_rel_std:g}" if args.prior_rel_std else ""))
+    report(res, args.no_far)
     return 0
 
 

@@ -458,6 +458,24 @@ def test_resplit_keeps_sums_and_ringing_frequency():
     assert _resplit(z[:3], free[:2], ("f_M", "f_L"), 0.5) is None  # pair not estimated
 
 
+def test_candidates_along_one_basins_flat_direction_count_as_one():
+    """Two first-window solutions 3e-3 apart in one log-parameter at costs within
+    SAME_COST are one candidate (paper A's records from a prior 30 % off had such a
+    pair, continued side by side to the same end); apart in cost, or farther than
+    DISTINCT, they are two."""
+    from backlashkit.identify._lm import LMState
+    from backlashkit.identify._search import DISTINCT, SAME_COST, distinct
+
+    def state(shift, cost):
+        return LMState(np.r_[0.0, 0.0, shift], np.zeros(1), cost, None)
+
+    a = state(0.0, 100.0)
+    assert len(distinct([a, state(3e-3, 100.0 + 0.5 * SAME_COST)], 3, np.inf)) == 1
+    assert len(distinct([a, state(3e-3, 100.0 + 2 * SAME_COST)], 3, np.inf)) == 2
+    assert len(distinct([a, state(2 * DISTINCT, 100.0)], 3, np.inf)) == 2
+    assert len(distinct([a, state(1e-4, 150.0)], 3, np.inf)) == 1  # SAME_POINT
+
+
 def test_parametric_bootstrap(short):
     """Resamples simulated from the estimate and refitted: std_ and ci95_ from their
     spread, the estimate itself unchanged, the same resamples for the same seed."""

@@ -174,3 +174,44 @@ def test_a_profile_that_falls_again_is_looked_past():
     plain = _profile_of(lambda d: (d / 0.1) ** 2)
     once, twice = (bk.ProfileLikelihood()._interval(plain(k)) for k in (False, True))
     assert twice.ci95 == once.ci95 and len(twice.profile) == len(once.profile) + 2
+
+
+def _two_basins(anchor_w: float, calls: list):
+    """A profile with two basins in the other log-parameter ``w``: the estimate's at
+    ``w = 1`` and a lower one at ``w = 3``; a constant row of 1000 stands for the
+    noise (the estimate's cost)."""
+    import numpy as np
+
+    from backlashkit.identify.intervals import IntervalInputs, _HeldTheta
+
+    def residual(rows):
+        calls.append(len(rows))
+        zt, w = rows[:, 0], rows[:, 1]
+        return np.column_stack([30.0 * (w - 1.0) * (w - 3.0), 0.3 * (w - 3.0), 5.0 * zt,
+                                np.full(len(rows), math.sqrt(1000.0))])
+
+    z = np.array([0.0, 1.0])
+    cost = float(np.sum(residual(z[np.newaxis, :]) ** 2))
+    fit = IntervalInputs(theta=1.0, std=0.1, z=z, cov_z=np.diag([0.04, 1.0]), cost=cost,
+                         residual=residual, fd_step=1e-6, resample=lambda rng: None,
+                         refit=lambda records: 1.0, anchor=np.array([anchor_w]))
+    return _HeldTheta(fit, max_iter=20)
+
+
+def test_an_end_is_refitted_from_the_priors_point_only_where_it_is_near(monkeypatch):
+    """The recheck from the prior's point finds the lower basin where that point costs
+    within RECHECK_FAR of the estimate's cost above it; farther, it is not run (one
+    simulation, of the point itself), unless RECHECK_FAR allows it."""
+    import backlashkit.identify.intervals as intervals
+
+    calls: list = []
+    held = _two_basins(3.2, calls)
+    continued = held.rise(1.0, memo := {}, 0.2)
+    assert continued == pytest.approx(1.0, abs=0.01)  # 5 * 0.2, squared: the held theta
+    assert held.recheck(1.0, memo, 0.2) == pytest.approx(continued - 0.36, abs=0.01)
+    far = _two_basins(4.5, calls := [])  # 30 * 3.5 * 1.5 squared: far above 1000
+    continued = far.rise(1.0, memo := {}, 0.2)
+    n = len(calls)
+    assert far.recheck(1.0, memo, 0.2) == continued and len(calls) == n + 1
+    monkeypatch.setattr(intervals, "RECHECK_FAR", math.inf)
+    assert far.recheck(1.0, memo, 0.2) == pytest.approx(continued - 0.36, abs=0.01)
