@@ -43,10 +43,11 @@ CONTINUE_RATIO = 1.25
 SAME_POINT = 1e-3
 #: Candidates within :data:`DISTINCT` of each other whose costs differ by less than
 #: this (chi-square units) count as one point too: they lie along a flat direction of
-#: one basin. On paper A's records from a prior 30 % off, two first-window solutions
-#: 3e-3 apart in a Coulomb torque alone, at the same cost to 0.005, were continued
-#: side by side to the same end on every window (``benchmarks/bench_identify.py
-#: --count`` before and after).
+#: one basin. On paper A's records from a prior 30 % off, two first-window solutions of
+#: one basin were continued side by side to the same end; counted as one, the
+#: continuation took 360 sensitivity runs instead of 438 and the whole records 18
+#: simulations instead of 26 (``benchmarks/bench_identify.py --count`` before and
+#: after: docs/design/sensitivities.md, "Fewer refits").
 SAME_COST = 0.01
 #: End points of the continuation paths within this (chi-square units) of the best on
 #: the longest short window, and more than DISTINCT apart, make the search ambiguous.
