@@ -50,7 +50,7 @@ from backlashkit.parallel import ProgressBar, map_tasks
 ERR_P = 0.3
 #: A refit "lowered the fit" where it ended below its reference by more than this
 #: (chi-square units): below it, it reached the same point from another side.
-SAME_POINT = 0.05
+LOWERED = 0.05
 
 
 class Watch:
@@ -144,17 +144,17 @@ def report(res: list[dict], no_far: bool) -> None:
     print(f"restarts: {len(restarts)} screened, {sum(b is not None for b in below)} ended "
           f"the screen ({screen} iterations) below the reference, first below at "
           f"iteration {dict(sorted(hist.items()))}; they lowered the fit by more than "
-          f"{SAME_POINT} in {sum(r['restart_gain'] > SAME_POINT for r in res)} of "
+          f"{LOWERED} in {sum(r['restart_gain'] > LOWERED for r in res)} of "
           f"{len(res)} fits")
     screen = intervals_mod.RECHECK_SCREEN_ITER
     rechecks = [c for r in res for c in r["rechecks"]]
     far = sum(c["start"] > intervals_mod.RECHECK_FAR for c in rechecks)
-    won = [c for c in rechecks if c["gain"] > SAME_POINT]
+    won = [c for c in rechecks if c["gain"] > LOWERED]
     hist = Counter(first_below(c["costs"], screen) for c in won)
     print(f"rechecks: {len(rechecks)}, {far} of them starting more than RECHECK_FAR = "
           f"{intervals_mod.RECHECK_FAR:g} times the estimate's cost above it "
           f"({'run' if no_far else 'not run'}); {len(won)} lowered an end by more than "
-          f"{SAME_POINT}, first below at iteration {dict(sorted(hist.items(), key=str))}")
+          f"{LOWERED}, first below at iteration {dict(sorted(hist.items(), key=str))}")
     for name, group in (("lowered an end", won),
                         ("did not", [c for c in rechecks if c not in won])):
         starts = [c["start"] for c in group]

@@ -46,10 +46,10 @@ def lm(fun: Callable[[np.ndarray], np.ndarray],
     The residual vector is long (every sample of both speeds) and the parameters few,
     so the step is solved from ``J^T J`` (n x n) rather than by an SVD of ``J``.
     Stops after ``max_iter`` Jacobians, or when an accepted step lowers the cost by
-    less than ``rtol`` relative or ``atol`` absolute (the cost is in chi-square units:
-    :data:`FINAL_ATOL`), or when no step lowers
-    it. An accepted step is extrapolated (doubled while the cost keeps falling); no
-    step changes a log-parameter by more than ``max_step``. ``state`` continues an
+    less than ``rtol`` relative or ``atol`` absolute (the cost is in chi-square units;
+    default :data:`FINAL_ATOL`), or when no step lowers it. An accepted step is
+    extrapolated (doubled while the cost keeps falling); no step changes a
+    log-parameter by more than ``max_step``. ``state`` continues an
     earlier run that stopped at ``max_iter``.
     """
     if state is None or state.done:

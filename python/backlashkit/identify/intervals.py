@@ -73,7 +73,7 @@ RECHECK_SCREEN_ITER = 5
 #: lowered an end within 0.026 (``benchmarks/screen_iterations.py --no-far``).
 RECHECK_FAR = 1.0
 #: A held-theta refit stops once a step lowers its cost by less than this (chi-square
-#: units; the fit's own refinements go on to 1e-3): the rise is wanted to within
+#: units; the fit's own refinements go on to ``_lm.FINAL_ATOL``): the rise is wanted to within
 #: ``tol`` (0.25) of 3.84, and the last steps of a slow valley (a Coulomb torque
 #: trading against viscous friction) gain hundredths each.
 PROFILE_ATOL = 0.01
