@@ -66,6 +66,7 @@ import sys
 import time
 import warnings
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import NamedTuple
 
@@ -129,9 +130,10 @@ def crb_theta(linear, theta, fc, tau_i, snr=SNR) -> float:
                                estimate=names, initial_state="steady", tau_i=tau_i)
               for a in (A1, A2)]
     return (bounds[0] + bounds[1]).theta_std
-def clean_records(linear, theta, fc, tau_i, counts=0):
+def clean_records(linear, theta, fc, tau_i, counts=0, kernel=False):
     """The noise-free reference records of one scenario: ``(t, u, w_M, w_L)``, or with
-    encoders ``(t, u, phi_M, phi_L)``, the exact angles."""
+    encoders ``(t, u, phi_M, phi_L)``, the exact angles. ``kernel``: the speeds made
+    by the compiled kernel the estimator fits with instead (``--kernel-records``)."""
     drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
     loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
     t = bk.signals.time_grid(T_END, TS)
@@ -142,7 +144,7 @@ def clean_records(linear, theta, fc, tau_i, counts=0):
         if counts:
             out.append((t, u, *reference_angles(drive, t, u, **kw)))
         else:
-            ref = reference_simulate(drive, t, u, **kw)
+            ref = (drive.simulate if kernel else partial(reference_simulate, drive))(t, u, **kw)
             out.append((t, u, ref.w_motor, ref.w_load))
     return out
 
@@ -311,7 +313,7 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     """Run and print one scenario's row."""
     fc, tau, counts = effect
     t0 = time.perf_counter()
-    clean = clean_records(linear, theta, fc, tau, counts)
+    clean = clean_records(linear, theta, fc, tau, counts, kernel=args.kernel_records)
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau, args.snr)
     task = Task(linear, theta, clean, counts, args.snr, args.prior_rel_std)
@@ -363,7 +365,8 @@ def seeded_trial(pair):
 
 
 #: What must agree between the slices of one row (``--merge``).
-SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code", "prior_rel_std")
+SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code", "prior_rel_std",
+              "kernel_records")
 
 
 #: What a slice ran, as paths of the repository: the package, the compiled core and
@@ -393,7 +396,8 @@ def save_slice(args, row: dict) -> None:
     if path.exists():
         raise SystemExit(f"real_drive.py: {path} exists: choose another --save file")
     doc = {"snr": args.snr, "seed": args.seed, "trials": args.trials,
-           "prior_rel_std": args.prior_rel_std, "code": code_version(), **row}
+           "prior_rel_std": args.prior_rel_std, "kernel_records": args.kernel_records,
+           "code": code_version(), **row}
     # numpy scalars (a choice's kept flag) as Python values
     path.write_text(json.dumps(doc, indent=1, default=lambda x: x.item()) + "\n")
     print(f"wrote {path} (trials {row['first']} to {row['first'] + len(row['results']) - 1})",
@@ -425,7 +429,8 @@ def merge(args) -> None:
     rel = docs[0].get("prior_rel_std", 0.0)
     print(f"{docs[0]['drive']}, {docs[0]['effect']}: {len(docs)} slices, code "
           f"{docs[0]['code']}, SNR {docs[0]['snr']:g} dB, seed {docs[0]['seed']}"
-          + (f", priors drawn with relative std {rel:g}" if rel else ""))
+          + (f", priors drawn with relative std {rel:g}" if rel else "")
+          + (", records by the compiled kernel" if docs[0].get("kernel_records") else ""))
     _print_header()
     _print_row(docs[0]["drive"], docs[0]["effect"], theta, res, docs[0]["crb"],
                sum(d["seconds"] for d in docs))
@@ -624,6 +629,10 @@ def main(argv=None) -> int:
                    help="give each fit a prior of the linear parameters with relative std "
                         "S, its values drawn about the truth with that std (default 0: the "
                         "truth as the prior, no prior std)")
+    p.add_argument("--kernel-records", action="store_true",
+                   help="analogue records made by the compiled kernel the estimator fits "
+                        "with, not the scipy reference: a diagnostic that tells the two "
+                        "simulators' differences from the estimator's statistics")
     p.add_argument("--speed", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--crb", action="store_true",

@@ -13,7 +13,9 @@ and go on only where it is below its reference by then:
 
 For each kind it prints how many were screened, how many ended the screen below
 their reference, at which iteration those first went below (a histogram: what a
-shorter screen would have lost), and how many lowered the fit. For the rechecks it
+shorter screen would have lost), and how many lowered the fit; for the restarts also
+how many rival basins the search handed the interval (``_search.rivals_of``: other
+minima within 3.84 above the best on the whole records). For the rechecks it
 also prints where they started: their start's cost above the estimate's, over the
 estimate's cost, for those that ended below and for the rest.
 
@@ -61,6 +63,7 @@ class Watch:
         self.restarts: dict[int, tuple[object, list[float]]] = {}  # by id of its state
         self.rechecks: list[dict] = []
         self.restart_gain = 0.0
+        self.rivals = 0
 
     def step(self, real, state, fun, *args):
         """``_lm._step``, noting the iterations of the screened refits."""
@@ -80,10 +83,12 @@ class Watch:
         return ok
 
     def restart(self, real, pb, best, *args, **kw):
-        """``_search.restart``, noting how much it lowered the fit."""
-        out = real(pb, best, *args, **kw)
+        """``_search.restart``, noting how much it lowered the fit and the rival basins
+        it returned."""
+        out, rivals = real(pb, best, *args, **kw)
         self.restart_gain += best.cost - out.cost
-        return out
+        self.rivals += len(rivals)
+        return out, rivals
 
     def recheck(self, real, held, sign, memo, d):
         """``_HeldTheta.recheck``, noting its start and how much it lowered the end."""
@@ -114,7 +119,7 @@ def watched_fit(recs, prior, no_far: bool, **kw) -> dict:
         (lm_mod._step, search_mod.restart, intervals_mod._HeldTheta.recheck,
          intervals_mod.RECHECK_FAR) = saved
     return {"restarts": [costs for _, costs in w.restarts.values()],
-            "restart_gain": w.restart_gain, "rechecks": w.rechecks}
+            "restart_gain": w.restart_gain, "rechecks": w.rechecks, "rivals": w.rivals}
 
 
 def protocol_trial(no_far, seed):
@@ -146,6 +151,9 @@ def report(res: list[dict], no_far: bool) -> None:
           f"iteration {dict(sorted(hist.items()))}; they lowered the fit by more than "
           f"{LOWERED} in {sum(r['restart_gain'] > LOWERED for r in res)} of "
           f"{len(res)} fits")
+    print(f"rival basins (other minima within 3.84 above the best on the whole records, "
+          f"the stage's and the restarts'): {sum(r['rivals'] for r in res)} in "
+          f"{sum(r['rivals'] > 0 for r in res)} of {len(res)} fits")
     screen = intervals_mod.RECHECK_SCREEN_ITER
     rechecks = [c for r in res for c in r["rechecks"]]
     far = sum(c["start"] > intervals_mod.RECHECK_FAR for c in rechecks)

@@ -720,15 +720,17 @@ def test_fine_horizons_avoid_a_wrong_basin():
 def test_ambiguity_starts_continue_more_candidates():
     """A trial of ``benchmarks/robustness_joint.py --seed 5 --trials 20`` (light load,
     theta 0.5 deg, 20 dB): the two continuation paths end in distinct minima, and the
-    usual candidates all lead to one with theta 29 % low and k_sh 55 % high, outside
-    its interval; continuing more first-horizon solutions finds a lower minimum
-    whose interval covers the truth."""
+    usual candidates all lead to one with theta 29 % low and k_sh 55 % high (a rival
+    basin's profile, ``IntervalInputs.rivals``, now finds a lower point there, still
+    far off, with k_sh low, and the estimate moves to it), outside its interval;
+    continuing more first-horizon solutions finds a lower minimum whose interval
+    covers the truth."""
     drive, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
     usual = JointIdentifier(prior, search=JointSearch(
         continuation=Continuation(ambiguity_starts=0)), **PAPER_MODEL).fit(recs)
     fit = JointIdentifier(prior, **PAPER_MODEL).fit(recs)
     assert usual.ambiguous_ and fit.ambiguous_  # detected either way; acted on if asked
-    assert usual.theta_ < 0.8 * drive.theta and usual.params_["k_sh"] > 1.3 * drive.k_sh
+    assert usual.theta_ < 0.8 * drive.theta and abs(usual.params_["k_sh"] / drive.k_sh - 1) > 0.3
     assert abs(usual.theta_ - drive.theta) > 1.96 * usual.std_
     assert abs(fit.theta_ / drive.theta - 1) < 0.1
     assert abs(fit.theta_ - drive.theta) < 1.96 * fit.std_

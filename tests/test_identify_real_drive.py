@@ -134,9 +134,9 @@ def _looks_past(monkeypatch) -> list[bool]:
 
     seen, end = [], ProfileLikelihood._end
 
-    def recorded(self, rise, first, look_past, recheck=None):
+    def recorded(self, rise, first, look_past, recheck=None, largest=None):
         seen.append(look_past)
-        return end(self, rise, first, look_past, recheck)
+        return end(self, rise, first, look_past, recheck, largest)
 
     monkeypatch.setattr(ProfileLikelihood, "_end", recorded)
     return seen
@@ -464,8 +464,8 @@ def test_the_profiles_ends_are_refitted_from_the_priors_point(monkeypatch):
     fit = _fit(recs, OTHER, friction="coulomb", actuator=None)
     end = ProfileLikelihood._end
     monkeypatch.setattr(ProfileLikelihood, "_end",
-                        lambda self, rise, first, look_past, recheck=None:
-                        end(self, rise, first, look_past))
+                        lambda self, rise, first, look_past, recheck=None, largest=None:
+                        end(self, rise, first, look_past, largest=largest))
     stuck = _fit(recs, OTHER, friction="coulomb", actuator=None)
     for name, f in (("rechecked", fit), ("not", stuck)):
         print(f"{name}: theta {100 * (f.theta_ / 0.02 - 1):+.2f} %, interval "
@@ -474,6 +474,31 @@ def test_the_profiles_ends_are_refitted_from_the_priors_point(monkeypatch):
     assert not stuck.ci95_[0] <= 0.02 <= stuck.ci95_[1]
     assert abs(fit.theta_ / 0.02 - 1) < 0.5 * abs(stuck.theta_ / 0.02 - 1)
     assert _m2ll(fit, recs) < _m2ll(stuck, recs) - 1.0
+
+
+def test_the_interval_spans_a_rival_basin(monkeypatch):
+    """Trial 60 of the same row: the likelihood has two basins, the estimate's (theta
+    2.75 % low, ``k_sh`` 6 % low) and one near the truth, 2.6 above it in ``-2 log L``,
+    which the restart from the prior's point reaches. The estimate's own profile
+    leaves the truth out (its interval ends 0.20 % low); the profile is the lowest over
+    both basins, so the interval now spans the second one's profile too and covers
+    the truth. Without the rivals (``rivals_of`` finding none) it does not (``-s``
+    prints both)."""
+    from backlashkit.identify import _search
+
+    recs = _records(OTHER, 0.02, fc=(0.01, 0.02),
+                    seed=np.random.SeedSequence(2020, spawn_key=(1, 1, 60)), snr=30.0)
+    kw = {"friction": "coulomb", "actuator": None}
+    fit = _fit(recs, OTHER, **kw)
+    monkeypatch.setattr(_search, "rivals_of", lambda best, states: [])
+    alone = _fit(recs, OTHER, **kw)
+    for name, f in (("with rivals", fit), ("without", alone)):
+        print(f"{name}: theta {100 * (f.theta_ / 0.02 - 1):+.2f} %, interval "
+              f"[{100 * (f.ci95_[0] / 0.02 - 1):+.2f}, {100 * (f.ci95_[1] / 0.02 - 1):+.2f}] %")
+    assert fit.theta_ == alone.theta_  # the estimate is the same: the lower basin's
+    assert fit.ci95_[0] == alone.ci95_[0]  # the rival lies above: its lower side is not looked at
+    assert not alone.ci95_[0] <= 0.02 <= alone.ci95_[1]
+    assert fit.ci95_[0] <= 0.02 <= fit.ci95_[1]
 
 
 def test_a_search_again_from_a_fit_whose_friction_underflowed(coulomb):

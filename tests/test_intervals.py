@@ -215,3 +215,39 @@ def test_an_end_is_refitted_from_the_priors_point_only_where_it_is_near(monkeypa
     assert far.recheck(1.0, memo, 0.2) == continued and len(calls) == n + 1
     monkeypatch.setattr(intervals, "RECHECK_FAR", math.inf)
     assert far.recheck(1.0, memo, 0.2) == pytest.approx(continued - 0.36, abs=0.01)
+
+
+def test_the_profile_spans_a_rival_basins_own():
+    """Two basins in the other log-parameter ``w``: the estimate's at ``w = 1`` with
+    ``theta``'s minimum at 0 (log), and a rival at ``w = 3``, 2.0 above, with its minimum
+    at 0.3. The estimate's profile ends at +-sqrt(3.84) / 5; the lowest profile over
+    both basins reaches 3.84 at 0.3 + sqrt(3.84 - 2) / 5 on the rival's side, and the
+    side towards the estimate is not refitted from the rival."""
+    import numpy as np
+
+    from backlashkit.identify.intervals import IntervalInputs
+
+    def residual(rows):
+        zt, w = rows[:, 0], rows[:, 1]
+        return np.column_stack([30.0 * (w - 1.0) * (w - 3.0), math.sqrt(2.0) * (w - 1.0) / 2.0,
+                                5.0 * (zt - 0.15 * (w - 1.0)), np.full(len(rows), 30.0)])
+
+    def inputs(rivals):
+        z = np.array([0.0, 1.0])
+        return IntervalInputs(theta=1.0, std=0.2, z=z, cov_z=np.diag([0.04, 1.0]),
+                              cost=900.0, residual=residual, fd_step=1e-6,
+                              resample=lambda rng: None, refit=lambda records: 1.0,
+                              rivals=rivals)
+
+    alone = bk.ProfileLikelihood()._interval(inputs([]))
+    half = math.sqrt(CHI2_95) / 5.0
+    assert np.log(alone.ci95) == pytest.approx([-half, half], abs=0.03)
+    assert alone.rivals == 0
+    both = bk.ProfileLikelihood()._interval(inputs([(np.array([0.3, 3.0]), 902.0)]))
+    assert both.ci95[0] == alone.ci95[0] and both.rivals == 1
+    assert math.log(both.ci95[1]) == pytest.approx(0.3 + math.sqrt(CHI2_95 - 2.0) / 5.0,
+                                                   abs=0.03)
+    def below(found):
+        return sum(theta < 1.0 for theta, _ in found.profile)
+
+    assert below(both) == below(alone) and len(both.profile) > len(alone.profile)

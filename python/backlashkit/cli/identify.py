@@ -526,6 +526,7 @@ def _fit_joint(args: argparse.Namespace, prior: Any, records: list[Record],
         "interval": est.interval_,
         "ci95_bounded": list(est.ci95_bounded_),
         "ambiguous": est.ambiguous_,
+        "rival_basins": est.rival_basins_,
         "misfit_restarted": est.misfit_restarted_,
         "misfit_restart_won": est.misfit_restart_won_,
         "noise_model": ("white" if est.noise_ar_ is None
@@ -630,10 +631,16 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
     out += _noted(caught, flags, (PriorMismatchWarning,))
     out += _noted(caught, flags, (CorrelatedResidualsWarning,))
     out += _noted(caught, flags, (QuantisedSpeedsWarning,))
+    rivals = (f"the 95% interval spans the profiles of the {est.rival_basins_} other "
+              "minimum(s) within 3.84 of the best in -2 log L")
     if est.ambiguous_:
         out.append("the search ended in distinct minima of nearly equal cost (the likelihood "
-                   "is multimodal on these records); the interval describes the best one "
-                   "only: try --bootstrap N or longer records")
+                   "is multimodal on these records); "
+                   + (rivals if est.rival_basins_ else "the interval describes the best one only")
+                   + ": try --bootstrap N or longer records")
+    elif est.rival_basins_:
+        out.append(f"the likelihood has other minima near the best: {rivals}, so it is wider "
+                   "than theta -+ 1.96 std (longer or less noisy records narrow it)")
     return out
 
 

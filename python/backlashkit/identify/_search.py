@@ -28,7 +28,7 @@ from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
 from ._quantised import log_theta_draws, quantised
 from ._score import Linearised, linearise, score_test
-from .intervals import Z_95, IntervalInputs, ThetaInterval, quantisation_interval
+from .intervals import CHI2_95, Z_95, IntervalInputs, ThetaInterval, quantisation_interval
 from .noise import sample_noise
 from .record import Record
 from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
@@ -58,13 +58,20 @@ DISTINCT = 1e-2
 #: best one's by more than this are not refined on the whole record: that cost ranks
 #: candidates as the whole record does, to a few units.
 WHOLE_RECORD_MARGIN = 10.0
-#: A restart is refined on the final data only if it beats the best solution by more
-#: than this (chi-square units) on the longest short window.
-RESTART_MARGIN = 1.0
 #: Iterations a restart gets on the longest short window before it must be below the
 #: solution it restarts from: one climbing back to the same basin is still far above
 #: it then, one falling into a better basin already below.
 RESTART_SCREEN_ITER = 5
+#: A restart is refined on the whole records and may replace the best solution only if
+#: it beats it by more than this (chi-square units) on the longest short window.
+RESTART_MARGIN = 1.0
+#: A restart whose screen ends above the solution it restarts from, but by less than
+#: this (chi-square units, on the longest short window), is refined on the whole
+#: records too: where it lands in another basin within CHI2_95 above the best there,
+#: that basin is a rival, whose own profile the interval spans. The short window ranks
+#: two basins as the whole records do to about a unit; two units of slack keep a
+#: rival whose short-window rise is a little above CHI2_95.
+RIVAL_SCREEN = CHI2_95 + 2.0
 #: A held-theta refit of the profile search ending more than this (chi-square units)
 #: below the estimate's cost restarts the final refinement from there, at most
 #: RECENTRE_MAX times: a rattling shaft's likelihood is rough at the scale of 1-2
@@ -233,13 +240,28 @@ def direct_path(pb: Problem, path: Sequence[float], z0: np.ndarray,
 
 
 def whole_record(pb: Problem, ends: list[LMState], rows_full: Residual, max_iter: int
-                 ) -> LMState:
+                 ) -> tuple[LMState, list[LMState]]:
     """Stage 4: the distinct ends within :data:`WHOLE_RECORD_MARGIN` of the best refined
-    on the final data; the lowest final cost."""
+    on the final data; the lowest final cost and its rivals (:func:`rivals_of`)."""
     ends.sort(key=lambda st: st.cost)
     kept = distinct(ends, math.inf, ends[0].cost + WHOLE_RECORD_MARGIN)
-    finals = [pb.refine(rows_full, st.z, max_iter) for st in kept]
-    return min(finals, key=lambda st: st.cost)
+    finals = sorted((pb.refine(rows_full, st.z, max_iter) for st in kept),
+                    key=lambda st: st.cost)
+    return finals[0], rivals_of(finals[0], finals[1:])
+
+
+def rivals_of(best: LMState, states: Sequence[LMState]) -> list[LMState]:
+    """The ``states`` (on the final data) in other basins than ``best``, more than
+    :data:`DISTINCT` from it and from each other in some log-parameter, from
+    :data:`RESTART_MARGIN` below its cost to ``CHI2_95`` above: minima of the
+    likelihood whose basins the 95 % interval must span too. A point lower still would
+    have replaced ``best`` (:func:`restart`)."""
+    out: list[LMState] = []
+    for st in sorted(states, key=lambda st_: st_.cost):
+        if -RESTART_MARGIN <= st.cost - best.cost < CHI2_95 and all(
+                np.max(np.abs(st.z - o.z)) > DISTINCT for o in [best, *out]):
+            out.append(st)
+    return out
 
 
 def prior_point(z: np.ndarray, free: Sequence[str], anchor: dict[str, float]
@@ -268,28 +290,41 @@ def restart_start(kind: str, shift: float, z: np.ndarray, free: Sequence[str],
 
 
 def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residual,
-            cfg: Restarts, max_iter: int, anchor: dict[str, float]) -> LMState:
+            cfg: Restarts, max_iter: int, anchor: dict[str, float],
+            rivals: Sequence[LMState] = ()) -> tuple[LMState, list[LMState]]:
     """Stage 5: the best solution restarted from the prior's linear parameters
     ``anchor`` (z units by name), with ``k_sh`` and with the friction split shifted; a
-    restart is kept if it lowers the final cost (:class:`~.search.Restarts`)."""
+    restart that screens :data:`RESTART_MARGIN` below the best is refined on the whole
+    records, and kept if it lowers the final cost (:class:`~.search.Restarts`); one
+    that screens within :data:`RIVAL_SCREEN` above it is refined there as a rival.
+    Returns the best point and its rivals (:func:`rivals_of`) among the restarts and
+    ``rivals`` (stage 4's)."""
     shifts = cfg.shifts(pb.free)
     if not shifts:
-        return best
+        return best, list(rivals)
     ref = pb.refine(rows_short, best.z, max_iter)
+    seen, near = [ref], list(rivals)
     for kind, d_ in shifts:  # each from the best solution so far
         z0 = restart_start(kind, d_, best.z, pb.free, anchor)
         if z0 is None:
             continue
         st = pb.refine(rows_short, z0, min(RESTART_SCREEN_ITER, max_iter))
-        if not st.cost < ref.cost:
+        if not st.cost < ref.cost + RIVAL_SCREEN or not distinct([st], 1, math.inf, seen):
             continue
+        seen.append(st)
         if not st.done:
             st = pb.refine(rows_short, st.z, max_iter - RESTART_SCREEN_ITER, state=st)
         if st.cost < ref.cost - RESTART_MARGIN:
             st = pb.refine(rows_full, st.z, max_iter)
             if st.cost < best.cost:
-                best = st
-    return best
+                best, st = st, best
+            near.append(st)
+        elif st.cost < ref.cost + RIVAL_SCREEN:  # a rival, or better on the whole records
+            st = pb.refine(rows_full, st.z, max_iter)
+            if st.cost < best.cost - RESTART_MARGIN:
+                best, st = st, best
+            near.append(st)
+    return best, rivals_of(best, near)
 
 
 def reestimate_noise(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
@@ -347,13 +382,17 @@ class Uncertain:
 def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_iter: int,
                 draw: Callable[[np.ndarray, np.random.Generator], list[Record]],
                 refit: Callable[[list[Record]], float], *, look_past: bool = False,
-                anchor: dict[str, float] | None = None) -> Uncertain:
+                anchor: dict[str, float] | None = None,
+                rivals: Sequence[np.ndarray] = ()) -> Uncertain:
     """Stage 8: Gauss-Newton covariance and the interval object's interval; a profile
     refit well below the estimate's cost moves the estimate there (at most
     :data:`RECENTRE_MAX` times). ``draw(z, rng)``: a bootstrap resample at ``z``;
     ``refit(records)``: its ``theta``; ``look_past``: :attr:`IntervalInputs.look_past`;
     ``anchor``: the prior's point (z units by name), a second start of the profile's
-    end refits (:attr:`IntervalInputs.anchor`)."""
+    end refits (:attr:`IntervalInputs.anchor`); ``rivals``: the search's other minima
+    (log-parameters of ``pb``), refitted on ``rows_unc`` and handed on where they stay
+    rivals (:attr:`IntervalInputs.rivals`)."""
+    near = [pb.refine(rows_unc, z, max_iter) for z in rivals]
     for k_centre in range(RECENTRE_MAX + 1):
         z = best.z
         # the prior's rows are in the residual: its information is in J^T J
@@ -371,7 +410,8 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
             pb.fd_step, partial(draw, z), refit,
             partial(rows_unc.exact_jacobian, with_theta=False), look_past,
-            None if anchor is None else prior_point(z, pb.free, anchor)[1:]))
+            None if anchor is None else prior_point(z, pb.free, anchor)[1:],
+            [(st.z, st.cost) for st in rivals_of(best, near)]))
         if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
             break
         st = pb.refine(rows_unc, found.lowest_z, max_iter)
@@ -577,7 +617,9 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     final_h = search.final_horizon
     anchor = dict(zip(pb.free, z_anchor, strict=True))
     located = locate(pb, search, sigma, recs, start_drive, z_anchor, stage=stage)
-    best, starts, two_step, ambiguous = located
+    best, starts, two_step, ambiguous, rivals = located
+    # by name: the terms' tests below can drop a parameter or add one
+    rival_points = [dict(zip(pb.names, st.z, strict=True)) for st in rivals]
     stage(4)
     noise_passes = 0 if fixed_noise else search.noise_iter
     best, sig = reestimate_noise(pb, best, sigma, final_h, len(recs), noise_passes,
@@ -602,7 +644,10 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
                       partial(resample, pb, sig, ar), refit,
                       look_past=bool(joined_terms(terms, choices))
                       or any(t.mode == "prior" for t in terms),
-                      anchor=anchor if search.restarts.prior else None)
+                      anchor=anchor if search.restarts.prior else None,
+                      rivals=[np.array([pt.get(n, x) for n, x in zip(pb.names, best.z,
+                                                                    strict=True)])
+                              for pt in rival_points])
     if quantised(rows_unc):
         errors = quantisation_errors(unc, rows_unc)
         unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)
@@ -648,11 +693,11 @@ def fixed_test(pb: Problem, best: LMState, term: Term, recs: list[Record],
 def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
            start_drive: TwoMassDrive, z_anchor: np.ndarray, *, two_step=_UNSET,
            stage: Callable[[int], None] = lambda done: None
-           ) -> tuple[LMState, list[float], tuple[float, float] | None, bool]:
+           ) -> tuple[LMState, list[float], tuple[float, float] | None, bool, list[LMState]]:
     """Stages 1-4 from ``z_anchor``: the grid, the first window, the continuation, the
     whole records and the restarts. Returns the best point, the starts' ``theta``, the
-    two-step estimate (``two_step`` reuses one already made) and whether the landscape
-    was ambiguous."""
+    two-step estimate (``two_step`` reuses one already made), whether the landscape
+    was ambiguous and the rivals of the best point (:func:`rivals_of`)."""
     short = [search.first.horizon, *search.continuation.horizons]
     rows0 = pb.residual(pb.screen, short[0], sigma)
     zg, minima = grid_minima(pb, rows0, search.grid, z_anchor)
@@ -696,10 +741,11 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     stage(3)
     final_h = search.final_horizon
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
-    best = whole_record(pb, ends, rows_full, max_iter)
-    best = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
-                   search.restarts, max_iter, dict(zip(pb.free, z_anchor, strict=True)))
-    return best, starts, two_step, ambiguous
+    best, rivals = whole_record(pb, ends, rows_full, max_iter)
+    best, rivals = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
+                           search.restarts, max_iter,
+                           dict(zip(pb.free, z_anchor, strict=True)), rivals)
+    return best, starts, two_step, ambiguous, rivals
 
 
 def prior_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,

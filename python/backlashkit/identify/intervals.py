@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
@@ -98,7 +98,10 @@ class IntervalInputs:
     past (:data:`LOOK_PAST`). ``anchor``, where given, is a second start of the
     other log-parameters for the refits at the profile's ends (the prior's linear
     parameters, the added terms as estimated): the refits continued from the estimate
-    keep to its basin, and another basin can lie lower there.
+    keep to its basin, and another basin can lie lower there. ``rivals``: other minima
+    of the cost, as ``(z, cost)``, within ``CHI2_95`` of the estimate's and in other
+    basins (the search's restarts found them); the profile is the lowest over all
+    basins, so its interval spans theirs too.
     """
 
     theta: float
@@ -113,6 +116,7 @@ class IntervalInputs:
     jacobian: Callable[[np.ndarray], np.ndarray | None] | None = None
     look_past: bool = False
     anchor: np.ndarray | None = None
+    rivals: list[tuple[np.ndarray, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -120,7 +124,8 @@ class ThetaInterval:
     """An interval of ``theta`` and what its computation found on the way.
 
     ``lowest_rise`` below 0: a held-theta refit (at log-parameters ``lowest_z``) ended
-    below the estimate's cost, so the estimate was not the nearby minimum.
+    below the estimate's cost, so the estimate was not the nearby minimum. ``rivals``:
+    the other basins whose profiles the interval spans (:attr:`IntervalInputs.rivals`).
     """
 
     kind: str
@@ -131,6 +136,7 @@ class ThetaInterval:
     bootstrap_thetas: np.ndarray | None = None
     lowest_rise: float = 0.0
     lowest_z: np.ndarray | None = field(default=None, repr=False)
+    rivals: int = 0
 
 
 @dataclass(frozen=True)
@@ -218,38 +224,64 @@ class ProfileLikelihood:
             raise InputError(f"max_factor must be a finite number > 1, got {self.max_factor!r}")
 
     def _interval(self, fit: IntervalInputs) -> ThetaInterval:
-        z, cov_z = fit.z, fit.cov_z
+        cov_z = fit.cov_z
         s_z = math.sqrt(cov_z[0, 0]) if cov_z[0, 0] > 0 else 0.0
+        first = Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP
         search = _HeldTheta(fit, self.max_iter)
-        ends, bounded = [], []
-        for sign in (-1.0, 1.0):
-            memo: dict[float, np.ndarray] = {}
-            recheck = (partial(search.recheck, sign, memo)
-                       if fit.anchor is not None and fit.anchor.size else None)
-            d, ok = self._end(partial(search.rise, sign, memo),
-                              Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP, fit.look_past,
-                              recheck)
-            ends.append(math.exp(z[0] + sign * d))
-            bounded.append(ok)
-        lowest = min(search.evaluated, key=lambda e: e[0])
-        points = np.array(sorted((math.exp(zz[0]), r) for r, zz in search.evaluated))
-        return ThetaInterval("profile", (ends[0], ends[1]), (bounded[0], bounded[1]),
+        ends = self._ends(search, first, fit.look_past,
+                          fit.anchor is not None and bool(fit.anchor.size))
+        evaluated = list(search.evaluated)
+        for z_r, cost_r in fit.rivals:  # the profile is the lowest over every basin
+            other = _HeldTheta(replace(fit, z=z_r, anchor=None), self.max_iter,
+                               cost_r - fit.cost)
+            # the side away from the estimate: between the two lies the estimate's basin;
+            # no farther than the estimate's own search goes
+            side = 1.0 if z_r[0] > fit.z[0] else -1.0
+            room = math.log(self.max_factor) - abs(z_r[0] - fit.z[0])
+            if room <= 0.0:
+                continue
+            (end,) = self._ends(other, first, fit.look_past, False, (side,), room)
+            k = int(side > 0)
+            if (end[0] - ends[k][0]) * side > 0:
+                ends[k] = end
+            evaluated += other.evaluated
+        lowest = min(evaluated, key=lambda e: e[0])
+        points = np.array(sorted((math.exp(zz[0]), r) for r, zz in evaluated))
+        return ThetaInterval("profile", (ends[0][0], ends[1][0]), (ends[0][1], ends[1][1]),
                              profile=points, lowest_rise=float(lowest[0]),
-                             lowest_z=lowest[1])
+                             lowest_z=lowest[1], rivals=len(fit.rivals))
+
+    def _ends(self, search: _HeldTheta, first: float, look_past: bool, recheck: bool,
+              signs: tuple[float, ...] = (-1.0, 1.0), largest: float | None = None
+              ) -> list[tuple[float, bool]]:
+        """The ends (``theta`` in rad, whether bounded) of one basin's profile
+        (``search``) on the sides ``signs`` (-1 lower, +1 upper), each refitted from the
+        fit's anchor too (``recheck``), at most ``largest`` (log theta; default
+        ``log(max_factor)``) from the basin's ``theta``."""
+        out = []
+        for sign in signs:
+            memo: dict[float, np.ndarray] = {}
+            d, ok = self._end(partial(search.rise, sign, memo), first, look_past,
+                              partial(search.recheck, sign, memo) if recheck else None,
+                              math.log(self.max_factor) if largest is None else largest)
+            out.append((math.exp(search.fit.z[0] + sign * d), ok))
+        return out
 
     def _end(self, rise: Callable[[float], float], first: float, look_past: bool,
-             recheck: Callable[[float], float] | None = None) -> tuple[float, bool]:
-        """One side's end: its distance (log theta) and whether it is bounded.
-        ``recheck(d)``: the rise at ``d`` refitted from a second start too."""
+             recheck: Callable[[float], float] | None = None,
+             largest: float | None = None) -> tuple[float, bool]:
+        """One side's end: its distance (log theta, at most ``largest``, default
+        ``log(max_factor)``) and whether it is bounded. ``recheck(d)``: the rise at
+        ``d`` refitted from a second start too."""
+        largest = math.log(self.max_factor) if largest is None else largest
         search = partial(profile_crossing, rise, tol=self.tol,
-                         max_evaluations=self.max_evaluations,
-                         largest=math.log(self.max_factor))
+                         max_evaluations=self.max_evaluations, largest=largest)
         d, ok = search(first)
         if ok and recheck is not None and recheck(d) < CHI2_95 - self.tol:
             d, ok = search(d)  # a lower basin at the end: on outwards from there
         for _ in range(LOOKS_PAST if look_past else 0):
             past = d * (1.0 + LOOK_PAST)
-            if not ok or past >= math.log(self.max_factor) or rise(past) > CHI2_95 + self.tol:
+            if not ok or past >= largest or rise(past) > CHI2_95 + self.tol:
                 break
             d, ok = search(past)  # the profile fell again: on outwards from there
         return d, ok
@@ -262,14 +294,15 @@ class ProfileLikelihood:
 class _HeldTheta:
     """Refits of a fit's other log-parameters with ``theta`` held: its profile."""
 
-    def __init__(self, fit: IntervalInputs, max_iter: int) -> None:
+    def __init__(self, fit: IntervalInputs, max_iter: int, rise0: float = 0.0) -> None:
+        """``fit.z``: the basin's minimum, ``rise0`` above ``fit.cost`` (a rival's)."""
         self.fit, self.max_iter = fit, max_iter
         z, cov_z = fit.z, fit.cov_z
         # the other log-parameters move with theta along the Fisher covariance: the
         # start of every held-theta refit (its exact optimum where the cost is quadratic)
         self.slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(z.size - 1)
         #: every refit: cost rise and log-parameters (the estimate first)
-        self.evaluated: list[tuple[float, np.ndarray]] = [(0.0, z)]
+        self.evaluated: list[tuple[float, np.ndarray]] = [(rise0, z)]
         self._rises: dict[tuple[float, float], float] = {}  # (sign, d) -> rise
 
     def _residual(self, zt: float, w: np.ndarray) -> np.ndarray:

@@ -37,6 +37,10 @@ Fitted attributes besides those in the class docstring
 ``profile_`` (array or None)
     Rows ``(theta, rise)`` where the profile search evaluated the likelihood, sorted,
     ``rise`` in chi-square units above ``cost_``; None for the other intervals.
+``rival_basins_`` (int)
+    Other minima of the likelihood, in other basins, within 3.84 (chi-square) of the
+    estimate's: the profile interval spans their profiles too, so ``ci95_`` can be
+    wider than ``std_`` says (0 for the other intervals).
 ``bootstrap_thetas_`` (array or None)
     The refitted ``theta`` of every bootstrap resample.
 ``param_std_``, ``covariance_``
@@ -590,6 +594,7 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
         "std_": float(unc.std[0]) if found.std is None else found.std,
         "ci95_": found.ci95, "ci95_bounded_": found.bounded, "interval_": found.kind,
         "profile_": found.profile, "bootstrap_thetas_": found.bootstrap_thetas,
+        "rival_basins_": found.rivals,
         "params_": {**{n: float(getattr(drive, n)) for n in (*LINEAR_PARAMS, "fc_M", "fc_L")},
                     "tau_i": tau_i},
         "drive_": drive, "estimated_": pb.names,
