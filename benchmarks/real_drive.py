@@ -37,13 +37,18 @@ alone (the study prints its trial of largest error; ``--trial A:B`` each of tria
 to ``B - 1`` in turn) and prints its fitted parameters
 against the truth, each term test's reason, the profile's refits (``theta`` and the
 rise of the cost at each) and (analogue speeds) ``-2 log L`` of the
-true drive against the estimate's; on analogue records of a drive with a
+true drive against the estimate's, and with Coulomb friction and no loop that of the
+minimum nearest the truth (:func:`truth_basin_line`: another basin, or one the search
+missed); on analogue records of a drive with a
 current loop it also refits them with the loop's lag held at its true value, a check
 of the profile interval (:func:`held_loop_check`). ``--profile-grid N`` adds the
 profile's rise at ``N`` held ``theta`` each side of the estimate, against the parabola
 of its standard error (:class:`GridProfile`). ``--snr DB`` sets the analogue
-speeds' noise (default 40 dB). ``--prior-rel-std S`` gives each fit a prior of the
-linear parameters with relative std ``S`` instead of the truth without one: each
+speeds' noise (default 40 dB). ``--kernel-records`` makes the analogue records with
+the compiled kernel the estimator fits with instead of the scipy reference (a
+diagnostic: where a row is the same either way, what it shows is the estimator's
+statistics, not the two simulators' differences). ``--prior-rel-std S`` gives each
+fit a prior of the linear parameters with relative std ``S`` instead of the truth without one: each
 trial's prior values drawn about the truth with that std (:func:`trial_prior`), as a
 prior that says what it knows.
 
@@ -239,6 +244,44 @@ def truth_line(linear, theta, fc, tau_i, recs, fit) -> str:
             f"level; {'below: the search stopped short' if rise < 0 else 'above it'})")
 
 
+#: Names of the truth's-basin refit (:func:`truth_basin_line`): theta, the linear
+#: parameters and the Coulomb torques, refitted in their logarithms.
+BASIN_PARAMS = ("theta", *LINEAR_PARAMS, "fc_M", "fc_L")
+
+
+def truth_basin_line(linear, theta, fc, recs, fit) -> str:
+    """The minimum of the likelihood nearest the truth: scipy's least squares from the
+    true drive (a drive without a loop, with Coulomb friction), the speeds weighted by
+    the fit's noise levels, against the estimate in ``-2 log L`` (as
+    :func:`truth_line`). A minimum above the estimate is another basin, which the
+    profile interval spans if it reaches it (``rival_basins_``); one below, a basin the
+    search missed."""
+    from scipy.optimize import least_squares
+
+    sig = np.asarray(fit.noise_std_, float)
+
+    def residual(z):
+        d = bk.TwoMassDrive(**dict(zip(BASIN_PARAMS, np.exp(z), strict=True)))
+        out = []
+        for r, s in zip(recs, sig, strict=True):
+            sim = d.simulate(r.t, r.torque, initial_state=d.steady_state(r.torque[0]))
+            out += [(r.w_motor - sim.w_motor) / s[0], (r.w_load - sim.w_load) / s[1]]
+        return np.concatenate(out)
+
+    z0 = np.log([theta, *(linear[n] for n in LINEAR_PARAMS), *fc])
+    with warnings.catch_warnings():  # steps across grazing contacts
+        warnings.simplefilter("ignore")
+        z = least_squares(residual, z0, diff_step=1e-6, xtol=1e-12, ftol=1e-12).x
+    d = bk.TwoMassDrive(**dict(zip(BASIN_PARAMS, np.exp(z), strict=True)))
+    sims = [d.simulate(r.t, r.torque, initial_state=d.steady_state(r.torque[0])) for r in recs]
+    rise = residuals_m2ll(e for r, sim in zip(recs, sims, strict=True)
+                          for e in (r.w_motor - sim.w_motor, r.w_load - sim.w_load)
+                          ) - concentrated_m2ll(fit)
+    return (f"  the truth's basin: its minimum at theta {100 * (d.theta / theta - 1):+.2f} %, "
+            f"k_sh {100 * (d.k_sh / linear['k_sh'] - 1):+.1f} %, -2 log L {rise:+.4g} from "
+            f"the estimate's; rival basins spanned by the interval: {fit.rival_basins_}")
+
+
 def held_loop_check(linear, theta, recs, fit, tau_i, prior=None, **kw) -> str:
     """The records refitted with Coulomb friction and the loop's lag held at its true
     value. The profile of ``theta`` at that fit's ``theta`` lies at most its rise of
@@ -355,6 +398,8 @@ def _trial_alone(args, k, names, task: Task, effect, seed) -> None:
             print(_profile_line(fit.profile_, theta), flush=True)
         if not counts and fit.noise_ar_ is None:
             print(truth_line(linear, theta, fc, tau, recs, fit), flush=True)
+            if not tau and fc[0]:  # the refit's model: Coulomb friction, no loop
+                print(truth_basin_line(linear, theta, fc, recs, fit), flush=True)
     if tau and not counts:
         print(held_loop_check(linear, theta, recs, fit, tau, prior, **kw), flush=True)
 
