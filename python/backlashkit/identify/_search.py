@@ -66,11 +66,12 @@ RESTART_SCREEN_ITER = 5
 #: it beats it by more than this (chi-square units) on the longest short window.
 RESTART_MARGIN = 1.0
 #: A restart whose screen ends above the solution it restarts from, but by less than
-#: this (chi-square units, on the longest short window), is refined on the whole
-#: records too: where it lands in another basin within CHI2_95 above the best there,
-#: that basin is a rival, whose own profile the interval spans. The short window ranks
-#: two basins as the whole records do to about a unit; two units of slack keep a
-#: rival whose short-window rise is a little above CHI2_95.
+#: this (chi-square units, on the longest short window), and more than DISTINCT from
+#: it, is refined on the whole records too: where it lands in another basin within
+#: CHI2_95 above the best there, that basin is a rival, whose own profile the interval
+#: spans. The short window ranks two basins nearly as the whole records do (as
+#: WHOLE_RECORD_MARGIN has it); two units of slack keep a rival whose short-window rise
+#: is a little above CHI2_95.
 RIVAL_SCREEN = CHI2_95 + 2.0
 #: A held-theta refit of the profile search ending more than this (chi-square units)
 #: below the estimate's cost restarts the final refinement from there, at most
@@ -303,15 +304,19 @@ def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residua
     if not shifts:
         return best, list(rivals)
     ref = pb.refine(rows_short, best.z, max_iter)
-    seen, near = [ref], list(rivals)
+    seen, near = [ref], list(rivals)  # seen: the basins on the short window
+
+    def rival(st: LMState) -> bool:  # near enough, in a basin of its own
+        return st.cost < ref.cost + RIVAL_SCREEN and all(
+            np.max(np.abs(st.z - o.z)) > DISTINCT for o in seen)
+
     for kind, d_ in shifts:  # each from the best solution so far
         z0 = restart_start(kind, d_, best.z, pb.free, anchor)
         if z0 is None:
             continue
         st = pb.refine(rows_short, z0, min(RESTART_SCREEN_ITER, max_iter))
-        if not st.cost < ref.cost + RIVAL_SCREEN or not distinct([st], 1, math.inf, seen):
+        if not (st.cost < ref.cost or rival(st)):
             continue
-        seen.append(st)
         if not st.done:
             st = pb.refine(rows_short, st.z, max_iter - RESTART_SCREEN_ITER, state=st)
         if st.cost < ref.cost - RESTART_MARGIN:
@@ -319,7 +324,8 @@ def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residua
             if st.cost < best.cost:
                 best, st = st, best
             near.append(st)
-        elif st.cost < ref.cost + RIVAL_SCREEN:  # a rival, or better on the whole records
+        elif rival(st):  # a rival, or better on the whole records
+            seen.append(st)
             st = pb.refine(rows_full, st.z, max_iter)
             if st.cost < best.cost - RESTART_MARGIN:
                 best, st = st, best
