@@ -182,7 +182,10 @@ class ProfileLikelihood:
     from the estimate keep to its basin, and where the other basin is lower there the
     search goes on outwards from it (on the second drive of
     ``benchmarks/real_drive.py`` with Coulomb friction at 30 dB, several
-    intervals left out the truth that way; docs/validation/real-drives.md).
+    intervals left out the truth that way; docs/validation/real-drives.md). Where the
+    search found other minima within 3.84 above the estimate in other basins
+    (``IntervalInputs.rivals``), the profile follows each one's too, outwards on its
+    side away from the estimate, and the interval spans them all.
 
     Where the shaft rattles the profile is rough at the scale of a chi-square unit: a
     refit held at ``theta`` can end below the estimate's cost. The rise is then taken
