@@ -68,11 +68,13 @@ def test_noisy_torque_is_refused_by_every_identifier(step1):
 
 
 def test_why_the_limit(step1, monkeypatch):
-    """With the check lifted: 0.2 mN m of torque noise (0.13 % of the step) leaves the
-    joint fit within a fraction of a standard error of the fit without noise (0.003 of
-    one) and its standard error within 10 % (9 %); 0.3 mN m (0.19 %) moves theta by
-    0.47 of one and shrinks it by 38 %, 1 mN m some 3000 times with the truth thousands
-    of them away (the model rattles on the noise), which is why the limit is 0.05 %.
+    """With the check lifted: 0.2 and 0.3 mN m of torque noise (0.13 and 0.19 % of the
+    step) leave the joint fit within a fraction of a standard error of the fit without
+    noise and its standard error within 10 %; 1 mN m shrinks it tens of thousands of
+    times with the truth thousands of them away (the model rattles on the noise),
+    which is why there is a limit, at 0.05 %. (Before 0e5cc03, 0.3 mN m moved theta by
+    0.47 of one and shrank it by 38 %: a restart refined as a possible rival basin now
+    reaches the better point.)
 
     The standard error is from the exact sensitivities' Fisher information. Central
     differences across the rattling contact changes shrank it further, 4.4 times at
@@ -92,8 +94,8 @@ def test_why_the_limit(step1, monkeypatch):
               f"standard errors, standard error x{fit.std_ / clean.std_:.4g}")
     assert abs(fine.theta_ - clean.theta_) < 0.25 * clean.std_
     assert fine.std_ == pytest.approx(clean.std_, rel=0.1)
-    assert abs(shrunk.theta_ - clean.theta_) > 0.3 * clean.std_
-    assert shrunk.std_ < 0.75 * clean.std_
+    assert abs(shrunk.theta_ - clean.theta_) < 0.25 * clean.std_
+    assert shrunk.std_ == pytest.approx(clean.std_, rel=0.1)
     assert broken.std_ < 1e-3 * clean.std_
     assert abs(broken.theta_ - THETA) > 1000 * broken.std_
 
