@@ -229,17 +229,23 @@ def residuals_m2ll(residuals) -> float:
     return sum(e.size * math.log(float(np.mean(e ** 2))) for e in residuals)
 
 
+def steady_errors(drive, recs, loop=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(w_M - sim, w_L - sim)`` per record of ``drive`` simulated by the compiled
+    kernel from the records' steady start."""
+    sims = [drive.simulate(r.t, r.torque, actuator=loop,
+                           initial_state=drive.steady_state(r.torque[0])) for r in recs]
+    return [(r.w_motor - sim.w_motor, r.w_load - sim.w_load)
+            for r, sim in zip(recs, sims, strict=True)]
+
+
 def truth_line(linear, theta, fc, tau_i, recs, fit) -> str:
     """``-2 log L`` of the true drive (the compiled kernel from the records' steady
     start) against the fit's: a truth below the estimate means the search stopped
     short of the maximum; above it, the noise favours the estimate."""
     drive = bk.TwoMassDrive(**linear, theta=theta, fc_M=fc[0], fc_L=fc[1])
     loop = bk.CurrentLoop(tau_i=tau_i) if tau_i else None
-    sims = [drive.simulate(r.t, r.torque, actuator=loop,
-                           initial_state=drive.steady_state(r.torque[0])) for r in recs]
-    rise = residuals_m2ll(e for r, sim in zip(recs, sims, strict=True)
-                          for e in (r.w_motor - sim.w_motor, r.w_load - sim.w_load)
-                          ) - concentrated_m2ll(fit)
+    rise = (residuals_m2ll(e for pair in steady_errors(drive, recs, loop) for e in pair)
+            - concentrated_m2ll(fit))
     return (f"  the truth: -2 log L {rise:+.4g} from the estimate's (white noise of fitted "
             f"level; {'below: the search stopped short' if rise < 0 else 'above it'})")
 
@@ -262,21 +268,17 @@ def truth_basin_line(linear, theta, fc, recs, fit) -> str:
 
     def residual(z):
         d = bk.TwoMassDrive(**dict(zip(BASIN_PARAMS, np.exp(z), strict=True)))
-        out = []
-        for r, s in zip(recs, sig, strict=True):
-            sim = d.simulate(r.t, r.torque, initial_state=d.steady_state(r.torque[0]))
-            out += [(r.w_motor - sim.w_motor) / s[0], (r.w_load - sim.w_load) / s[1]]
-        return np.concatenate(out)
+        return np.concatenate([e / s_ for pair, s in zip(steady_errors(d, recs), sig,
+                                                          strict=True)
+                               for e, s_ in zip(pair, s, strict=True)])
 
     z0 = np.log([theta, *(linear[n] for n in LINEAR_PARAMS), *fc])
     with warnings.catch_warnings():  # steps across grazing contacts
         warnings.simplefilter("ignore")
         z = least_squares(residual, z0, diff_step=1e-6, xtol=1e-12, ftol=1e-12).x
     d = bk.TwoMassDrive(**dict(zip(BASIN_PARAMS, np.exp(z), strict=True)))
-    sims = [d.simulate(r.t, r.torque, initial_state=d.steady_state(r.torque[0])) for r in recs]
-    rise = residuals_m2ll(e for r, sim in zip(recs, sims, strict=True)
-                          for e in (r.w_motor - sim.w_motor, r.w_load - sim.w_load)
-                          ) - concentrated_m2ll(fit)
+    rise = (residuals_m2ll(e for pair in steady_errors(d, recs) for e in pair)
+            - concentrated_m2ll(fit))
     return (f"  the truth's basin: its minimum at theta {100 * (d.theta / theta - 1):+.2f} %, "
             f"k_sh {100 * (d.k_sh / linear['k_sh'] - 1):+.1f} %, -2 log L {rise:+.4g} from "
             f"the estimate's; rival basins spanned by the interval: {fit.rival_basins_}")

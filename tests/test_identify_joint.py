@@ -722,7 +722,7 @@ def test_ambiguity_starts_continue_more_candidates():
     theta 0.5 deg, 20 dB): the two continuation paths end in distinct minima, and the
     usual candidates all lead to one with theta 29 % low and k_sh 55 % high (a rival
     basin's profile, ``IntervalInputs.rivals``, now finds a lower point there, still
-    far off, with k_sh low, and the estimate moves to it), outside its interval;
+    far off, and the estimate moves to it), outside its interval;
     continuing more first-horizon solutions finds a lower minimum whose interval
     covers the truth."""
     drive, recs, prior = _robustness_trial(5, 0, 10, 20, 0.5, 20.0)
