@@ -32,25 +32,26 @@
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
-[--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial ``K``
-alone (the study prints its trial of largest error; ``--trial A:B`` each of trials ``A``
-to ``B - 1`` in turn) and prints its fitted parameters
-against the truth, each term test's reason, the profile's refits (``theta`` and the
-rise of the cost at each) and (analogue speeds) ``-2 log L`` of the
-true drive against the estimate's, and with Coulomb friction and no loop that of the
-minimum nearest the truth (:func:`truth_basin_line`: another basin, or one the search
-missed); on analogue records of a drive with a
-current loop it also refits them with the loop's lag held at its true value, a check
-of the profile interval (:func:`held_loop_check`). ``--profile-grid N`` adds the
-profile's rise at ``N`` held ``theta`` each side of the estimate, against the parabola
-of its standard error (:class:`GridProfile`). ``--snr DB`` sets the analogue
-speeds' noise (default 40 dB). ``--kernel-records`` makes the analogue records with
-the compiled kernel the estimator fits with instead of the scipy reference (a
-diagnostic: where a row is the same either way, what it shows is the estimator's
-statistics, not the two simulators' differences). ``--prior-rel-std S`` gives each
-fit a prior of the linear parameters with relative std ``S`` instead of the truth without one: each
-trial's prior values drawn about the truth with that std (:func:`trial_prior`), as a
-prior that says what it knows.
+[--speed --repeats 3] [--crb] [--offsets] [--trial K]``; ``--trial K`` reruns trial
+``K`` alone (the study prints its trial of largest error; ``--trial A:B`` each of trials
+``A`` to ``B - 1`` in turn) and prints its fitted parameters against the truth, each
+term test's reason, the profile's refits (``theta`` and the rise of the cost at each)
+and (analogue speeds) ``-2 log L`` of the true drive against the estimate's, and that of
+the minimum nearest the truth (:func:`truth_basin_line`: another basin, or one the
+search missed); ``--trial K,L,M`` reruns the trials listed (a row prints those beyond
+its error limit so); on analogue records of a drive with a current loop it also refits
+them with the loop's lag held at its true value, a check of the profile interval
+(:func:`held_loop_check`), and with ``--free-loop`` from each of the lag's starts with
+the lag next to free (:func:`free_loop_lines`). ``--profile-grid N`` adds the profile's
+rise at ``N`` held ``theta`` each side of the estimate, against the parabola of its
+standard error (:class:`GridProfile`). ``--snr DB`` sets the analogue speeds' noise
+(default 40 dB). ``--kernel-records`` makes the analogue records with the compiled
+kernel the estimator fits with instead of the scipy reference (a diagnostic: where a row
+is the same either way, what it shows is the estimator's statistics, not the two
+simulators' differences). ``--prior-rel-std S`` gives each fit a prior of the linear
+parameters with relative std ``S`` instead of the truth without one: each trial's prior
+values drawn about the truth with that std (:func:`trial_prior`), as a prior that says
+what it knows.
 
 A row too long for one run is measured in slices, each of one scenario (one
 ``--drives`` and one ``--effects``): ``--slice A:B --save FILE`` runs trials ``A`` to
@@ -76,10 +77,13 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import norm
 
 import backlashkit as bk
 from backlashkit.identify.crb import LINEAR_PARAMS, cramer_rao_bound
 from backlashkit.identify.intervals import ProfileLikelihood, _HeldTheta
+from backlashkit.identify.terms import TAU_START_SAMPLES
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA, protocol_records
 from backlashkit.parallel import ProgressBar, map_tasks, task_seeds
 from backlashkit.verify import reference_angles, reference_simulate
@@ -250,38 +254,51 @@ def truth_line(linear, theta, fc, tau_i, recs, fit) -> str:
             f"level; {'below: the search stopped short' if rise < 0 else 'above it'})")
 
 
-#: Names of the truth's-basin refit (:func:`truth_basin_line`): theta, the linear
-#: parameters and the Coulomb torques, refitted in their logarithms.
-BASIN_PARAMS = ("theta", *LINEAR_PARAMS, "fc_M", "fc_L")
+def basin_params(fc, tau_i) -> tuple[str, ...]:
+    """Names of the truth's-basin refit (:func:`truth_basin_line`), refitted in their
+    logarithms: theta and the linear parameters, with the Coulomb torques and the
+    loop's lag where the drive has them."""
+    return ("theta", *LINEAR_PARAMS, *(("fc_M", "fc_L") if fc[0] else ()),
+            *(("tau_i",) if tau_i else ()))
 
 
-def truth_basin_line(linear, theta, fc, recs, fit) -> str:
+def _basin_errors(names, z, recs):
+    """:func:`steady_errors` of the drive (and loop) whose ``names`` have logarithms
+    ``z``."""
+    values = dict(zip(names, np.exp(z), strict=True))
+    tau_i = values.pop("tau_i", 0.0)
+    drive = bk.TwoMassDrive(**values)
+    return drive, steady_errors(drive, recs, bk.CurrentLoop(tau_i=tau_i) if tau_i else None)
+
+
+def truth_basin_line(linear, theta, fc, tau_i, recs, fit) -> str:
     """The minimum of the likelihood nearest the truth: scipy's least squares from the
-    true drive (a drive without a loop, with Coulomb friction), the speeds weighted by
+    true drive (the true model's terms, :func:`basin_params`), the speeds weighted by
     the fit's noise levels, against the estimate in ``-2 log L`` (as
-    :func:`truth_line`). A minimum above the estimate is another basin, which the
-    profile interval spans if it reaches it (``rival_basins_``); one below, a basin the
-    search missed."""
-    from scipy.optimize import least_squares
-
+    :func:`truth_line`). A minimum above the estimate means the records point to the
+    estimate, and the profile interval spans the other basin if it reaches it
+    (``rival_basins_``); one below, a basin the search missed."""
     sig = np.asarray(fit.noise_std_, float)
+    names = basin_params(fc, tau_i)
 
     def residual(z):
-        d = bk.TwoMassDrive(**dict(zip(BASIN_PARAMS, np.exp(z), strict=True)))
-        return np.concatenate([e / s_ for pair, s in zip(steady_errors(d, recs), sig,
+        return np.concatenate([e / s_ for pair, s in zip(_basin_errors(names, z, recs)[1], sig,
                                                           strict=True)
                                for e, s_ in zip(pair, s, strict=True)])
 
-    z0 = np.log([theta, *(linear[n] for n in LINEAR_PARAMS), *fc])
+    truth = {"theta": theta, **linear, "fc_M": fc[0], "fc_L": fc[1], "tau_i": tau_i}
     with warnings.catch_warnings():  # steps across grazing contacts
         warnings.simplefilter("ignore")
-        z = least_squares(residual, z0, diff_step=1e-6, xtol=1e-12, ftol=1e-12).x
-    d = bk.TwoMassDrive(**dict(zip(BASIN_PARAMS, np.exp(z), strict=True)))
-    rise = (residuals_m2ll(e for pair in steady_errors(d, recs) for e in pair)
-            - concentrated_m2ll(fit))
+        z = least_squares(residual, np.log([truth[n] for n in names]), diff_step=1e-6,
+                          xtol=1e-12, ftol=1e-12).x
+    d, errors = _basin_errors(names, z, recs)
+    rise = residuals_m2ll(e for pair in errors for e in pair) - concentrated_m2ll(fit)
+    verdict = ("above the estimate: the records point to the estimate" if rise > 0
+               else "below the estimate: the search missed it")
     return (f"  the truth's basin: its minimum at theta {100 * (d.theta / theta - 1):+.2f} %, "
             f"k_sh {100 * (d.k_sh / linear['k_sh'] - 1):+.1f} %, -2 log L {rise:+.4g} from "
-            f"the estimate's; rival basins spanned by the interval: {fit.rival_basins_}")
+            f"the estimate's, {verdict}; rival basins spanned by the interval: "
+            f"{fit.rival_basins_}")
 
 
 def held_loop_check(linear, theta, recs, fit, tau_i, prior=None, **kw) -> str:
@@ -301,6 +318,32 @@ def held_loop_check(linear, theta, recs, fit, tau_i, prior=None, **kw) -> str:
             f"({100 * (held.theta_ / theta - 1):+.2f} %), -2 log L {rise:+.3g} from the "
             f"estimate's (white noise of fitted level), "
             f"{'inside' if lo <= held.theta_ <= hi else 'outside'} its 95 % interval")
+
+
+#: Relative prior stds of :func:`free_loop_lines`: the linear parameters and the lag
+#: fitted about the prior's values and a lag's start with stds of 1000 % and 500 %, so
+#: that their penalty rows weigh next to nothing against the records (a lag a quarter
+#: of its start costs about 0.08 in ``-2 log L``).
+FREE_LINEAR_STD, FREE_LAG_STD = 10.0, 5.0
+
+
+def free_loop_lines(linear, theta, recs, fit, prior=None) -> str:
+    """The records refitted with Coulomb friction and a current loop whose lag is next
+    to free (:data:`FREE_LAG_STD`), once from each of the lag's starts
+    (``terms.TAU_START_SAMPLES``, held through the search, then fitted): how far the
+    model with a loop lets ``theta`` go at a cost near the estimate's, where the fit
+    dropped the loop. ``prior``: the fit's prior values (default the truth's)."""
+    rel = {**dict.fromkeys(LINEAR_PARAMS, FREE_LINEAR_STD), "tau_i": FREE_LAG_STD}
+    out = ["  the loop next to free, from each start of its lag (theta, its std_, the "
+           "lag, -2 log L from the estimate's):"]
+    for k in TAU_START_SAMPLES:
+        f = _fit(prior or linear, recs, friction="coulomb", prior_rel_std=rel,
+                 actuator=bk.CurrentLoop(tau_i=k * recs[0].ts))
+        out.append(f"    from {k * recs[0].ts * 1e3:g} ms: " + (
+            f"refused ({f})" if isinstance(f, str) else
+            f"{100 * (f.theta_ / theta - 1):+.2f} %, {100 * f.std_ / theta:.2f} %, "
+            f"{1e3 * f.tau_i_:.3g} ms, {concentrated_m2ll(f) - concentrated_m2ll(fit):+.3g}"))
+    return "\n".join(out)
 
 
 def trial_records(task: Task, seed) -> list:
@@ -362,9 +405,9 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau, args.snr)
     task = Task(linear, theta, clean, counts, args.snr, args.prior_rel_std)
-    if args.trial is not None:  # each trial's own seed, as in the whole study's (spawned
-        seeds = task_seeds(seed, args.trial[1])  # once: a SeedSequence spawns anew each call)
-        for k in range(*args.trial):
+    if args.trial is not None:  # each trial's own seed, as in the whole study's, spawned
+        seeds = task_seeds(seed, max(args.trial) + 1)  # once (it spawns anew each call)
+        for k in args.trial:
             _trial_alone(args, k, (dname, ename), task, effect, seeds[k])
         return
     first, stop = args.slice or (0, args.trials)
@@ -400,10 +443,11 @@ def _trial_alone(args, k, names, task: Task, effect, seed) -> None:
             print(_profile_line(fit.profile_, theta), flush=True)
         if not counts and fit.noise_ar_ is None:
             print(truth_line(linear, theta, fc, tau, recs, fit), flush=True)
-            if not tau and fc[0]:  # the refit's model: Coulomb friction, no loop
-                print(truth_basin_line(linear, theta, fc, recs, fit), flush=True)
+            print(truth_basin_line(linear, theta, fc, tau, recs, fit), flush=True)
     if tau and not counts:
         print(held_loop_check(linear, theta, recs, fit, tau, prior, **kw), flush=True)
+        if args.free_loop and not isinstance(fit, str):
+            print(free_loop_lines(linear, theta, recs, fit, prior), flush=True)
 
 
 def seeded_trial(pair):
@@ -498,10 +542,11 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
     shift = statistics.median(shifts) if shifts else math.nan
     floor = ERR_FLOOR if math.isnan(crb) else max(ERR_FLOOR, CRB_FACTOR * crb / theta)
     limit = 100 * floor
-    beyond = sum(e > limit for e in err)
+    beyond = [first + i for i, r in enumerate(res)
+              if "theta" in r and abs(r["theta"] / theta - 1) * 100 > limit]
     print(f"{dname:<7} {ename:<15} {n:>4}/{len(res):<3} "
           f"{statistics.median(err) if err else math.nan:>11.2f} "
-          f"{max(err) if err else math.nan:>7.2f} {100 * crb / theta:>6.2f} {beyond:>6d} "
+          f"{max(err) if err else math.nan:>7.2f} {100 * crb / theta:>6.2f} {len(beyond):>6d} "
           f"{cover:>6.1%} "
           f"{f'{0.95 - band:.1%}-{0.95 + band:.1%}':>14} {kept['friction']:>8.1%} "
           f"{kept['actuator']:>9.1%} {rise:>9.3g} {shift:>6.2f} {seconds:>6.0f}", flush=True)
@@ -509,10 +554,14 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
         k = max(range(len(res)), key=lambda i: abs(res[i].get("theta", theta) / theta - 1))
         print(f"  largest error in trial {first + k}: {_trial_line(res[k], theta)}",
               flush=True)
+        if beyond:  # rerun them with --trial to tell a search's miss from the records'
+            print(f"  beyond the error limit of {limit:.3g} %: trials "
+                  f"{','.join(map(str, beyond))}", flush=True)
         if n > 1:  # does the interval's width match the estimates' spread?
-            print(f"  theta's standard deviation over the trials "
-                  f"{statistics.stdev(r['theta'] for r in ok):.3g} rad, median std_ "
-                  f"{statistics.median(r['std'] for r in ok):.3g} rad", flush=True)
+            spread = statistics.stdev(r['theta'] for r in ok)
+            print(f"  theta's standard deviation over the trials {spread:.3g} rad, median "
+                  f"std_ {statistics.median(r['std'] for r in ok):.3g} rad", flush=True)
+            print(_expected_beyond(n, limit / 100 * theta, crb, spread), flush=True)
             # a bias, or errors wider than std_ says, for every trial or for a few
             z = [abs(r["theta"] - theta) / r["std"] for r in ok if r["std"] > 0]
             print(f"  mean error {statistics.fmean(r['theta'] / theta - 1 for r in ok):+.2%}, "
@@ -523,6 +572,15 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)
             break
+
+
+def _expected_beyond(n: int, limit: float, crb: float, spread: float) -> str:
+    """How many of ``n`` fits normal errors would put beyond the error limit (rad): of
+    the bound's spread ``crb`` (what the limit assumes), and of the trials' ``spread``."""
+    at = ", ".join(f"{2 * n * norm.sf(limit / s):.2g} {what}"
+                   for s, what in ((crb, "at the bound"), (spread, "at the trials' spread"))
+                   if math.isfinite(s) and s > 0)
+    return f"  fits beyond the limit that normal errors would give: {at}"
 
 
 def _print_by_loop(ok, theta) -> None:
@@ -666,9 +724,9 @@ def main(argv=None) -> int:
     p.add_argument("--effects", default=",".join(EFFECTS),
                    help=f"comma-separated scenarios (default: {', '.join(EFFECTS)}; "
                         f"'extended': {', '.join(EXTENDED)})")
-    p.add_argument("--trial", type=_trials, default=None, metavar="K or A:B",
-                   help="run only trial K (from 0), or trials A to B-1, of each scenario, "
-                        "each alone as in the study")
+    p.add_argument("--trial", type=_trials, default=None, metavar="K, A:B or K,L,M",
+                   help="run only trial K (from 0), trials A to B-1, or the trials listed, "
+                        "of each scenario, each alone as in the study")
     p.add_argument("--profile-grid", type=int, default=0, metavar="N",
                    help="with --trial: the profile's rise at N held theta each side, up to "
                         f"{GRID_SPAN:g} standard errors")
@@ -676,6 +734,9 @@ def main(argv=None) -> int:
                    help="give each fit a prior of the linear parameters with relative std "
                         "S, its values drawn about the truth with that std (default 0: the "
                         "truth as the prior, no prior std)")
+    p.add_argument("--free-loop", action="store_true",
+                   help="with --trial, on records of a drive with a loop: also refit them "
+                        "with the loop's lag next to free from each of its starts")
     p.add_argument("--kernel-records", action="store_true",
                    help="analogue records made by the compiled kernel the estimator fits "
                         "with, not the scipy reference: a diagnostic that tells the two "
@@ -710,17 +771,19 @@ def main(argv=None) -> int:
     return 0
 
 
-def _trials(text: str) -> tuple[int, int]:
-    """``K`` as trials ``(K, K + 1)``, or ``A:B`` as :func:`_slice`."""
+def _trials(text: str) -> list[int]:
+    """``K`` as ``[K]``, ``A:B`` as trials ``A`` to ``B - 1`` (:func:`_slice`), or
+    ``K,L,M`` as those trials."""
     if ":" in text:
-        return _slice(text)
+        return list(range(*_slice(text)))
     try:
-        k = int(text)
+        ks = [int(x) for x in text.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected K or A:B (integers), got {text!r}") from None
-    if k < 0:
-        raise argparse.ArgumentTypeError(f"expected a trial >= 0, got {k}")
-    return k, k + 1
+        raise argparse.ArgumentTypeError(
+            f"expected K, A:B or K,L,M (integers), got {text!r}") from None
+    if min(ks) < 0:
+        raise argparse.ArgumentTypeError(f"expected trials >= 0, got {text!r}")
+    return ks
 
 
 def _slice(text: str) -> tuple[int, int]:

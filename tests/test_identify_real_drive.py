@@ -501,6 +501,56 @@ def test_the_interval_spans_a_rival_basin(monkeypatch):
     assert fit.ci95_[0] <= 0.02 <= fit.ci95_[1]
 
 
+def test_the_coulomb_start_does_not_lean_on_the_priors_viscous_friction():
+    """The Coulomb torques start from the line through the held levels, whose intercept
+    is their sum whatever the prior's viscous friction. From one level, the prior's
+    viscous friction must be subtracted, and 10 % too much of it leaves nothing: the
+    start falls to its floor, a factor 16 below the truth's half-sum."""
+    from backlashkit.identify.terms import FC_START_FLOOR, coulomb_start
+
+    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=5, snr=30.0)
+    off = bk.TwoMassDrive(**{**OTHER, "f_M": 1.1 * OTHER["f_M"], "f_L": 1.1 * OTHER["f_L"]})
+    assert coulomb_start(recs, off) == pytest.approx(0.015, rel=0.1)
+    assert coulomb_start(recs, bk.TwoMassDrive(**OTHER)) == coulomb_start(recs, off)
+    assert coulomb_start(recs[1:], off) == FC_START_FLOOR * A2  # one level: the floor
+
+
+def _drawn_prior(seed: np.random.SeedSequence, rel: float) -> dict:
+    """The prior ``benchmarks/real_drive.py --prior-rel-std`` draws for the trial of
+    ``seed``: each linear parameter times ``1 + rel e``, ``e`` standard normal clipped
+    at 3, from the stream ``2**20`` of the trial's seed."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed.entropy,
+                                                       spawn_key=(*seed.spawn_key, 1 << 20)))
+    eps = np.clip(rng.standard_normal(len(OTHER)), -3.0, 3.0)
+    return {n: x * (1.0 + rel * e) for (n, x), e in zip(OTHER.items(), eps, strict=True)}
+
+
+def test_a_prior_off_in_its_viscous_friction_still_finds_the_coulomb_torques(monkeypatch):
+    """Trial 175 of the second drive's Coulomb row at 30 dB with a 10 % prior
+    (``benchmarks/real_drive.py --prior-rel-std 0.1``): the prior's ``f_L`` is 18 % high,
+    so the Coulomb start from the prior's viscous friction fell to its floor, and the
+    search ended with ``fc_M`` at 0, ``k_sh`` 38 % low and theta 9.2 % low, over 90
+    above the truth in ``-2 log L``. From the held levels' line it ends near the truth
+    (``-s`` prints both)."""
+    from backlashkit.identify import terms
+
+    seed = np.random.SeedSequence(2020, spawn_key=(1, 1, 175))
+    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=seed, snr=30.0)
+    prior = _drawn_prior(seed, 0.1)
+    kw = {"prior_rel_std": 0.1, "interval": bk.FisherInterval()}
+    fit = _fit(recs, prior, **kw)
+    monkeypatch.setattr(terms, "LEVEL_SPREAD", math.inf)  # the start from the prior's
+    stuck = _fit(recs, prior, **kw)
+    rise = _m2ll(stuck, recs) - _m2ll(fit, recs)
+    print(f"theta {100 * (fit.theta_ / 0.02 - 1):+.2f} % against "
+          f"{100 * (stuck.theta_ / 0.02 - 1):+.2f} % from the prior's friction, -2 log L "
+          f"{rise:+.4g} above")
+    assert stuck.theta_ < 0.95 * 0.02
+    assert rise > 50.0
+    assert fit.theta_ == pytest.approx(0.02, rel=THETA_RTOL)
+    assert fit.fc_M_ == pytest.approx(0.01, rel=0.3)
+
+
 def test_a_search_again_from_a_fit_whose_friction_underflowed(coulomb):
     """The misfit restart searches again from the first fit's linear parameters; a
     friction that fit drove to 0 (its logarithm below the floats' range) raised ``math

@@ -99,6 +99,11 @@ FRICTION_CHOICES = ("auto", "viscous", "coulomb")
 #: of the largest held torque: a negligible model change, which the fit (in natural
 #: units, ``Problem.scales``) moves to 0 within a step where the data show no friction.
 FC_START_FLOOR = 1e-3
+#: The held speeds must differ by this factor for the line through the levels to give
+#: the Coulomb torques' start (:func:`coulomb_start`): closer levels make its intercept
+#: an extrapolation that amplifies the speeds' noise (paper A's two levels differ by a
+#: factor of about 6).
+LEVEL_SPREAD = 1.5
 #: Starts of a fitted current-loop time constant, in sample times. The loop is added to
 #: the model after the search, from its result: where the drive also has Coulomb
 #: friction, that result has traded the loop's lag for friction and backlash, and a
@@ -547,35 +552,48 @@ def torque_scale(recs: Sequence[Record]) -> float:
 
 
 def coulomb_start(recs: Sequence[Record], prior: TwoMassDrive) -> float:
-    """Half the Coulomb torque the held levels show beside the prior's viscous friction.
+    """Half the Coulomb torque the held levels show.
 
     Before each step-down the drive turns steadily: ``T = (f_M + f_L) w + fc_M + fc_L``.
-    The median over records of ``T - (f_M + f_L) w``, halved, floored at
-    :data:`FC_START_FLOOR` of the held torque, starts both Coulomb torques.
+    Where the held speeds differ by :data:`LEVEL_SPREAD` or more, the line through the
+    levels ``(|w|, |T|)`` gives ``fc_M + fc_L`` as its intercept, whatever the prior's
+    viscous friction. Otherwise the median over records of ``T - (f_M + f_L) w`` with
+    the prior's: a small difference of large numbers, which a prior 10 % off in
+    ``f_M + f_L`` can put at 0 or at several times the truth. Halved, floored at
+    :data:`FC_START_FLOOR` of the held torque, it starts both Coulomb torques.
 
     Parameters
     ----------
     recs : sequence of Record
         Step-down records (others are skipped).
     prior : TwoMassDrive
-        The prior (its viscous frictions).
+        The prior (its viscous frictions, where one level is held).
 
     Returns
     -------
     float
         The start of each Coulomb torque in N m.
     """
-    f_sum = prior.f_M + prior.f_L
-    excess, levels = [], []
+    w, t = (np.abs(x) for x in held_levels(recs))
+    if t.size == 0:
+        return FC_START_FLOOR
+    slope, total = (np.polyfit(w, t, 1) if w.max() >= LEVEL_SPREAD * w.min()
+                    else (math.nan, math.nan))
+    if not slope > 0:  # one level, or a line no drive has: the prior's viscous friction
+        total = float(np.median(t - (prior.f_M + prior.f_L) * w))
+    return max(0.5 * float(total), FC_START_FLOOR * float(t.max()))
+
+
+def held_levels(recs: Sequence[Record]) -> tuple[np.ndarray, np.ndarray]:
+    """The motor's mean speed (rad/s) over the last 0.1 s of each record's hold before
+    its step-down, and the held torque (N m); records without a step-down skipped."""
+    speeds, levels = [], []
     for rec in recs:
         try:
             i_s, _, level, _ = find_step_down(rec)
         except InputError:
             continue
         n = max(1, min(i_s // 4, int(round(0.1 / rec.ts))))  # the last 0.1 s of the hold
-        w = float(np.mean(rec.w_motor[i_s - n : i_s]))
-        excess.append(abs(level) - f_sum * abs(w))
-        levels.append(abs(level))
-    scale = max(levels) if levels else 1.0
-    fc = 0.5 * float(np.median(excess)) if excess else 0.0
-    return max(fc, FC_START_FLOOR * scale)
+        speeds.append(float(np.mean(rec.w_motor[i_s - n : i_s])))
+        levels.append(float(level))
+    return np.array(speeds), np.array(levels)
