@@ -435,6 +435,9 @@ def _trial_alone(args, k, names, task: Task, effect, seed) -> None:
     print(f"{names[0]}, {names[1]}, trial {k}: {_trial_line(_summary(fit), theta)}", flush=True)
     if grid is not None and not isinstance(fit, str):
         print(_grid_lines(grid, fit, theta), flush=True)
+    if task.prior_rel_std:  # the drawn prior's values, off the truth
+        print("  prior: " + ", ".join(f"{n} {100 * (prior[n] / x - 1):+.1f} %"
+                                      for n, x in linear.items()), flush=True)
     if not isinstance(fit, str):
         print(_fitted_line(fit, linear, fc, tau), flush=True)
         for c in fit.choices_:
