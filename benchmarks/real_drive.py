@@ -58,7 +58,9 @@ A row too long for one run is measured in slices, each of one scenario (one
 ``B - 1`` of ``--trials`` with the seeds the whole row gives them and writes their
 results with the git objects of the code they ran (``python/``, ``crates/`` and this
 script; it refuses uncommitted changes there); ``--merge FILE ...`` prints the row
-from slices that tile the trials with one seed, SNR and code.
+from slices that tile the trials with one seed, SNR and code; ``--against OTHER`` adds
+the trials whose interval holds the truth in one of the two rows only (another saved
+row of the same drive and trials, e.g. with another prior or code).
 """
 
 from __future__ import annotations
@@ -528,6 +530,29 @@ def merge(args) -> None:
     _print_header()
     _print_row(docs[0]["drive"], docs[0]["effect"], theta, res, docs[0]["crb"],
                sum(d["seconds"] for d in docs))
+    if args.against:
+        _print_against(res, json.loads(Path(args.against).read_text()), docs[0]["drive"],
+                       theta)
+
+
+def _print_against(res: list, other: dict, dname: str, theta: float) -> None:
+    """The trials covered in the merged row ``res`` (from trial 0) or in the saved row
+    ``other`` alone, each with both rows' lines (a change of code or prior: which
+    trials it won or lost)."""
+    if other["drive"] != dname or other["first"] != 0:
+        raise SystemExit("real_drive.py: --against needs a row of the same drive from "
+                         "trial 0")
+
+    def covers(r) -> bool:
+        return "theta" in r and r["ci95"][0] <= theta <= r["ci95"][1]
+
+    for name, a, b in (("this row only", res, other["results"]),
+                       ("the other row only", other["results"], res)):
+        ks = [i for i, (x, y) in enumerate(zip(a, b, strict=False)) if covers(x) and not covers(y)]
+        print(f"  covered in {name}: {len(ks)} trials", flush=True)
+        for i in ks:
+            print(f"    trial {i}: {_trial_line(res[i], theta)}; the other: "
+                  f"{_trial_line(other['results'][i], theta)}", flush=True)
 
 
 def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
@@ -758,6 +783,10 @@ def main(argv=None) -> int:
                    help="print the row of one scenario from its saved slices")
     p.add_argument("--partial", action="store_true",
                    help="with --merge: slices that tile only the first trials of the row")
+    p.add_argument("--against", default=None, metavar="FILE",
+                   help="with --merge: also list the trials whose interval holds the truth "
+                        "in one of the two rows only (FILE: another saved row of the same "
+                        "trials), with both estimates")
     args = p.parse_args(argv)
     args.drives = args.drives.split(",")
     args.effects = [e for name in args.effects.split(",")
