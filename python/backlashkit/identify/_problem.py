@@ -201,10 +201,9 @@ class Problem:
         return out
 
     def residual(self, spans: Sequence[Span], horizon: float | None, sig: np.ndarray,
-                 ar: np.ndarray | None = None, *, penalised: bool = True) -> Residual:
-        """The weighted residual over ``spans`` within ``horizon`` (:class:`Residual`);
-        ``penalised=False``: its prior rows 0 (the search's windows)."""
-        return Residual(self, spans, horizon, sig, ar, penalised=penalised)
+                 ar: np.ndarray | None = None) -> Residual:
+        """The weighted residual over ``spans`` within ``horizon`` (:class:`Residual`)."""
+        return Residual(self, spans, horizon, sig, ar)
 
     def refine(self, res: Residual, z0: np.ndarray, max_iter: int, bounds=None,
                state: LMState | None = None) -> LMState:
@@ -231,18 +230,13 @@ class Residual:
     """Weighted residual rows of log-parameter rows: every selected sample of ``w_M``
     then ``w_L`` per span (of the angles ``phi_M``, ``phi_L`` from the span's start,
     less their mean, where the record holds encoder angles), divided by its noise
-    level, then the prior's rows (0 where not ``penalised``: the search's windows hold
-    a small part of the records' information, and a prior sized for all of it drew
-    their solutions into the ringing phase of the prior's values; see
-    :func:`~backlashkit.identify._search.locate`). With
+    level, then the prior's rows. With
     ``ar`` (record, channel, lag) each channel is whitened by ``A(q)`` first and
     ``sig`` is the innovation's std."""
 
     def __init__(self, problem: Problem, spans: Sequence[Span], horizon: float | None,
-                 sig: np.ndarray, ar: np.ndarray | None = None, *,
-                 penalised: bool = True) -> None:
+                 sig: np.ndarray, ar: np.ndarray | None = None) -> None:
         self.problem, self.spans, self.sig, self.ar = problem, list(spans), sig, ar
-        self.penalised = penalised
         self.sels = selection(spans, horizon)
         self.sizes = [sample_count(s_) for s_ in self.sels]
         self.ends = [s_.stop if isinstance(s_, slice) else int(s_[-1]) + 1 for s_ in self.sels]
@@ -267,9 +261,6 @@ class Residual:
                     np.subtract(y, model[c][:, s_], out=dst)
                     np.divide(dst, self.sig[sp.k, c], out=dst)
                 pos += m - lag
-        if not self.penalised:
-            out[:, pos:] = 0.0
-            return out
         p = pb.values(z_rows)[:, 1:]
         with np.errstate(invalid="ignore"):  # inf / inf: no penalty on an overflow
             out[:, pos:] = np.nan_to_num((p - pb.p_prior) / (pb.pen * pb.p_prior))
@@ -348,8 +339,7 @@ class Residual:
         with np.errstate(invalid="ignore"):  # no penalty (inf) on the terms' parameters
             prior = np.nan_to_num(scale[1:] / (pb.pen * pb.p_prior))
         out[pos:] = 0.0
-        if self.penalised:
-            out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
+        out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
         return out
 
     def channels(self, r: np.ndarray):

@@ -209,7 +209,7 @@ def continue_on(pb: Problem, path: Sequence[float], states: list[LMState],
     caches the residuals by window); ``trail`` receives the states of every window."""
     for hz in path:
         if hz not in windows:
-            windows[hz] = pb.residual(pb.screen, hz, sig, penalised=False)
+            windows[hz] = pb.residual(pb.screen, hz, sig)
         states = [pb.refine(windows[hz], st.z, max_iter) for st in states]
         if trail is not None:
             trail.append(states)
@@ -703,17 +703,9 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     """Stages 1-4 from ``z_anchor``: the grid, the first window, the continuation, the
     whole records and the restarts. Returns the best point, the starts' ``theta``, the
     two-step estimate (``two_step`` reuses one already made), whether the landscape
-    was ambiguous and the rivals of the best point (:func:`rivals_of`).
-
-    The short windows leave the prior's penalty out (``penalised=False``): they only
-    lead to a basin, which the whole records then refine with it. A window holds a
-    small part of the records' information, so a prior std sized for all of it
-    outweighs the window's data and draws its solution towards the prior's values,
-    whose ringing phase may be another basin's: with a prior drawn 10 % about the
-    truth on the second drive at 30 dB, such fits ended in a basin over 6 above one
-    near the truth (``test_the_windows_leave_the_priors_penalty_out``)."""
+    was ambiguous and the rivals of the best point (:func:`rivals_of`)."""
     short = [search.first.horizon, *search.continuation.horizons]
-    rows0 = pb.residual(pb.screen, short[0], sigma, penalised=False)
+    rows0 = pb.residual(pb.screen, short[0], sigma)
     zg, minima = grid_minima(pb, rows0, search.grid, z_anchor)
     n_starts = search.grid.starts
     z_starts = [zg[i] for i in minima[:n_starts]]
@@ -756,8 +748,8 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     final_h = search.final_horizon
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
     best, rivals = whole_record(pb, ends, rows_full, max_iter)
-    rows_short = pb.residual(pb.screen, short[-1], sigma, penalised=False)
-    best, rivals = restart(pb, best, rows_short, rows_full, search.restarts, max_iter,
+    best, rivals = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
+                           search.restarts, max_iter,
                            dict(zip(pb.free, z_anchor, strict=True)), rivals)
     return best, starts, two_step, ambiguous, rivals
 
