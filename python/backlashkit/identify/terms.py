@@ -558,9 +558,11 @@ def coulomb_start(recs: Sequence[Record], prior: TwoMassDrive) -> float:
     Where the held speeds differ by :data:`LEVEL_SPREAD` or more, the line through the
     levels ``(|w|, |T|)`` gives ``fc_M + fc_L`` as its intercept, whatever the prior's
     viscous friction. Otherwise the median over records of ``T - (f_M + f_L) w`` with
-    the prior's: a small difference of large numbers, which a prior 10 % off in
-    ``f_M + f_L`` can put at 0 or at several times the truth. Halved, floored at
-    :data:`FC_START_FLOOR` of the held torque, it starts both Coulomb torques.
+    the prior's: a small difference of large numbers, which a prior 10 % high in
+    ``f_M + f_L`` put at its floor on the second drive of
+    ``benchmarks/real_drive.py`` (16 times below the truth's half-sum). Halved,
+    floored at :data:`FC_START_FLOOR` of the held torque, it starts both Coulomb
+    torques.
 
     Parameters
     ----------
@@ -577,8 +579,8 @@ def coulomb_start(recs: Sequence[Record], prior: TwoMassDrive) -> float:
     w, t = (np.abs(x) for x in held_levels(recs))
     if t.size == 0:
         return FC_START_FLOOR
-    slope, total = (np.polyfit(w, t, 1) if w.max() >= LEVEL_SPREAD * w.min()
-                    else (math.nan, math.nan))
+    spread = w.max() > 0.0 and w.max() >= LEVEL_SPREAD * w.min()  # not all at rest
+    slope, total = np.polyfit(w, t, 1) if spread else (math.nan, math.nan)
     if not slope > 0:  # one level, or a line no drive has: the prior's viscous friction
         total = float(np.median(t - (prior.f_M + prior.f_L) * w))
     return max(0.5 * float(total), FC_START_FLOOR * float(t.max()))
