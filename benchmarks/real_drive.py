@@ -548,7 +548,7 @@ def _print_against(res: list, other: dict, dname: str, theta: float) -> None:
 
     for name, a, b in (("this row only", res, other["results"]),
                        ("the other row only", other["results"], res)):
-        ks = [i for i, (x, y) in enumerate(zip(a, b, strict=False)) if covers(x) and not covers(y)]
+        ks = [i for i, (x, y) in enumerate(zip(a, b, strict=True)) if covers(x) and not covers(y)]
         print(f"  covered in {name}: {len(ks)} trials", flush=True)
         for i in ks:
             print(f"    trial {i}: {_trial_line(res[i], theta)}; the other: "
