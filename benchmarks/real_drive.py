@@ -164,8 +164,7 @@ class Task(NamedTuple):
     """What every trial of one scenario shares: the truth (linear parameters in SI,
     ``theta`` in rad), its clean records (:func:`clean_records`), the encoders' counts
     per revolution (0: analogue speeds), the speeds' SNR in dB and the prior's
-    relative std (``--prior-rel-std``), and whether the profile spans a current loop
-    the test dropped (``--dropped-loop``)."""
+    relative std (``--prior-rel-std``)."""
 
     linear: dict
     theta: float
@@ -173,19 +172,13 @@ class Task(NamedTuple):
     counts: int
     snr: float
     prior_rel_std: float
-    dropped_loop: bool = False
 
 
 def one_trial(task: Task, seed):
     """One trial of a scenario: the fit's theta, interval and choices (with
     ``--prior-rel-std``, about its drawn prior)."""
     prior, kw = trial_prior(task.linear, task.prior_rel_std, seed)
-    return _summary(_fit(prior, trial_records(task, seed), **kw, **interval_kw(task)))
-
-
-def interval_kw(task: Task) -> dict:
-    """The fit's interval option: the default, or the profile spanning a dropped loop."""
-    return {"interval": bk.ProfileLikelihood(dropped_loop=True)} if task.dropped_loop else {}
+    return _summary(_fit(prior, trial_records(task, seed), **kw))
 
 
 def trial_prior(linear, rel, seed) -> tuple[dict, dict]:
@@ -413,7 +406,7 @@ def _scenario(args, dname, linear, theta, ename, effect, seed) -> None:
     clean = clean_records(linear, theta, fc, tau, counts, kernel=args.kernel_records)
     # quantised angles are not white Gaussian noise: no bound is printed for encoders
     crb = math.nan if counts else crb_theta(linear, theta, fc, tau, args.snr)
-    task = Task(linear, theta, clean, counts, args.snr, args.prior_rel_std, args.dropped_loop)
+    task = Task(linear, theta, clean, counts, args.snr, args.prior_rel_std)
     if args.trial is not None:  # each trial's own seed, as in the whole study's, spawned
         seeds = task_seeds(seed, max(args.trial) + 1)  # once (it spawns anew each call)
         for k in args.trial:
@@ -440,7 +433,7 @@ def _trial_alone(args, k, names, task: Task, effect, seed) -> None:
     recs = trial_records(task, seed)
     prior, kw = trial_prior(linear, task.prior_rel_std, seed)
     grid = GridProfile(n=args.profile_grid) if args.profile_grid else None
-    fit = _fit(prior, recs, **kw, **({"interval": grid} if grid else interval_kw(task)))
+    fit = _fit(prior, recs, **kw, **({"interval": grid} if grid else {}))
     print(f"{names[0]}, {names[1]}, trial {k}: {_trial_line(_summary(fit), theta)}", flush=True)
     if grid is not None and not isinstance(fit, str):
         print(_grid_lines(grid, fit, theta), flush=True)
@@ -469,7 +462,7 @@ def seeded_trial(pair):
 
 #: What must agree between the slices of one row (``--merge``).
 SLICE_KEYS = ("drive", "effect", "snr", "seed", "trials", "code", "prior_rel_std",
-              "kernel_records", "dropped_loop")
+              "kernel_records")
 
 
 #: What a slice ran, as paths of the repository: the package, the compiled core and
@@ -500,7 +493,6 @@ def save_slice(args, row: dict) -> None:
         raise SystemExit(f"real_drive.py: {path} exists: choose another --save file")
     doc = {"snr": args.snr, "seed": args.seed, "trials": args.trials,
            "prior_rel_std": args.prior_rel_std, "kernel_records": args.kernel_records,
-           "dropped_loop": args.dropped_loop,
            "code": code_version(), **row}
     # numpy scalars (a choice's kept flag) as Python values
     path.write_text(json.dumps(doc, indent=1, default=lambda x: x.item()) + "\n")
@@ -534,8 +526,7 @@ def merge(args) -> None:
     print(f"{docs[0]['drive']}, {docs[0]['effect']}: {len(docs)} slices, code "
           f"{docs[0]['code']}, SNR {docs[0]['snr']:g} dB, seed {docs[0]['seed']}"
           + (f", priors drawn with relative std {rel:g}" if rel else "")
-          + (", records by the compiled kernel" if docs[0].get("kernel_records") else "")
-          + (", the profile spanning a dropped loop" if docs[0].get("dropped_loop") else ""))
+          + (", records by the compiled kernel" if docs[0].get("kernel_records") else ""))
     _print_header()
     _print_row(docs[0]["drive"], docs[0]["effect"], theta, res, docs[0]["crb"],
                sum(d["seconds"] for d in docs))
@@ -771,9 +762,6 @@ def main(argv=None) -> int:
                    help="give each fit a prior of the linear parameters with relative std "
                         "S, its values drawn about the truth with that std (default 0: the "
                         "truth as the prior, no prior std)")
-    p.add_argument("--dropped-loop", action="store_true",
-                   help="fit with ProfileLikelihood(dropped_loop=True): where the test "
-                        "drops the current loop, the interval spans the loop model's too")
     p.add_argument("--free-loop", action="store_true",
                    help="with --trial, on records of a drive with a loop: also refit them "
                         "with the loop's lag next to free from each of its starts")

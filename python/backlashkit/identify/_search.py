@@ -658,10 +658,6 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
         errors = quantisation_errors(unc, rows_unc)
         unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)
         choices = quantised_choices(choices, errors)
-    if interval._spans_dropped() and not quantised(rows_unc):
-        choices = [dropped_span(c, pb, unc.best, sig, ar, final_h, terms, recs, interval,
-                                search.max_iter, refit, anchor if search.restarts.prior
-                                else None) for c in choices]
     unc.interval = widened(unc.interval, choices)
     stage(7)
     if unc.best.z is not checked_z:  # the profile search re-centred the estimate
@@ -670,32 +666,6 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
              for t in terms if t.mode == "fixed"}
     return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices,
                    fixed)
-
-
-def dropped_span(choice: TermChoice, pb: Problem, best: LMState, sig: np.ndarray,
-                 ar: np.ndarray | None, final_h: float | None, terms: Sequence[Term],
-                 recs: list[Record], interval, max_iter: int,
-                 refit: Callable[[list[Record]], float], anchor: dict[str, float] | None
-                 ) -> TermChoice:
-    """``choice`` with the larger model's interval of ``theta`` spanned too
-    (:attr:`TermChoice.other_ci95`) where it dropped a term added after the search (a
-    current loop): the model refitted with the term from ``best`` (each start of
-    :meth:`Term.start_grid`, as its test) and its own interval computed by ``interval``.
-    A lag the records cannot tell from the linear parameters lies along a flat valley
-    whose ``theta`` the smaller model's interval leaves out."""
-    term = next((t for t in terms if t.name == choice.term), None)
-    if (choice.kept or term is None or term.mode != "auto" or term.searched
-            or any(n in pb.names for n in term.params)):
-        return choice
-    big = pb.with_params(term.params, term.floors(recs), term.scales(recs))
-    rows = big.residual(big.final_spans(final_h), final_h, sig, ar)
-    st = added_term_fit(big, rows, best.z, best.cost, term, recs, max_iter)
-    unc = uncertainty(big, st, rows, interval, max_iter, partial(resample, big, sig, ar),
-                      refit, look_past=True, anchor=anchor)
-    lo, hi = unc.interval.ci95
-    if choice.other_ci95 is not None:
-        lo, hi = min(lo, choice.other_ci95[0]), max(hi, choice.other_ci95[1])
-    return replace(choice, other_ci95=(float(lo), float(hi)))
 
 
 @dataclass(frozen=True)

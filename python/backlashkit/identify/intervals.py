@@ -148,9 +148,6 @@ class FisherInterval:
     likelihood is quadratic over the interval.
     """
 
-    def _spans_dropped(self) -> bool:
-        return False
-
     def _interval(self, fit: IntervalInputs) -> ThetaInterval:
         # a half-width is >= 0: the symmetric interval is cut there
         return ThetaInterval("fisher", (max(0.0, fit.theta - Z_95 * fit.std),
@@ -212,22 +209,12 @@ class ProfileLikelihood:
     max_factor : float, optional
         Widest interval searched: ``[theta_ / max_factor, theta_ max_factor]``
         (default 10).
-    dropped_loop : bool, optional
-        Where ``actuator="auto"`` drops the current loop, refit the records with the
-        loop from the estimate and span that model's profile interval too (default
-        False). On a stiff drive at 30 dB a 1 ms loop's lag trades against the inertia
-        and stiffness along a nearly flat valley: the model without it is chosen, and
-        its interval is too narrow where the drive has one.
     """
 
     tol: float = 0.25
     max_evaluations: int = 6
     max_iter: int = 20
     max_factor: float = 10.0
-    dropped_loop: bool = False
-
-    def _spans_dropped(self) -> bool:
-        return self.dropped_loop
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tol, (int, float)) and 0.0 < self.tol < CHI2_95):
@@ -452,9 +439,6 @@ class ParametricBootstrap:
             v.integer("jobs", self.jobs, 1)
             if self.executor is not None:
                 raise InputError("give executor or jobs, not both")
-
-    def _spans_dropped(self) -> bool:
-        return False
 
     def _interval(self, fit: IntervalInputs) -> ThetaInterval:
         root = self.seed if isinstance(self.seed, np.random.SeedSequence) else (

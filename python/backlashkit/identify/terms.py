@@ -314,8 +314,7 @@ class TermChoice:
         Where the test cannot tell the two models apart (the term estimated, lowering
         ``-2 log L``, but by no more than the threshold): the Fisher 95 % interval of
         ``theta`` in rad of the model not chosen, which the estimate's interval is
-        widened to cover; with ``ProfileLikelihood(dropped_loop=True)``, for a dropped
-        current loop, also the loop model's profile interval. None otherwise.
+        widened to cover. None otherwise.
     screened : bool
         Whether the term was dropped unfitted by its score test (:data:`SCREEN_DROP`);
         ``rise`` and ``shift`` are then the test's linearised predictions.
@@ -399,8 +398,7 @@ class TermChoice:
             drop = math.floor(self.rise * 1e3) / 1e3
             return (f"{name} dropped without fitting it: at the fit without it, a score "
                     f"test predicts it would lower -2 log L by {drop:.3g}, less than "
-                    f"{SCREEN_DROP} (too little to pin it down): the data do not call for it"
-                    f"{both}")
+                    f"{SCREEN_DROP} (too little to pin it down): the data do not call for it")
         if self.rise <= 0:
             # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
             # torques of 0), so a fit with the term ending higher found no better point
