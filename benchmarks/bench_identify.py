@@ -91,7 +91,8 @@ def _median(fn, repeats: int) -> float:
 WINDOW_SAMPLES = 10_000
 
 
-def simulations(fn, samples: int, done=None, kernel=None, sens=None) -> tuple[float, int]:
+def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=None
+                ) -> tuple[float, int]:
     """What ``fn()`` costs in simulations of ``samples`` samples, and the kernel's
     calls; ``done`` (a list ``[samples, calls]``) counts as it goes; ``kernel`` (a dict
     ``{"holds": [s, rows x samples], "windows": [...], "whole": [...]}``) adds up the
@@ -99,7 +100,8 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None) -> tuple[fl
     (another sample time than the records': ``identify._model.HOLD_STEP``), in the
     other calls shorter than :data:`WINDOW_SAMPLES` and in the rest. ``sens`` (a list
     ``[runs, samples, s]``) adds up the compiled sensitivity runs apart: they are not
-    simulations, and :func:`count` weighs them by their time."""
+    simulations, and :func:`count` weighs them by their time; ``sens_parts`` (a dict
+    as ``kernel``, of ``[runs, samples, s]``) splits them the same way."""
     import backlashkit._core as core
 
     import backlashkit.identify._model as model
@@ -112,9 +114,12 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None) -> tuple[fl
     def counted_sens(p, t0, ts, u, *rest):
         start = time.perf_counter()
         out = real_sens(p, t0, ts, u, *rest)
-        sens[0] += 1
-        sens[1] += np.size(u)
-        sens[2] += time.perf_counter() - start
+        took = time.perf_counter() - start
+        parts = [sens] if sens_parts is None else [sens, sens_parts[part_of(ts, np.size(u))]]
+        for part in parts:
+            part[0] += 1
+            part[1] += np.size(u)
+            part[2] += took
         return out
 
     def counted(n, p, t0, ts, u, x0, **kw):
@@ -124,8 +129,7 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None) -> tuple[fl
         start = time.perf_counter()
         out = real(n, p, t0, ts, u, x0, **kw)
         if kernel is not None:
-            part = kernel["holds" if not np.isclose(ts, TS, rtol=1e-6, atol=0.0) else
-                          "windows" if np.shape(u)[1] < WINDOW_SAMPLES else "whole"]
+            part = kernel[part_of(ts, np.shape(u)[1])]
             part[0] += time.perf_counter() - start
             part[1] += work
         return out
@@ -140,17 +144,26 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None) -> tuple[fl
     return done[0] / samples, done[1]
 
 
+def part_of(ts: float, n: int) -> str:
+    """Which part of a fit a kernel call of ``n`` samples at ``ts`` runs: a hold on the
+    coarse grid (another sample time than the records'), a window or a whole span."""
+    if not np.isclose(ts, TS, rtol=1e-6, atol=0.0):
+        return "holds"
+    return "windows" if n < WINDOW_SAMPLES else "whole"
+
+
 def count(recs, prior) -> None:
     """Issue 24's measure: one fit and one bound in simulations of the records, and
     where the fit's wall time goes."""
     samples = sum(r.t.size for r in recs)
     done, kernel = [0, 0], {"holds": [0.0, 0], "windows": [0.0, 0], "whole": [0.0, 0]}
     sens = [0, 0, 0.0]
+    sens_parts = {part: [0, 0, 0.0] for part in kernel}
     marks = [(0, 0, 0.0, 0, 0.0, time.perf_counter())]
     fit = JointIdentifier(prior, workers=1, progress=lambda k, total: marks.append(
         (k, total, done[0] / samples, sens[0], sens[2], time.perf_counter()))).fit
     start = time.perf_counter()
-    n_fit, calls = simulations(lambda: fit(recs), samples, done, kernel, sens)
+    n_fit, calls = simulations(lambda: fit(recs), samples, done, kernel, sens, sens_parts)
     wall = time.perf_counter() - start
     # a sensitivity run weighed by its time, at the simulations' rate on whole spans
     whole_sec, whole_work = kernel["whole"]
@@ -169,6 +182,9 @@ def count(recs, prior) -> None:
         print(f"  the kernel in the {part} ({what[part]}): {sec:.2f} s, "
               f"{1e9 * sec / max(work, 1):.0f} ns per sample and parameter row")
     print(f"  the sensitivity runs: {sens[2]:.2f} s")
+    for part, (runs, n, sec) in sens_parts.items():
+        print(f"    in the {part}: {runs} runs, {sec:.2f} s, {1e9 * sec / max(n, 1):.0f} ns "
+              "per sample")
     print(f"  one fit's wall time: {wall:.2f} s, the kernel "
           f"{sum(sec for sec, _ in kernel.values()) + sens[2]:.2f} s of it")
     truth = TwoMassDrive(**P_TRUE, theta=THETA)

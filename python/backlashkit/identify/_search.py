@@ -302,7 +302,7 @@ def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residua
     ``rivals`` (stage 4's)."""
     shifts = cfg.shifts(pb.free)
     if not shifts:
-        return best, list(rivals)
+        return whole_restarts(pb, best, rows_full, cfg, max_iter, list(rivals))
     ref = pb.refine(rows_short, best.z, max_iter)
     seen, near = [ref], list(rivals)  # seen: the basins on the short window
 
@@ -330,6 +330,20 @@ def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residua
             if st.cost < best.cost - RESTART_MARGIN:
                 best, st = st, best
             near.append(st)
+    return whole_restarts(pb, best, rows_full, cfg, max_iter, near)
+
+
+def whole_restarts(pb: Problem, best: LMState, rows_full: Residual, cfg: Restarts,
+                   max_iter: int, near: list[LMState]) -> tuple[LMState, list[LMState]]:
+    """The best solution restarted with ``k_sh`` shifted by
+    :meth:`~.search.Restarts.whole_shifts`, each refined on the whole records and kept
+    where it lowers the cost by :data:`RESTART_MARGIN`; returns the best point and its
+    rivals among ``near`` and these (:func:`rivals_of`)."""
+    for d_ in cfg.whole_shifts(pb.free):
+        st = pb.refine(rows_full, restart_start("k_sh", d_, best.z, pb.free, {}), max_iter)
+        if st.cost < best.cost - RESTART_MARGIN:
+            best, st = st, best
+        near.append(st)
     return best, rivals_of(best, near)
 
 
