@@ -613,7 +613,7 @@ def test_stiffness_restarts_escape_a_wrong_ringing_phase():
     drive, recs, prior = _robustness_trial(4, 3, 1, 6, 2.0, 20.0)
     one_path = Continuation(fine_horizons=())
     stuck = JointIdentifier(prior, search=JointSearch(
-        restarts=Restarts(stiffness=()), continuation=one_path)).fit(recs)
+        restarts=Restarts(stiffness=(), long=()), continuation=one_path)).fit(recs)
     fit = JointIdentifier(prior, search=JointSearch(continuation=one_path)).fit(recs)
     assert stuck.theta_ < 0.94 * drive.theta and stuck.params_["k_sh"] < 0.85 * drive.k_sh
     assert abs(fit.theta_ / drive.theta - 1) < 0.05
@@ -631,7 +631,8 @@ def test_wide_stiffness_restarts_reach_the_truths_basin():
     drive, recs, prior = _robustness_trial(5, 3, 17, 20, 2.0, 20.0)
     fisher = bk.FisherInterval()  # the restarts come before the interval
     narrow = JointIdentifier(prior, search=JointSearch(
-        continuation=Continuation(direct=False), restarts=Restarts(stiffness=(0.15,))),
+        continuation=Continuation(direct=False),
+        restarts=Restarts(stiffness=(0.15,), long=())),
         interval=fisher).fit(recs)
     fit = JointIdentifier(prior, interval=fisher).fit(recs)
     assert fit.search.restarts.stiffness == (0.15, 0.4, 0.8)  # the default
@@ -652,7 +653,7 @@ def test_friction_restarts_cross_the_ridge_of_a_wrong_split():
     # without the second search too, which also leaves this minimum (misfit_restart)
     with pytest.warns(bk.CorrelatedResidualsWarning):
         stuck = JointIdentifier(prior, search=JointSearch(
-            restarts=Restarts(friction=(), misfit=False)), interval=fisher,
+            restarts=Restarts(friction=(), misfit=False, long=())), interval=fisher,
             **PAPER_MODEL).fit(recs)
     fit = JointIdentifier(prior, interval=fisher, **PAPER_MODEL).fit(recs)
     assert fit.search.restarts.friction == (1.0,)  # the default
@@ -676,7 +677,8 @@ def test_misfit_restart_leaves_a_stiff_shaft_without_backlash():
     fisher = bk.FisherInterval()
     with pytest.warns(bk.CorrelatedResidualsWarning,
                       match=r"lag-1 .*the model misfits, since the noise itself is white"):
-        stuck = JointIdentifier(prior, search=JointSearch(restarts=Restarts(misfit=False)),
+        stuck = JointIdentifier(prior, search=JointSearch(restarts=Restarts(misfit=False,
+                                                                          long=())),
                                 interval=fisher).fit(recs)
     assert np.all(np.abs(stuck.held_noise_lag1_) < 0.1)  # the speeds' own noise: white
     fit = JointIdentifier(prior, interval=fisher).fit(recs)
@@ -706,7 +708,8 @@ def test_fine_horizons_avoid_a_wrong_basin():
     in it; the fit must be right either way."""
     drive, recs, prior = _robustness_trial(5, 6, 9, 20, 5.0, 20.0)
     one_path = JointIdentifier(prior, search=JointSearch(
-        continuation=Continuation(fine_horizons=()), restarts=Restarts(stiffness=(0.15,)))
+        continuation=Continuation(fine_horizons=()),
+        restarts=Restarts(stiffness=(0.15,), long=()))
     ).fit(recs)
     fit = JointIdentifier(prior).fit(recs)
     assert abs(fit.theta_ / drive.theta - 1) < 0.02

@@ -279,12 +279,12 @@ class Restarts(_Config):
         ``k_sh`` multiplied by ``e^-x`` and ``e^x`` for every ``x`` (default
         ``(0.15, 0.4, 0.8)``; the whole-record cost is multimodal in the ringing's
         phase); ``()``: none. Each is screened on the longest short window first.
-    whole : sequence of float, optional
-        ``k_sh`` multiplied by ``e^-x`` and ``e^x`` for every ``x``, each refined on the
-        whole records without that screen (default ``(0.1,)``). The records hold more
-        periods of the ringing than the window, and so more basins of its phase: on
+    long : sequence of float, optional
+        ``k_sh`` multiplied by ``e^-x`` and ``e^x`` for every ``x``, each screened on a
+        window twice the longest short one instead (default ``(0.1,)``). Longer
+        records hold more periods of the ringing, and so more basins of its phase: on
         the second drive of ``benchmarks/real_drive.py`` at 30 dB, a lower basin
-        ``k_sh`` 5-6 % from the estimate's that the window does not separate
+        ``k_sh`` 5-6 % from the estimate's that the short window does not separate
         (docs/design/joint-search.md, item 10); ``()``: none.
     friction : sequence of float, optional
         ``f_M / f_L`` multiplied by ``e^-x`` and ``e^x``, the sum kept (default
@@ -310,14 +310,14 @@ class Restarts(_Config):
     """
 
     stiffness: Sequence[float] = (0.15, 0.4, 0.8)
-    whole: Sequence[float] = (0.1,)
+    long: Sequence[float] = (0.1,)
     friction: Sequence[float] = (1.0,)
     misfit: bool = True
     prior: bool = True
 
     def __post_init__(self) -> None:
         self._set("stiffness", _shifts("Restarts", "stiffness", self.stiffness))
-        self._set("whole", _shifts("Restarts", "whole", self.whole))
+        self._set("long", _shifts("Restarts", "long", self.long))
         self._set("friction", _shifts("Restarts", "friction", self.friction))
         self._set("misfit", _flag("Restarts", "misfit", self.misfit))
         self._set("prior", _flag("Restarts", "prior", self.prior))
@@ -341,8 +341,8 @@ class Restarts(_Config):
         out += [("f_M:f_L", d) for x in self.friction for d in (-x, x)]
         return out
 
-    def whole_shifts(self, free: Sequence[str]) -> list[float]:
-        """The log-shifts of ``k_sh`` refined on the whole records (``whole``).
+    def long_shifts(self, free: Sequence[str]) -> list[float]:
+        """The log-shifts of ``k_sh`` screened on the long window (``long``).
 
         Parameters
         ----------
@@ -352,9 +352,9 @@ class Restarts(_Config):
         Returns
         -------
         list of float
-            ``-x, x`` for every ``x`` of ``whole``.
+            ``-x, x`` for every ``x`` of ``long``.
         """
-        return [d for x in self.whole for d in (-x, x)] if "k_sh" in free else []
+        return [d for x in self.long for d in (-x, x)] if "k_sh" in free else []
 
 
 @dataclass(frozen=True, repr=False)
