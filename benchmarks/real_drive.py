@@ -535,10 +535,15 @@ def merge(args) -> None:
                        theta)
 
 
+#: ``--against``: an estimate counts as moved where it differs by more than this
+#: relative amount (far above rounding, far below any standard error of these rows).
+MOVED = 1e-6
+
+
 def _print_against(res: list, other: dict, dname: str, theta: float) -> None:
     """The trials covered in the merged row ``res`` (from trial 0) or in the saved row
     ``other`` alone, each with both rows' lines (a change of code or prior: which
-    trials it won or lost)."""
+    trials it won or lost), and the trials whose estimates moved (:data:`MOVED`)."""
     if other["drive"] != dname or other["first"] != 0 or len(other["results"]) != len(res):
         raise SystemExit("real_drive.py: --against needs a row of the same drive and "
                          "trials, from trial 0")
@@ -553,6 +558,10 @@ def _print_against(res: list, other: dict, dname: str, theta: float) -> None:
         for i in ks:
             print(f"    trial {i}: {_trial_line(res[i], theta)}; the other: "
                   f"{_trial_line(other['results'][i], theta)}", flush=True)
+    moved = [i for i, (x, y) in enumerate(zip(res, other["results"], strict=True))
+             if "theta" in x and "theta" in y and abs(x["theta"] / y["theta"] - 1) > MOVED]
+    print(f"  estimates moved by more than {MOVED:g} of theta: {len(moved)} trials"
+          + (f" ({', '.join(map(str, moved))})" if moved else ""), flush=True)
 
 
 def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:

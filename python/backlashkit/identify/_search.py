@@ -58,7 +58,7 @@ DISTINCT = 1e-2
 #: best one's by more than this are not refined on the whole record: that cost ranks
 #: candidates as the whole record does, to a few units.
 WHOLE_RECORD_MARGIN = 10.0
-#: Iterations a restart gets on the longest short window before it must be below the
+#: Iterations a restart gets on its screening window before it must be below the
 #: solution it restarts from: one climbing back to the same basin is still far above
 #: it then, one falling into a better basin already below.
 RESTART_SCREEN_ITER = 5
@@ -69,7 +69,7 @@ RESTART_SCREEN_ITER = 5
 #: paper A's 80 s ones, so the restarts that climb back cost little there.
 LONG_WINDOW = 2.0
 #: A restart is refined on the whole records and may replace the best solution only if
-#: it beats it by more than this (chi-square units) on the longest short window.
+#: it beats it by more than this (chi-square units) on the window it is screened on.
 RESTART_MARGIN = 1.0
 #: A restart whose screen ends above the solution it restarts from, but by less than
 #: this (chi-square units, on the longest short window), and more than DISTINCT from

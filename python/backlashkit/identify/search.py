@@ -13,8 +13,9 @@ why each exists):
    best one restarted from other splits of ``J_M + J_L`` and ``f_M + f_L``.
 3. :class:`Continuation` -- the best distinct solutions continued on growing windows,
    then refined on the whole record (or ``final_horizon``).
-4. :class:`Restarts` -- the best solution restarted with the stiffness and the
-   friction split shifted, and the whole search run again from a fit that misfits.
+4. :class:`Restarts` -- the best solution restarted from the prior's point, with the
+   stiffness (screened on a short and on a longer window) and the friction split
+   shifted, and the whole search run again from a fit that misfits.
 
 Then the noise levels are re-estimated from the residuals (``noise_iter`` times) and
 the uncertainty computed. Every object is frozen and validated on construction; a
@@ -304,9 +305,10 @@ class Restarts(_Config):
 
     Notes
     -----
-    A restart gets a few iterations on the longest short window first and goes on
-    only if it comes below the solution it restarts from; it is refined on the whole
-    record only if it beats it there, and kept only if it lowers the final cost.
+    A restart gets a few iterations on the longest short window first (those of
+    ``long`` on a window twice as long) and goes on only if it comes below the
+    solution it restarts from; it is refined on the whole record only if it beats it
+    there, and kept only if it lowers the final cost.
     """
 
     stiffness: Sequence[float] = (0.15, 0.4, 0.8)
