@@ -306,8 +306,8 @@ def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residua
     records, and kept if it lowers the final cost (:class:`~.search.Restarts`); one
     that screens within :data:`RIVAL_SCREEN` above it is refined there as a rival.
     Returns the best point and its rivals (:func:`rivals_of`) among the restarts and
-    ``rivals`` (stage 4's). ``rows_long``: the long window of :func:`long_restarts`
-    (default the whole records)."""
+    ``rivals`` (stage 4's). Then the restarts of :func:`long_restarts` on
+    ``rows_long`` (default the whole records)."""
     rows_long = rows_full if rows_long is None else rows_long
     shifts = cfg.shifts(pb.free)
     if not shifts:
@@ -784,10 +784,13 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     final_h = search.final_horizon
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
     best, rivals = whole_record(pb, ends, rows_full, max_iter)
+    long_h = LONG_WINDOW * short[-1]
+    # a final horizon no longer than the long window: the final data are the longest
+    rows_long = (rows_full if final_h is not None and final_h <= long_h
+                 else pb.residual(pb.screen, long_h, sigma))
     best, rivals = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
                            search.restarts, max_iter,
-                           dict(zip(pb.free, z_anchor, strict=True)), rivals,
-                           pb.residual(pb.screen, LONG_WINDOW * short[-1], sigma))
+                           dict(zip(pb.free, z_anchor, strict=True)), rivals, rows_long)
     return best, starts, two_step, ambiguous, rivals
 
 
