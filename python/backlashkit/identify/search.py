@@ -284,8 +284,8 @@ class Restarts(_Config):
         ``k_sh`` multiplied by ``e^-x`` and ``e^x`` for every ``x``, each screened on a
         window twice the longest short one instead (default ``(0.1,)``). Longer
         records hold more periods of the ringing, and so more basins of its phase: on
-        the second drive of ``benchmarks/real_drive.py`` at 30 dB, a lower basin
-        ``k_sh`` 5-6 % from the estimate's that the short window does not separate
+        the second drive of ``benchmarks/real_drive.py`` at 30 dB, a lower basin with
+        ``k_sh`` 5.8 % from the estimate's that the short window does not separate
         (docs/design/joint-search.md, item 10); ``()``: none.
     friction : sequence of float, optional
         ``f_M / f_L`` multiplied by ``e^-x`` and ``e^x``, the sum kept (default
