@@ -297,9 +297,8 @@ def restart_start(kind: str, shift: float, z: np.ndarray, free: Sequence[str],
 
 
 def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residual,
-            cfg: Restarts, max_iter: int, anchor: dict[str, float],
-            rivals: Sequence[LMState] = (), rows_long: Residual | None = None
-            ) -> tuple[LMState, list[LMState]]:
+            rows_long: Residual, cfg: Restarts, max_iter: int, anchor: dict[str, float],
+            rivals: Sequence[LMState] = ()) -> tuple[LMState, list[LMState]]:
     """Stage 5: the best solution restarted from the prior's linear parameters
     ``anchor`` (z units by name), with ``k_sh`` and with the friction split shifted; a
     restart that screens :data:`RESTART_MARGIN` below the best is refined on the whole
@@ -307,8 +306,7 @@ def restart(pb: Problem, best: LMState, rows_short: Residual, rows_full: Residua
     that screens within :data:`RIVAL_SCREEN` above it is refined there as a rival.
     Returns the best point and its rivals (:func:`rivals_of`) among the restarts and
     ``rivals`` (stage 4's). Then the restarts of :func:`long_restarts` on
-    ``rows_long`` (default the whole records)."""
-    rows_long = rows_full if rows_long is None else rows_long
+    ``rows_long``."""
     shifts = cfg.shifts(pb.free)
     if not shifts:
         return long_restarts(pb, best, rows_long, rows_full, cfg, max_iter, list(rivals))
@@ -350,8 +348,8 @@ def long_restarts(pb: Problem, best: LMState, rows_long: Residual, rows_full: Re
     :data:`RESTART_SCREEN_ITER` iterations on the long window ``rows_long``
     (:data:`LONG_WINDOW` times the longest short one); one that ends
     :data:`RESTART_MARGIN` below the best's cost there is refined on the whole records
-    and kept where it lowers the cost. Returns the best point and its rivals
-    among ``near`` and these (:func:`rivals_of`)."""
+    and kept where it lowers their cost by :data:`RESTART_MARGIN` too. Returns the best
+    point and its rivals among ``near`` and these (:func:`rivals_of`)."""
     shifts = cfg.long_shifts(pb.free)
     if not shifts:
         return best, rivals_of(best, near)
@@ -789,8 +787,8 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     rows_long = (rows_full if final_h is not None and final_h <= long_h
                  else pb.residual(pb.screen, long_h, sigma))
     best, rivals = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
-                           search.restarts, max_iter,
-                           dict(zip(pb.free, z_anchor, strict=True)), rivals, rows_long)
+                           rows_long, search.restarts, max_iter,
+                           dict(zip(pb.free, z_anchor, strict=True)), rivals)
     return best, starts, two_step, ambiguous, rivals
 
 
