@@ -287,6 +287,12 @@ class Restarts(_Config):
         the second drive of ``benchmarks/real_drive.py`` at 30 dB, a lower basin with
         ``k_sh`` 5.8 % from the estimate's that the short window does not separate
         (docs/design/joint-search.md, item 10); ``()``: none.
+    ringing : sequence of float, optional
+        ``k_sh`` multiplied by ``e^x`` and ``J_M`` by ``e^(-x/2)``, and the opposite,
+        for every ``x``, each screened on the long window for up to
+        ``RINGING_SCREEN_ITER`` iterations (default ``(0.08,)``): the ringing's
+        frequency moved by about ``e^(3x/4)``, into a basin of its phase that a shift
+        of ``k_sh`` alone does not reach; ``()``: none.
     friction : sequence of float, optional
         ``f_M / f_L`` multiplied by ``e^-x`` and ``e^x``, the sum kept (default
         ``(1.0,)``; the split shows only while the shaft crosses the backlash).
@@ -313,6 +319,7 @@ class Restarts(_Config):
 
     stiffness: Sequence[float] = (0.15, 0.4, 0.8)
     long: Sequence[float] = (0.1,)
+    ringing: Sequence[float] = (0.08,)
     friction: Sequence[float] = (1.0,)
     misfit: bool = True
     prior: bool = True
@@ -320,6 +327,7 @@ class Restarts(_Config):
     def __post_init__(self) -> None:
         self._set("stiffness", _shifts("Restarts", "stiffness", self.stiffness))
         self._set("long", _shifts("Restarts", "long", self.long))
+        self._set("ringing", _shifts("Restarts", "ringing", self.ringing))
         self._set("friction", _shifts("Restarts", "friction", self.friction))
         self._set("misfit", _flag("Restarts", "misfit", self.misfit))
         self._set("prior", _flag("Restarts", "prior", self.prior))
@@ -357,6 +365,25 @@ class Restarts(_Config):
             ``-x, x`` for every ``x`` of ``long``.
         """
         return [d for x in self.long for d in (-x, x)] if "k_sh" in free else []
+
+    def ringing_shifts(self, free: Sequence[str]) -> list[dict[str, float]]:
+        """The log-shifts of ``k_sh`` and ``J_M`` screened on the long window
+        (``ringing``).
+
+        Parameters
+        ----------
+        free : sequence of str
+            The estimated linear parameters (none without both ``k_sh`` and ``J_M``).
+
+        Returns
+        -------
+        list of dict
+            ``{"k_sh": d, "J_M": -d / 2}`` for ``d`` in ``-x, x``, every ``x`` of
+            ``ringing``.
+        """
+        if "k_sh" not in free or "J_M" not in free:
+            return []
+        return [{"k_sh": d, "J_M": -d / 2} for x in self.ringing for d in (-x, x)]
 
 
 @dataclass(frozen=True, repr=False)
