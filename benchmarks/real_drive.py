@@ -298,7 +298,8 @@ def truth_basin_line(linear, theta, fc, tau_i, recs, fit) -> str:
     verdict = ("above the estimate: the records point to the estimate" if rise > 0
                else "below the estimate: the search missed it")
     return (f"  the truth's basin: its minimum at theta {100 * (d.theta / theta - 1):+.2f} %, "
-            f"k_sh {100 * (d.k_sh / linear['k_sh'] - 1):+.1f} %, -2 log L {rise:+.4g} from "
+            f"k_sh {100 * (d.k_sh / linear['k_sh'] - 1):+.1f} %, "
+            f"J_M {100 * (d.J_M / linear['J_M'] - 1):+.1f} %, -2 log L {rise:+.4g} from "
             f"the estimate's, {verdict}; rival basins spanned by the interval: "
             f"{fit.rival_basins_}")
 

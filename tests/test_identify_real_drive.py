@@ -572,24 +572,30 @@ def test_long_window_stiffness_restarts_reach_a_basin_the_short_window_merges():
     assert fit.theta_ == pytest.approx(0.02, rel=0.01)
 
 
-def test_ringing_restarts_reach_a_basin_a_stiffness_shift_alone_does_not():
+def test_ringing_restarts_reach_a_basin_a_stiffness_shift_alone_does_not(monkeypatch):
     """Trial 18 of the same row (``--prior-rel-std 0.1 --trial 18``): the search ended
     with ``k_sh`` 7.7 % low, ``J_M`` 6.8 % high and theta 4.50 % low, and every
-    stiffness restart came back to it: from ``k_sh`` alone shifted, even to the lower
-    basin's ``k_sh``, the fit walks back. Shifted with ``J_M`` too
-    (``Restarts.ringing``), the ringing's frequency moves into that basin, lower in
-    ``-2 log L`` by more than 3, with theta within 2 % (``-s`` prints both)."""
+    stiffness restart came back to it. Shifted with ``J_M`` too (``Restarts.ringing``),
+    the ringing's frequency moves into a basin near the truth, lower in ``-2 log L`` by
+    more than 3, with theta within 2 %; screened for as few iterations as the other
+    restarts, they stop on the way (``-s`` prints the three)."""
+    from backlashkit.identify import _search
+
     seed = np.random.SeedSequence(2020, spawn_key=(1, 1, 18))
     recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=seed, snr=30.0)
     prior = _drawn_prior(seed, 0.1)
     kw = {"prior_rel_std": 0.1, "interval": bk.FisherInterval()}
     fit = _fit(recs, prior, **kw)
     alone = _fit(recs, prior, search=bk.JointSearch(restarts=bk.Restarts(ringing=())), **kw)
+    monkeypatch.setattr(_search, "RINGING_SCREEN_ITER", _search.RESTART_SCREEN_ITER)
+    short = _fit(recs, prior, **kw)
     fall = _m2ll(alone, recs) - _m2ll(fit, recs)
     print(f"theta {100 * (fit.theta_ / 0.02 - 1):+.2f} % against "
-          f"{100 * (alone.theta_ / 0.02 - 1):+.2f} % without the ringing restarts, "
-          f"-2 log L {fall:+.4g} lower")
+          f"{100 * (alone.theta_ / 0.02 - 1):+.2f} % without the ringing restarts and "
+          f"{100 * (short.theta_ / 0.02 - 1):+.2f} % with a screen of "
+          f"{_search.RESTART_SCREEN_ITER} iterations; -2 log L {fall:+.4g} lower")
     assert alone.theta_ < 0.96 * 0.02
+    assert short.theta_ == alone.theta_  # the short screen stops them on the way
     assert fall > 3.0
     assert fit.theta_ == pytest.approx(0.02, rel=0.02)
 

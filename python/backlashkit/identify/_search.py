@@ -70,15 +70,16 @@ RESTART_SCREEN_ITER = 5
 LONG_WINDOW = 2.0
 #: Iterations a ringing restart (``Restarts.ringing``) gets on the long window before it
 #: must be below the solution it restarts from: moved in both the stiffness and the
-#: motor's inertia, it crawls through rival basins of the ringing's phase for 15 to 25
-#: iterations before it falls into a lower one (on the second drive of
-#: ``benchmarks/real_drive.py`` with Coulomb friction at 30 dB).
+#: motor's inertia, it passes through other basins of the ringing's phase before it
+#: falls into a lower one, and the RESTART_SCREEN_ITER of the other restarts stop it
+#: on the way (trial 18 of the second drive's Coulomb row in
+#: ``benchmarks/real_drive.py`` with a 10 % prior,
+#: ``test_ringing_restarts_reach_a_basin_a_stiffness_shift_alone_does_not``).
 RINGING_SCREEN_ITER = 25
 #: Share of the final data's residuals that the long window must hold for the ringing
 #: restarts: screened to their minimum, each costs about a fit on that window, which
-#: is affordable where the window is most of the records (6 of the second drive's 8 s)
-#: but not on paper A's 80 s records, of which it holds 6 s (there they added 0.5 s,
-#: a fifth, to a fit and every one came back to the best's basin).
+#: is spent where the window is most of the records (6 of the second drive's 8 s),
+#: whose basins it then ranks as they do; of paper A's 80 s records it holds 6 s.
 RINGING_SHARE = 0.5
 #: A restart is refined on the whole records and may replace the best solution only if
 #: it beats it by more than this (chi-square units) on the window it is screened on.

@@ -289,10 +289,13 @@ class Restarts(_Config):
         (docs/design/joint-search.md, item 10); ``()``: none.
     ringing : sequence of float, optional
         ``k_sh`` multiplied by ``e^x`` and ``J_M`` by ``e^(-x/2)``, and the opposite,
-        for every ``x``, each screened on the long window for up to
-        ``RINGING_SCREEN_ITER`` iterations (default ``(0.08,)``): the ringing's
-        frequency moved by about ``e^(3x/4)``, into a basin of its phase that a shift
-        of ``k_sh`` alone does not reach; ``()``: none.
+        for every ``x`` (default ``(0.08,)``): the ringing's frequency, about
+        ``sqrt(k_sh / J_M)`` on a heavy load, moved by ``e^(3x/4)``, into a basin of
+        its phase that a shift of ``k_sh`` alone does not reach (on the second drive
+        of ``benchmarks/real_drive.py`` with a 10 % prior, trials 18 and 87:
+        docs/design/joint-search.md, item 11); ``()``: none. Each is screened on the
+        long window for up to 25 iterations, and only where that window holds at
+        least half of the final data.
     friction : sequence of float, optional
         ``f_M / f_L`` multiplied by ``e^-x`` and ``e^x``, the sum kept (default
         ``(1.0,)``; the split shows only while the shaft crosses the backlash).
@@ -312,9 +315,10 @@ class Restarts(_Config):
     Notes
     -----
     A restart gets a few iterations on the longest short window first (those of
-    ``long`` on a window twice as long) and goes on only if it comes below the
-    solution it restarts from; it is refined on the whole record only if it beats it
-    there, and kept only if it lowers the final cost.
+    ``long`` on a window twice as long, those of ``ringing`` more iterations there)
+    and goes on only if it comes below the solution it restarts from; it is refined
+    on the whole record only if it beats it there, and kept only if it lowers the
+    final cost.
     """
 
     stiffness: Sequence[float] = (0.15, 0.4, 0.8)
