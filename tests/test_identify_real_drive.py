@@ -525,6 +525,16 @@ def _drawn_prior(seed: np.random.SeedSequence, rel: float) -> dict:
     return {n: x * (1.0 + rel * e) for (n, x), e in zip(OTHER.items(), eps, strict=True)}
 
 
+def _coulomb_p10(trial: int) -> tuple[list, dict, dict]:
+    """Trial ``trial`` of the second drive's Coulomb row at 30 dB with a prior drawn
+    10 % about the truth (``benchmarks/real_drive.py --prior-rel-std 0.1``): its
+    records, its prior, and the fit's prior options (Fisher intervals, for speed)."""
+    seed = np.random.SeedSequence(2020, spawn_key=(1, 1, trial))
+    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=seed, snr=30.0)
+    return recs, _drawn_prior(seed, 0.1), {"prior_rel_std": 0.1,
+                                           "interval": bk.FisherInterval()}
+
+
 def test_a_prior_off_in_its_viscous_friction_still_finds_the_coulomb_torques(monkeypatch):
     """Trial 175 of the second drive's Coulomb row at 30 dB with a 10 % prior
     (``benchmarks/real_drive.py --prior-rel-std 0.1``): the prior's ``f_L`` is 18 % high,
@@ -534,10 +544,7 @@ def test_a_prior_off_in_its_viscous_friction_still_finds_the_coulomb_torques(mon
     (``-s`` prints both)."""
     from backlashkit.identify import terms
 
-    seed = np.random.SeedSequence(2020, spawn_key=(1, 1, 175))
-    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=seed, snr=30.0)
-    prior = _drawn_prior(seed, 0.1)
-    kw = {"prior_rel_std": 0.1, "interval": bk.FisherInterval()}
+    recs, prior, kw = _coulomb_p10(175)
     fit = _fit(recs, prior, **kw)
     monkeypatch.setattr(terms, "LEVEL_SPREAD", math.inf)  # the start from the prior's
     stuck = _fit(recs, prior, **kw)
@@ -557,10 +564,7 @@ def test_long_window_stiffness_restarts_reach_a_basin_the_short_window_merges():
     on the 3 s window, came back to it. Screened on a window twice as long (all of
     these 8 s records), the restart at ``k_sh e^0.1`` reaches a basin near the truth,
     lower in ``-2 log L`` by more than 5, with theta within 1 % (``-s`` prints both)."""
-    seed = np.random.SeedSequence(2020, spawn_key=(1, 1, 69))
-    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=seed, snr=30.0)
-    prior = _drawn_prior(seed, 0.1)
-    kw = {"prior_rel_std": 0.1, "interval": bk.FisherInterval()}
+    recs, prior, kw = _coulomb_p10(69)
     fit = _fit(recs, prior, **kw)
     window = _fit(recs, prior, search=bk.JointSearch(restarts=bk.Restarts(long=())), **kw)
     fall = _m2ll(window, recs) - _m2ll(fit, recs)
@@ -581,10 +585,7 @@ def test_ringing_restarts_reach_a_basin_a_stiffness_shift_alone_does_not(monkeyp
     restarts, they stop on the way (``-s`` prints the three)."""
     from backlashkit.identify import _search
 
-    seed = np.random.SeedSequence(2020, spawn_key=(1, 1, 18))
-    recs = _records(OTHER, 0.02, fc=(0.01, 0.02), seed=seed, snr=30.0)
-    prior = _drawn_prior(seed, 0.1)
-    kw = {"prior_rel_std": 0.1, "interval": bk.FisherInterval()}
+    recs, prior, kw = _coulomb_p10(18)
     fit = _fit(recs, prior, **kw)
     alone = _fit(recs, prior, search=bk.JointSearch(restarts=bk.Restarts(ringing=())), **kw)
     monkeypatch.setattr(_search, "RINGING_SCREEN_ITER", _search.RESTART_SCREEN_ITER)
