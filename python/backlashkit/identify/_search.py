@@ -70,10 +70,9 @@ RESTART_SCREEN_ITER = 5
 LONG_WINDOW = 2.0
 #: Iterations a ringing restart (``Restarts.ringing``) gets on the long window before it
 #: must be below the solution it restarts from: moved in both the stiffness and the
-#: motor's inertia, it passes through other basins of the ringing's phase before it
-#: falls into a lower one, and the RESTART_SCREEN_ITER of the other restarts stop it
-#: on the way (trial 18 of the second drive's Coulomb row in
-#: ``benchmarks/real_drive.py`` with a 10 % prior,
+#: motor's inertia, it takes more iterations to fall into a lower basin than the
+#: RESTART_SCREEN_ITER of the other restarts, which stop it on the way (trial 18 of
+#: the second drive's Coulomb row in ``benchmarks/real_drive.py`` with a 10 % prior,
 #: ``test_ringing_restarts_reach_a_basin_a_stiffness_shift_alone_does_not``).
 RINGING_SCREEN_ITER = 25
 #: Share of the final data's residuals that the long window must hold for the ringing
