@@ -136,9 +136,12 @@ def trial(task):
                          recs, (d.simulate(rec.t, rec.torque) for rec in recs), strict=True)))
                  for d in (drive, fit.drive_)]
     fisher = fit.param_std_["theta"]
+    # -2 log L with white noise of unknown level per channel, less its constant: where
+    # two codes end a trial apart, the lower is the better fit of the same records
+    m2ll = sum(e.size * math.log(float(np.mean(e**2))) for pair in fit.residuals_ for e in pair)
     return (fit.theta_, fit.std_, fit.ci95_, costs[0] < costs[1], fisher, fit.ambiguous_,
             fit.ci95_bounded_, float(np.max(np.abs(fit.residual_lag1_))),
-            fit.misfit_restarted_, fit.misfit_restart_won_, bool(fit.far_from_prior_))
+            fit.misfit_restarted_, fit.misfit_restart_won_, bool(fit.far_from_prior_), m2ll)
 
 
 def _cost(fit, k: int, measured, simulated) -> float:
@@ -256,7 +259,7 @@ def main() -> None:
                  "estimate": r[0], "std": r[1], "ci95": list(r[2]), "truth_cost_lower": bool(r[3]),
                  "std_fisher": r[4], "ambiguous": bool(r[5]), "ci95_bounded": list(r[6]),
                  "max_abs_lag1": r[7], "misfit_restarted": bool(r[8]),
-                 "misfit_restart_won": bool(r[9]), "far_from_prior": r[10]}
+                 "misfit_restart_won": bool(r[9]), "far_from_prior": r[10], "m2ll": r[11]}
                 for (k, d, snr, _), chunk_start in zip(scen, range(0, len(results), args.trials),
                                                        strict=True)
                 for i, r in enumerate(results[chunk_start : chunk_start + args.trials])]

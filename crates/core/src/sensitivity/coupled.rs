@@ -220,8 +220,8 @@ mod tests {
     #[test]
     fn balancing_brings_the_norm_near_the_spectral_radius() {
         // Paper A's drive on a flank: `k / J_M` = 1.6e4 1/s beside rows of order 1, a
-        // 1-norm 126 times the spectral radius; balanced, within 1.2 times it, and a
-        // sample of 1 ms then needs no squaring. The similarity is by powers of two.
+        // 1-norm over 100 times the spectral radius; balanced, within 1.2 times it.
+        // The similarity is by powers of two, so it rounds nothing.
         let (jm, jl, k, fm, fl, d) = (0.00488, 0.068, 78.0, 0.005, 0.005, 0.01575);
         let a = [
             [-(fm + d) / jm, d / jm, -k / jm],
