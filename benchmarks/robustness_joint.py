@@ -138,7 +138,9 @@ def trial(task):
     fisher = fit.param_std_["theta"]
     # -2 log L with white noise of unknown level per channel, less its constant: where
     # two codes end a trial apart, the lower is the better fit of the same records
-    m2ll = sum(e.size * math.log(float(np.mean(e**2))) for pair in fit.residuals_ for e in pair)
+    from real_drive import concentrated_m2ll
+
+    m2ll = concentrated_m2ll(fit)
     return (fit.theta_, fit.std_, fit.ci95_, costs[0] < costs[1], fisher, fit.ambiguous_,
             fit.ci95_bounded_, float(np.max(np.abs(fit.residual_lag1_))),
             fit.misfit_restarted_, fit.misfit_restart_won_, bool(fit.far_from_prior_), m2ll)
