@@ -25,7 +25,8 @@ const RADIX: f64 = 2.0;
 /// A balancing step is kept where it shrinks a row and column's norm below this
 /// share of what they were (LAPACK's `gebal`).
 const BALANCE_GAIN: f64 = 0.95;
-/// Balancing sweeps at most (it converges in two or three on a 3 x 3 drive).
+/// Balancing sweeps at most: a bound on the loop, which stops once a sweep changes
+/// nothing.
 const BALANCE_SWEEPS: usize = 10;
 
 /// `exp(M_j tau) = [[e, 0], [c_j, e]]` and `int_0^tau exp(M_j s) ds = [[f, 0], [k_j, f]]`.
