@@ -29,7 +29,7 @@
 term tested), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
 seven parameters) of the same records cost in simulations of those records: the
 samples the compiled kernel advanced (every parameter row of every call, counted by
-wrapping ``simulate_packed``), divided by the records' samples (issue 24's measure). The fit
+wrapping ``simulate_packed_runs``), divided by the records' samples (issue 24's measure). The fit
 and the bound take the compiled sensitivities where their model is theirs: those runs
 are counted apart, the fit's weighed by their time at its simulations' rate on whole
 spans, and the bound's time is also given in times of one simulation of the record
@@ -89,6 +89,9 @@ def _median(fn, repeats: int) -> float:
 #: others its whole spans (60-80 s): the two are timed apart (``--count``), and apart
 #: from the holds the windows start after.
 WINDOW_SAMPLES = 10_000
+#: The compiled sensitivity runs: simulating the drive first, or along a run the fit
+#: has just simulated (the first four arguments of both: parameters, t0, ts, torque).
+SENSITIVITY_KERNELS = ("drive_sensitivities", "drive_sensitivities_along")
 
 
 def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=None
@@ -109,18 +112,22 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=
 
     done = [0, 0] if done is None else done
     sens = [0, 0, 0.0] if sens is None else sens
-    real, real_sens = sim.simulate_packed, core.drive_sensitivities
+    real = sim.simulate_packed_runs
+    real_sens = {name: getattr(core, name) for name in SENSITIVITY_KERNELS}
 
-    def counted_sens(p, t0, ts, u, *rest):
-        start = time.perf_counter()
-        out = real_sens(p, t0, ts, u, *rest)
-        took = time.perf_counter() - start
-        parts = [sens] if sens_parts is None else [sens, sens_parts[part_of(ts, np.size(u))]]
-        for part in parts:
-            part[0] += 1
-            part[1] += np.size(u)
-            part[2] += took
-        return out
+    def counted_sens(kernel_fn):
+        def call(p, t0, ts, u, *rest):
+            start = time.perf_counter()
+            out = kernel_fn(p, t0, ts, u, *rest)
+            took = time.perf_counter() - start
+            parts = [sens] if sens_parts is None else [sens,
+                                                       sens_parts[part_of(ts, np.size(u))]]
+            for part in parts:
+                part[0] += 1
+                part[1] += np.size(u)
+                part[2] += took
+            return out
+        return call
 
     def counted(n, p, t0, ts, u, x0, **kw):
         work = np.shape(p)[0] * np.shape(u)[1]
@@ -134,13 +141,15 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=
             part[1] += work
         return out
 
-    model.simulate_packed = sim.simulate_packed = counted
-    core.drive_sensitivities = counted_sens
+    model.simulate_packed_runs = sim.simulate_packed_runs = counted
+    for name, kernel_fn in real_sens.items():
+        setattr(core, name, counted_sens(kernel_fn))
     try:
         fn()
     finally:
-        model.simulate_packed = sim.simulate_packed = real
-        core.drive_sensitivities = real_sens
+        model.simulate_packed_runs = sim.simulate_packed_runs = real
+        for name, kernel_fn in real_sens.items():
+            setattr(core, name, kernel_fn)
     return done[0] / samples, done[1]
 
 

@@ -233,6 +233,37 @@ def test_the_exact_jacobian_from_a_start_that_moves_with_the_parameters(short, s
                                f"from a {start} start")
 
 
+def test_the_exact_jacobian_follows_the_residuals_own_runs(short, monkeypatch):
+    """At a point the residual has just simulated (Levenberg-Marquardt's accepted
+    point), the Jacobian follows those runs, holds included, and simulates nothing
+    more; the same values as at a point simulated afresh. A point pushed out of the
+    kept ones (``KEPT_POINTS``) is simulated again."""
+    from backlashkit.identify import _problem
+    from backlashkit.identify._model import rel_std
+    from backlashkit.identify._problem import KEPT_POINTS, build_problem
+
+    t, u, clean = short
+    recs = [_noisy(clean, 30, 1), _noisy(clean, 30, 2)]
+    pb, sig = build_problem(TRUE.with_theta(None), recs, rel_std(0.3, LINEAR_PARAMS), None,
+                            JointSearch(), "paper", 1)
+    res = pb.residual(pb.screen, 0.3, sig)
+    assert any(sp.hold is not None for sp in res.spans)
+    z = np.log([getattr(TRUE, n) for n in pb.names])
+    fresh = res.exact_jacobian(z)
+    res.kept.clear()
+    res.at(z)
+    calls = []
+    real = _problem.simulate_span
+    monkeypatch.setattr(_problem, "simulate_span",
+                        lambda *a, **kw: calls.append(1) or real(*a, **kw))
+    assert np.array_equal(res.exact_jacobian(z), fresh)
+    assert not calls
+    for i in range(KEPT_POINTS):
+        res.at(z + 1e-3 * (i + 1))
+    assert np.array_equal(res.exact_jacobian(z), fresh)
+    assert len(calls) == (KEPT_POINTS + 1) * len(res.spans)
+
+
 def test_the_steady_starts_sensitivity_is_the_long_holds():
     """The steady state's sensitivity in closed form
     (:func:`~backlashkit.identify._model.steady_sensitivity`) against central

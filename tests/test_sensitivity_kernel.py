@@ -24,6 +24,7 @@ from backlashkit._sensitivity import (
     PARAMS,
     default_params,
     sensitivities,
+    sensitivities_along,
     trajectory_and_sensitivities,
 )
 from backlashkit.papers.ravanbod2002 import A2, P_TRUE, THETA
@@ -203,6 +204,39 @@ def test_bad_inputs_raise_value_error():
         sensitivities(drive, t, u, initial_sensitivity=np.zeros((2, 7)))
     with pytest.raises(ValueError, match="initial sensitivity must hold 3 x 1 finite values"):
         _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [6], np.full((1, 1), 0.0))
+
+
+def test_along_the_simulators_run_the_same_values_to_the_bit():
+    """The joint fit's Jacobian follows the run its residual has just simulated
+    (``sensitivities_along``): the same values to the bit as a run that simulates
+    again, on paper A's step-down with both Coulomb torques (sticks and breakaways)
+    and with the load's alone (its switch is the simulator's third), from a start with
+    a sensitivity. A run that does not fit the drive is a one-line ValueError."""
+    from backlashkit.identify._model import packed_row
+    from backlashkit.simulate import simulate_packed_runs
+
+    ts = 2.0**-10  # a step that time_grid finds to the bit from the times
+    t = np.arange(1537) * ts
+    u = bk.signals.step_down(t, A2, t_s=0.75)
+    x0 = np.array([0.5, 0.4, 0.01])
+    for fc in ({"fc_M": 0.01, "fc_L": 0.02}, {"fc_L": 0.02}):
+        drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, **fc)
+        names = default_params(drive)
+        s0 = np.random.default_rng(3).standard_normal((3, len(names)))
+        run = simulate_packed_runs(2, packed_row(drive)[np.newaxis, :], 0.0, ts,
+                                   u[np.newaxis, :], x0[np.newaxis, :], law="paper",
+                                   workers=1).run(0)
+        assert len(run.events) >= 4, run.events
+        _, want = trajectory_and_sensitivities(drive, t, u, initial_state=x0,
+                                               initial_sensitivity=s0)
+        got = sensitivities_along(drive, run, initial_sensitivity=s0)
+        assert np.array_equal(got, want), fc
+    for bad, match in ((run._replace(events=run.events[::-1]), "out of order"),
+                       (run._replace(states=run.states[1:]), "finite states"),
+                       (run._replace(first_modes=run.first_modes[:1]), "first sample's 2 "
+                                                                       "modes")):
+        with pytest.raises(ValueError, match=f"^the run given .*{match}"):
+            sensitivities_along(drive, bad)
 
 
 def _tangent_case(margin_rel: float):

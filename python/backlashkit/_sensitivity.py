@@ -18,6 +18,7 @@ import numpy as np
 from . import validate as v
 from .errors import InputError, SensitivityWarning
 from .plants import TwoMassDrive
+from .simulate import PackedRun
 
 #: The parameters a sensitivity may be taken with respect to, in the kernel's order:
 #: paper A's model, then the Coulomb torques (the breakaway torques tied to them).
@@ -139,6 +140,46 @@ def trajectory_and_sensitivities(
             "are ill-conditioned (the derivative barely exists there)",
             SensitivityWarning, stacklevel=3)
     return x, out
+
+
+def sensitivities_along(
+    drive: TwoMassDrive,
+    run: PackedRun,
+    *,
+    initial_sensitivity: np.ndarray | None = None,
+    params: Sequence[str] | None = None,
+) -> np.ndarray:
+    """The sensitivities ``(n, 3, len(params))`` of the states along ``run``, the
+    simulator's run of ``drive`` (:func:`backlashkit.simulate.simulate_packed_runs`,
+    paper A's law, no current loop, no motor angle), from its first state.
+
+    The same values to the bit as :func:`trajectory_and_sensitivities` from that state
+    on that grid and torque, without simulating the drive again: the joint fit has
+    just simulated the point whose Jacobian it wants. ``initial_sensitivity`` and
+    ``params`` as there; no warning (the run's near-grazing passes are its
+    simulator's).
+
+    Raises
+    ------
+    InputError
+        As :func:`sensitivities`.
+    ValueError
+        From the kernel: a run that does not fit the drive (another switch count,
+        states not finite, changes out of order or off the grid), or a change that
+        grazes a flank.
+    """
+    from . import _core
+
+    names = check_scope(drive, params)
+    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
+        initial_sensitivity, float)
+    p = np.array([getattr(drive, n) for n in PARAMS], float)
+    return _core.drive_sensitivities_along(
+        p, run.t0, run.ts, np.ascontiguousarray(run.torque, float),
+        np.ascontiguousarray(run.states, float),
+        np.ascontiguousarray(run.first_modes, np.int8),
+        np.ascontiguousarray(run.events, float).reshape(-1, 4),
+        [PARAMS.index(n) for n in names], s0)
 
 
 def check_scope(drive: TwoMassDrive, params: Sequence[str] | None) -> list[str]:

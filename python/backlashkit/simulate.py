@@ -21,7 +21,7 @@ import dataclasses
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 
@@ -39,11 +39,14 @@ __all__ = [
     "DriveResponse",
     "FrictionEvent",
     "NearGrazing",
+    "PackedRun",
+    "PackedRuns",
     "Sensitivity",
     "assess_sensitivity",
     "simulate_batch",
     "simulate_drive",
     "simulate_packed",
+    "simulate_packed_runs",
 ]
 
 Backend = Literal["rust", "numpy"]
@@ -356,14 +359,80 @@ def simulate_packed(
         States of every run, shape ``(b, n, S)``: ``S = 2N - 1``, one more with a
         current loop (the motor torque), one more with ``track_angle``.
     """
+    return simulate_packed_runs(n_inertias, params, t0, ts, torque, x0, law=law,
+                                workers=workers, track_angle=track_angle).states
+
+
+class PackedRun(NamedTuple):
+    """One run of :func:`simulate_packed_runs`: what the compiled sensitivities need to
+    follow it without simulating it again
+    (:func:`backlashkit._sensitivity.sensitivities_along`).
+
+    Attributes
+    ----------
+    t0, ts : float
+        Its grid: first sample's time and sample time in s.
+    torque : numpy.ndarray
+        Motor torque in N m, ``(n,)``.
+    states : numpy.ndarray
+        ``(n, S)``, as :func:`simulate_packed`.
+    first_modes : numpy.ndarray
+        The first sample's modes (int8): each shaft's contact, then each inertia's
+        friction switch.
+    events : numpy.ndarray
+        ``(E, 4)``: ``[time in s, switch, from, to]`` of every change of mode.
+    """
+
+    t0: float
+    ts: float
+    torque: np.ndarray
+    states: np.ndarray
+    first_modes: np.ndarray
+    events: np.ndarray
+
+
+class PackedRuns(NamedTuple):
+    """A batch of :func:`simulate_packed_runs`: the grid, the torque ``(1, n)`` or
+    ``(b, n)``, the states ``(b, n, S)``, the modes ``(b, n, M)`` and each run's
+    changes of mode ``(E, 4)``."""
+
+    t0: float
+    ts: float
+    torque: np.ndarray
+    states: np.ndarray
+    modes: np.ndarray
+    events: list[np.ndarray]
+
+    def run(self, i: int) -> PackedRun:
+        """Run ``i`` alone."""
+        u = self.torque[i if self.torque.shape[0] > 1 else 0]
+        return PackedRun(self.t0, self.ts, u, self.states[i], self.modes[i, 0],
+                         self.events[i])
+
+
+def simulate_packed_runs(
+    n_inertias: int,
+    params: np.ndarray,
+    t0: float,
+    ts: float,
+    torque: np.ndarray,
+    x0: np.ndarray,
+    *,
+    law: ShaftLaw | str,
+    workers: int | None,
+    track_angle: bool = False,
+) -> PackedRuns:
+    """As :func:`simulate_packed`, with each run's modes and changes of mode
+    (:class:`PackedRuns`): a run the compiled sensitivities may follow afterwards."""
     from . import _core
 
-    states, _, _ = _core.simulate_chain_batch(
+    torque = np.ascontiguousarray(torque, float)
+    states, modes, events = _core.simulate_chain_batch(
         n_inertias, np.ascontiguousarray(params, float), ShaftLaw.parse(law).code,
-        float(t0), float(ts), np.ascontiguousarray(torque, float),
-        np.ascontiguousarray(x0, float), workers or 0, track_angle,
+        float(t0), float(ts), torque, np.ascontiguousarray(x0, float), workers or 0,
+        track_angle,
     )
-    return states
+    return PackedRuns(float(t0), float(ts), torque, states, modes, [e for e, _ in events])
 
 
 @dataclass(frozen=True)

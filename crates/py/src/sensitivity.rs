@@ -1,5 +1,6 @@
 //! Bindings of the forward sensitivities of the two-mass drive.
 
+use backlashkit_core::hybrid::Event;
 use backlashkit_core::sensitivity::{self, N_PARAMS, N_STATES};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
@@ -36,13 +37,7 @@ fn drive_sensitivities<'py>(
     wanted: Vec<usize>,
     s0: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<SensitivityOutput<'py>> {
-    let params = params.as_slice()?;
-    let p: [f64; N_PARAMS] = params.try_into().map_err(|_| {
-        PyValueError::new_err(format!(
-            "params must have {N_PARAMS} entries, got {}",
-            params.len()
-        ))
-    })?;
+    let p = param_array(&params)?;
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);
     let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
     let out = py
@@ -67,7 +62,85 @@ fn drive_sensitivities<'py>(
     ))
 }
 
+/// As `drive_sensitivities`, along the run the simulator has made of the same drive,
+/// grid and torque (`simulate_chain_batch`'s row): its states `(len(u), 3)`, its
+/// first sample's modes and its events `(E, 4)` = `[time, switch, from, to]`; the run
+/// starts from its first state. The same values to the bit, without simulating again.
+/// Returns the sensitivities alone.
+#[pyfunction]
+#[pyo3(signature = (params, t0, ts, u, states, first_modes, events, wanted, s0=None))]
+#[allow(clippy::too_many_arguments)]
+fn drive_sensitivities_along<'py>(
+    py: Python<'py>,
+    params: PyReadonlyArray1<'py, f64>,
+    t0: f64,
+    ts: f64,
+    u: PyReadonlyArray1<'py, f64>,
+    states: PyReadonlyArray2<'py, f64>,
+    first_modes: PyReadonlyArray1<'py, i8>,
+    events: PyReadonlyArray2<'py, f64>,
+    wanted: Vec<usize>,
+    s0: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let p = param_array(&params)?;
+    let events = event_list(&events)?;
+    let run = sensitivity::Along {
+        states: states.as_slice()?,
+        first_modes: first_modes.as_slice()?,
+        events: &events,
+    };
+    let u = u.as_slice()?;
+    let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
+    let values = py
+        .detach(|| sensitivity::drive_sensitivities_along(&p, t0, ts, u, &run, s0, &wanted))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(
+        Array3::from_shape_vec((u.len(), N_STATES, wanted.len()), values)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?
+            .into_pyarray(py),
+    )
+}
+
+fn param_array(params: &PyReadonlyArray1<'_, f64>) -> PyResult<[f64; N_PARAMS]> {
+    let params = params.as_slice()?;
+    params.try_into().map_err(|_| {
+        PyValueError::new_err(format!(
+            "params must have {N_PARAMS} entries, got {}",
+            params.len()
+        ))
+    })
+}
+
+/// Events `(E, 4)` = `[time, switch, from, to]` as the simulator's bindings give them.
+fn event_list(events: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Event>> {
+    let a = events.as_array();
+    if a.ncols() != 4 && a.nrows() > 0 {
+        return Err(PyValueError::new_err(format!(
+            "events must have 4 columns [time, switch, from, to], got {}",
+            a.ncols()
+        )));
+    }
+    a.rows()
+        .into_iter()
+        .map(|r| {
+            let whole = |v: f64| v.fract() == 0.0 && v.abs() < 128.0;
+            if !(whole(r[1]) && r[1] >= 0.0 && whole(r[2]) && whole(r[3])) {
+                return Err(PyValueError::new_err(format!(
+                    "an event's switch and modes must be small whole numbers, got {r}"
+                )));
+            }
+            Ok(Event {
+                time: r[0],
+                index: r[1] as usize,
+                from: r[2] as i8,
+                to: r[3] as i8,
+            })
+        })
+        .collect()
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(drive_sensitivities, m)?)?;
+    m.add_function(wrap_pyfunction!(drive_sensitivities_along, m)?)?;
     Ok(())
 }

@@ -19,7 +19,7 @@ from .. import validate as v
 from ..actuator import CurrentLoop
 from ..errors import InputError
 from ..plants import TwoMassDrive
-from ..simulate import simulate_packed
+from ..simulate import PackedRun, simulate_packed_runs
 from .record import Record
 from .step import find_step_down
 
@@ -256,16 +256,38 @@ def steady_sensitivity(drive: TwoMassDrive, level: float, names: Sequence[str]
     return out
 
 
-def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str]
+@dataclass(frozen=True)
+class SpanRun:
+    """One parameter row's simulation of a span, which the compiled sensitivities can
+    follow without simulating it again (:func:`span_start`,
+    :func:`backlashkit._sensitivity.sensitivities_along`): the held torque's run on its
+    coarse grid (None without a hold) and the span's own run."""
+
+    hold: PackedRun | None
+    span: PackedRun
+
+
+def hold_grid(span: Span) -> tuple[int, float]:
+    """Steps and step in s of the coarse grid a span's hold is simulated on: the
+    fewest steps of at most :data:`HOLD_STEP`, and at least 2."""
+    n = max(2, math.ceil(span.hold / HOLD_STEP))
+    return n, span.hold / n
+
+
+def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str],
+               hold: PackedRun | None = None
                ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The state ``[w_M, w_L, phi]`` the model starts ``span`` from and its sensitivity
     to ``names`` (``(3, len(names))``), for the compiled sensitivities: ``(None,
     None)`` from rest; the end of the held torque's run on the coarse grid of
-    :func:`simulate_span`; or the steady state and :func:`steady_sensitivity`."""
-    from .._sensitivity import trajectory_and_sensitivities
+    :func:`simulate_span` (along ``hold``, that run of ``drive``, where given); or the
+    steady state and :func:`steady_sensitivity`."""
+    from .._sensitivity import sensitivities_along, trajectory_and_sensitivities
 
     if span.hold is not None:
-        n = max(2, math.ceil(span.hold / HOLD_STEP))
+        if hold is not None:
+            return hold.states[-1], sensitivities_along(drive, hold, params=names)[-1]
+        n, _ = hold_grid(span)  # the grid's step as time_grid finds it: hold / n
         x, sens = trajectory_and_sensitivities(
             drive, np.linspace(0.0, span.hold, n + 1), np.full(n + 1, span.level),
             params=names)
@@ -276,37 +298,42 @@ def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str]
     return x0, steady_sensitivity(drive, span.level, names)
 
 
-def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None
-                  ) -> np.ndarray:
+def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None, *,
+                  runs: list[SpanRun] | None = None) -> np.ndarray:
     """States ``(len(p), end, S)`` of packed parameter rows ``p`` over a span: the two
     speeds and the shaft angle, the motor torque with a current loop, and the motor's
-    angle from 0 at the span's start where the span fits angles.
+    angle from 0 at the span's start where the span fits angles. ``runs``, where given
+    for a single row, gets that row's :class:`SpanRun`.
 
     What the compiled core refuses (contact chatter, a mode too fast for the sample
     time) becomes an :class:`InputError` naming the record; the searches catch it as
     the ``ValueError`` it still is.
     """
     try:
+        held = None
         if span.hold is not None:  # from rest through the held torque, on a coarse grid
-            n = max(2, math.ceil(span.hold / HOLD_STEP))
-            held = simulate_packed(2, p, 0.0, span.hold / n, np.full((1, n + 1), span.level),
-                                   initial_states(p, None, span.level), law=law,
-                                   workers=workers)
-            x0 = held[:, -1, :]
+            n, step = hold_grid(span)
+            held = simulate_packed_runs(2, p, 0.0, step, np.full((1, n + 1), span.level),
+                                        initial_states(p, None, span.level), law=law,
+                                        workers=workers)
+            x0 = held.states[:, -1, :]
         else:
             x0 = initial_states(p, span.level, float(span.torque[0]))
         if span.positions:
             x0 = np.column_stack([x0, np.zeros(len(x0))])
         end = span.t.size if end is None else max(end, 2)
-        return simulate_packed(2, p, span.t[0], span.record.ts,
-                               span.torque[np.newaxis, :end], x0, law=law, workers=workers,
-                               track_angle=span.positions)
+        out = simulate_packed_runs(2, p, span.t[0], span.record.ts,
+                                   span.torque[np.newaxis, :end], x0, law=law,
+                                   workers=workers, track_angle=span.positions)
     except InputError:
         raise
     except ValueError as exc:
         text = " ".join(str(exc).split())
         raise InputError(f"{span.record.name}: cannot simulate the drive on this record: "
                          f"{text}") from exc
+    if runs is not None and len(p) == 1:
+        runs.append(SpanRun(None if held is None else held.run(0), out.run(0)))
+    return out.states
 
 
 def model_commutation(drive: TwoMassDrive, span: Span, law: str, tau_i: float = 0.0):

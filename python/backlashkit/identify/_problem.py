@@ -10,14 +10,12 @@ records. The stages that fit it are :mod:`backlashkit.identify._search`'s.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .._sensitivity import PARAMS as SENSITIVITY_PARAMS
-from ..errors import SensitivityWarning
 from ..plants import TwoMassDrive
 from ..signals import highpass_noise_std
 from ._lm import LMState, lm
@@ -28,6 +26,7 @@ from ._model import (
     TAU_COL,
     TIED,
     Span,
+    SpanRun,
     model_angles,
     screen_spans,
     simulate_span,
@@ -42,6 +41,10 @@ from .terms import Term
 #: A torque change larger than this, relative to the largest torque, is a jump (a
 #: window starts there); smaller ones are rounding.
 JUMP_RTOL = 1e-9
+#: Points whose runs a residual keeps for the exact Jacobian there: Levenberg-Marquardt
+#: asks for it at the last accepted point, which an extrapolation's rejected tries
+#: (one, at most a few) may follow.
+KEPT_POINTS = 4
 #: Noise levels are floored at this fraction of the record's largest speed, so that a
 #: noise-free record still has finite weights.
 NOISE_FLOOR = 1e-9
@@ -169,10 +172,13 @@ class Problem:
         return p
 
     def simulate(self, z_rows: np.ndarray, spans: Sequence[Span],
-                 ends: list[int] | None = None) -> list[np.ndarray]:
-        """States of log-parameter rows over spans (each up to ``ends[k]`` samples)."""
+                 ends: list[int] | None = None, *, runs: list[SpanRun] | None = None
+                 ) -> list[np.ndarray]:
+        """States of log-parameter rows over spans (each up to ``ends[k]`` samples);
+        ``runs``, where given for a single row, gets its run of each span."""
         p = self.packed(z_rows)
-        return [simulate_span(p, sp, self.law, self.workers, None if ends is None else ends[k])
+        return [simulate_span(p, sp, self.law, self.workers,
+                              None if ends is None else ends[k], runs=runs)
                 for k, sp in enumerate(spans)]
 
     def exact_drive(self, z: np.ndarray) -> TwoMassDrive | None:
@@ -244,10 +250,16 @@ class Residual:
         self.n_res = 2 * sum(m - self.lag for m in self.sizes) + len(problem.free)
         self.ys = [(sp.p_m[s_], sp.p_l[s_]) if sp.positions else (sp.y_m[s_], sp.y_l[s_])
                    for sp, s_ in zip(spans, self.sels, strict=True)]
+        # single points' runs of the spans, by the point's bytes, newest last: the
+        # exact Jacobian at one of them follows its runs (:meth:`exact_jacobian`)
+        self.kept: dict[bytes, list[SpanRun]] = {}
 
     def __call__(self, z_rows: np.ndarray) -> np.ndarray:
         pb, lag = self.problem, self.lag
-        sims = pb.simulate(z_rows, self.spans, self.ends)
+        runs = [] if len(z_rows) == 1 and not any(sp.positions for sp in self.spans) else None
+        sims = pb.simulate(z_rows, self.spans, self.ends, runs=runs)
+        if runs is not None:
+            self.keep(z_rows[0], runs)
         out = np.empty((len(z_rows), self.n_res))
         pos = 0
         for sp, y2, s_, x, m in zip(self.spans, self.ys, self.sels, sims, self.sizes,
@@ -265,6 +277,21 @@ class Residual:
         with np.errstate(invalid="ignore"):  # inf / inf: no penalty on an overflow
             out[:, pos:] = np.nan_to_num((p - pb.p_prior) / (pb.pen * pb.p_prior))
         return out
+
+    def runs_at(self, z: np.ndarray) -> list[SpanRun]:
+        """The runs of the spans at point ``z``: kept, or simulated now (and kept)."""
+        runs = self.kept.get(z.tobytes())
+        if runs is None:
+            runs = []
+            self.problem.simulate(z[np.newaxis, :], self.spans, self.ends, runs=runs)
+            self.keep(z, runs)
+        return runs
+
+    def keep(self, z: np.ndarray, runs: list[SpanRun]) -> None:
+        """Keep the runs of point ``z`` (the :data:`KEPT_POINTS` newest)."""
+        self.kept[z.tobytes()] = runs
+        while len(self.kept) > KEPT_POINTS:
+            del self.kept[next(iter(self.kept))]
 
     def weigh(self, sp: Span, c: int, e: np.ndarray) -> np.ndarray:
         """The rows of errors ``e`` (``(b, m)``: the selected samples of channel ``c`` of
@@ -300,16 +327,19 @@ class Residual:
         sensitivities, one run per span of the estimated parameters alone (without
         ``theta``'s column where ``with_theta`` is false: a refit that holds it); None
         outside their scope (:meth:`Problem.exact_drive`, encoder angles) or where a
-        change grazes (no derivative there: the caller differences instead). A span
-        that starts after a held torque or from a steady state starts with that
-        state's sensitivity (:func:`~backlashkit.identify._model.span_start`)."""
+        change grazes (no derivative there: the caller differences instead). The
+        sensitivities follow the residual's own simulation at ``z`` (:attr:`kept`
+        where it has just been simulated there, else simulated now), so they are
+        those of the model the residual evaluates. A span that starts after a held
+        torque or from a steady state starts with that state's sensitivity
+        (:func:`~backlashkit.identify._model.span_start`)."""
         pb = self.problem
         if any(sp.positions for sp in self.spans):
             return None
         drive = pb.exact_drive(z)
         if drive is None:
             return None
-        from .._sensitivity import trajectory_and_sensitivities
+        from .._sensitivity import sensitivities_along
 
         first = 0 if with_theta else 1
         names = pb.names[first:]
@@ -318,24 +348,23 @@ class Residual:
         minus_per_z = -scale[first:]
         out = np.empty((self.n_res, len(names)))
         pos = 0
-        for sp, s_, m, end in zip(self.spans, self.sels, self.sizes, self.ends, strict=True):
-            try:
-                with warnings.catch_warnings():  # as quiet near grazing as the differences
-                    warnings.simplefilter("ignore", SensitivityWarning)
-                    x0, s0 = span_start(drive, sp, names)
-                    _, sens = trajectory_and_sensitivities(
-                        drive, sp.t[:end], sp.torque[:end], initial_state=x0,
-                        initial_sensitivity=s0, params=names)
-            except ValueError:
-                return None
-            for c in (0, 1):
-                rows = out[pos : pos + m - self.lag]
-                if self.ar is None:  # weigh's arithmetic in place (the spans are speeds)
-                    np.multiply(sens[s_, c, :], minus_per_z, out=rows)
-                    np.divide(rows, self.sig[sp.k, c], out=rows)
-                else:
-                    rows[...] = self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T
-                pos += m - self.lag
+        try:
+            runs = self.runs_at(z)
+            for sp, s_, m, run in zip(self.spans, self.sels, self.sizes, runs, strict=True):
+                # along a run the kernel does not warn (the differences would not)
+                _, s0 = span_start(drive, sp, names, run.hold)
+                sens = sensitivities_along(drive, run.span, initial_sensitivity=s0,
+                                           params=names)
+                for c in (0, 1):
+                    rows = out[pos : pos + m - self.lag]
+                    if self.ar is None:  # weigh's arithmetic in place (the spans are speeds)
+                        np.multiply(sens[s_, c, :], minus_per_z, out=rows)
+                        np.divide(rows, self.sig[sp.k, c], out=rows)
+                    else:
+                        rows[...] = self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T
+                    pos += m - self.lag
+        except ValueError:
+            return None
         with np.errstate(invalid="ignore"):  # no penalty (inf) on the terms' parameters
             prior = np.nan_to_num(scale[1:] / (pb.pen * pb.p_prior))
         out[pos:] = 0.0

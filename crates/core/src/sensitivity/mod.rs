@@ -9,7 +9,8 @@
 //! and so on). The state and one sensitivity together follow a 6-state linear system
 //! whose flow over a span of held torque is exact (a matrix exponential, as the
 //! simulator's own); see `mode`, `flow` and `coupled`. The contact changes are those the simulator locates:
-//! the drive is simulated first and its events split the samples they fall in. At a
+//! the drive is simulated first (or its run is given, `drive_sensitivities_along`) and
+//! its events split the samples they fall in. At a
 //! change the sensitivities jump by the saltation `(f_- - f_+) dtau/dp`; see `run`.
 //! A stick-slip change is a change of mode like a contact change, with its own guard:
 //! the speed's zero crossing, or the breakaway of the torque on a stuck inertia.
@@ -29,7 +30,8 @@ mod run;
 mod tests;
 
 pub use run::{
-    drive_sensitivities, drive_sensitivities_from, drive_sensitivities_of, DriveSensitivities,
+    drive_sensitivities, drive_sensitivities_along, drive_sensitivities_from,
+    drive_sensitivities_of, Along, DriveSensitivities,
 };
 
 /// The parameters, in the order of a parameter vector: motor and load inertias, shaft

@@ -82,6 +82,75 @@ pub fn drive_sensitivities_from(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<DriveSensitivities, Error> {
+    let active = checked(p, s0, wanted)?;
+    let chain = chain_params(p)?;
+    if !t0.is_finite() {
+        return Err(Error::InvalidArgument(format!(
+            "start time must be finite, got {t0}"
+        )));
+    }
+    let run = simulate_chain(&chain, Law::Paper, t0, ts, u, x0)?;
+    let sticky = chain.sticky();
+    let Some(first) = run.modes.get(..1 + sticky.len()) else {
+        return Ok(DriveSensitivities::default());
+    };
+    let along = Along {
+        states: &run.states,
+        first_modes: first,
+        events: &run.events,
+    };
+    let values = walk(p, &sticky, t0, ts, u, &along, s0, wanted, active)?;
+    Ok(DriveSensitivities {
+        values,
+        states: run.states,
+        grazes: run.grazes,
+    })
+}
+
+/// A run of the simulator that the sensitivities can follow without simulating it
+/// again: its states, row-major `(samples, 3)`; its first sample's modes (the contact,
+/// then each inertia with friction, as the simulator writes them); and its changes.
+#[derive(Clone, Copy, Debug)]
+pub struct Along<'a> {
+    pub states: &'a [f64],
+    pub first_modes: &'a [i8],
+    pub events: &'a [Event],
+}
+
+/// As [`drive_sensitivities_from`], along `run`, the simulator's run of the same
+/// drive, grid and torque from `run`'s first state (the simulator's output for
+/// `x0 = run.states[..3]`): the joint fit has just simulated the point whose
+/// Jacobian it wants, and this skips simulating it again. The same arithmetic, so the same values to the bit as
+/// [`drive_sensitivities_from`] on that run. Returns `dx/dp` alone.
+///
+/// Errors: as [`drive_sensitivities_from`], and a run whose sizes do not match the
+/// grid or the drive's switches, whose states are not finite, or whose changes are
+/// out of order, outside the grid or not switches of this drive.
+pub fn drive_sensitivities_along(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    run: &Along<'_>,
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+) -> Result<Vec<f64>, Error> {
+    let active = checked(p, s0, wanted)?;
+    let sticky = chain_params(p)?.sticky();
+    check_run(t0, ts, u.len(), run, &sticky)?;
+    if u.is_empty() {
+        return Ok(Vec::new());
+    }
+    walk(p, &sticky, t0, ts, u, run, s0, wanted, active)
+}
+
+/// Which parameters are carried: `wanted`, checked (distinct, in range, a Coulomb
+/// torque only where positive), with `s0` of the matching size.
+fn checked(
+    p: &[f64; N_PARAMS],
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+) -> Result<[bool; N_PARAMS], Error> {
     let mut active = [false; N_PARAMS];
     for &j in wanted {
         if j >= N_PARAMS || active[j] {
@@ -107,34 +176,76 @@ pub fn drive_sensitivities_from(
             )));
         }
     }
-    let chain = chain_params(p)?;
-    if !t0.is_finite() {
-        return Err(Error::InvalidArgument(format!(
-            "start time must be finite, got {t0}"
-        )));
+    Ok(active)
+}
+
+/// A run given to [`drive_sensitivities_along`] checked against the grid of `n`
+/// samples and the drive's switches: the contact (event 0), then each inertia `i` of
+/// `sticky` (event `1 + i`, the simulator's numbering).
+fn check_run(t0: f64, ts: f64, n: usize, run: &Along<'_>, sticky: &[usize]) -> Result<(), Error> {
+    let switches = 1 + sticky.len();
+    let bad = |what: String| Err(Error::InvalidArgument(format!("the run given {what}")));
+    if !(t0.is_finite() && ts.is_finite() && ts > 0.0) {
+        return bad(format!(
+            "needs a finite start and a sample time > 0, got {t0} and {ts}"
+        ));
     }
-    let run = simulate_chain(&chain, Law::Paper, t0, ts, u, x0)?;
-    let sticky = chain.sticky();
-    let Some(first) = run.modes.get(..1 + sticky.len()) else {
-        return Ok(DriveSensitivities::default());
-    };
-    let mut mode = Mode::contact(first[0]);
+    if run.states.len() != n * N_STATES || !run.states.iter().all(|v| v.is_finite()) {
+        return bad(format!(
+            "must hold {n} x {N_STATES} finite states, got {} values",
+            run.states.len()
+        ));
+    }
+    if n > 0 && run.first_modes.len() != switches {
+        return bad(format!(
+            "must give the first sample's {switches} modes, got {}",
+            run.first_modes.len()
+        ));
+    }
+    let end = t0 + n.saturating_sub(1) as f64 * ts;
+    let mut last = t0;
+    for ev in run.events {
+        let mode = |m: i8| (-1..=1).contains(&m);
+        let switch = ev.index == 0 || sticky.contains(&(ev.index - 1));
+        if !(ev.time >= last && ev.time <= end && switch && mode(ev.from) && mode(ev.to)) {
+            return bad(format!(
+                "has a change out of order, outside [{t0}, {end}] s or of no switch of this \
+                 drive: {ev:?}"
+            ));
+        }
+        last = ev.time;
+    }
+    Ok(())
+}
+
+/// The sensitivities along a run of the drive (`run`, checked; `sticky`: its inertias
+/// with a friction switch), from `s0`.
+#[allow(clippy::too_many_arguments)]
+fn walk(
+    p: &[f64; N_PARAMS],
+    sticky: &[usize],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    run: &Along<'_>,
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+    active: [bool; N_PARAMS],
+) -> Result<Vec<f64>, Error> {
+    let mut mode = Mode::contact(run.first_modes[0]);
     for (r, &i) in sticky.iter().enumerate() {
-        mode.slip[i] = first[1 + r];
+        mode.slip[i] = run.first_modes[1 + r];
     }
     // Sensitivities are carried per log-parameter (see `flow`); a zero friction or
     // damping keeps the plain derivative.
     let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
-    // The simulator has checked that x0 has three finite entries.
-    let x = [x0[0], x0[1], x0[2]];
-    // Carried per log-parameter, as the flow carries them.
+    let x = [run.states[0], run.states[1], run.states[2]];
     let mut s = [[0.0; N_STATES]; N_PARAMS];
     for (c, &j) in wanted.iter().enumerate() {
         for i in 0..N_STATES {
             s[j][i] = s0.map_or(0.0, |s0| s0[i * wanted.len() + c] * scale[j]);
         }
     }
-    let z = Augmented { x, s };
     let mut walk = Walk {
         p,
         scale,
@@ -142,16 +253,11 @@ pub fn drive_sensitivities_from(
         active,
         wanted,
         mode,
-        z,
+        z: Augmented { x, s },
         last: (f64::NAN, [0.0; N_PARAMS]),
         full: std::array::from_fn(|_| None),
     };
-    let values = walk.run(t0, ts, u, &run.states, &run.events)?;
-    Ok(DriveSensitivities {
-        values,
-        states: run.states,
-        grazes: run.grazes,
-    })
+    walk.run(t0, ts, u, run.states, run.events)
 }
 
 /// The chain of the two-mass drive, validated; `theta` must be positive, the NumPy

@@ -2,6 +2,7 @@ use super::index::{FC_L, FC_M, F_M, J_M, THETA};
 use super::mode::{system, system_derivative, Mode};
 use super::*;
 use crate::chain::{simulate_chain, ChainParams, Law};
+use crate::hybrid::Event;
 use crate::Error;
 
 /// Paper A's drive (Section 5) in the order [`PARAMS`], without Coulomb friction.
@@ -463,4 +464,63 @@ fn a_run_continued_from_its_state_and_sensitivity_gives_the_whole_runs() {
     assert!(a.unwrap().values == whole.values);
     let bad = drive_sensitivities_from(&COULOMB, 0.0, TS, &u, &[0.0; 3], Some(&zero[1..]), &ALL);
     assert!(matches!(bad, Err(Error::InvalidArgument(_))));
+}
+
+#[test]
+fn along_the_simulators_run_the_same_values_to_the_bit() {
+    // The joint fit hands the sensitivities the run it has just simulated: along it,
+    // the values are those of a run that simulates again, to the bit. Paper A's drive,
+    // with both Coulomb torques and with the load's alone (its switch is event 2),
+    // from rest and from a state with a sensitivity.
+    let u = step_down(4.0, LEVEL);
+    let mut load = PAPER;
+    load[FC_L] = COULOMB[FC_L];
+    let cases: [(&[f64; N_PARAMS], Vec<usize>); 3] = [
+        (&PAPER, (0..N_LINEAR).collect()),
+        (&COULOMB, ALL.to_vec()),
+        (&load, (0..N_LINEAR).chain([FC_L]).collect()),
+    ];
+    for (p, wanted) in cases {
+        let x0 = [0.3, 0.2, 0.01];
+        let s0: Vec<f64> = (0..N_STATES * wanted.len())
+            .map(|i| 1e-3 * i as f64)
+            .collect();
+        let want = drive_sensitivities_from(p, 0.0, TS, &u, &x0, Some(&s0), &wanted).unwrap();
+        let run = simulate_from(p, &u, &x0);
+        assert!(run.events.len() >= 4, "{} changes", run.events.len());
+        let switches = run.modes.len() / u.len();
+        let along = Along {
+            states: &run.states,
+            first_modes: &run.modes[..switches],
+            events: &run.events,
+        };
+        let got = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
+        assert!(got == want.values, "{wanted:?}");
+    }
+    // A run that does not fit the grid or the drive is refused.
+    let run = simulate(&COULOMB, &u);
+    let first = &run.modes[..3];
+    let early = [Event {
+        time: -1.0,
+        ..run.events[0]
+    }];
+    let unknown = [Event {
+        index: 3,
+        ..run.events[0]
+    }];
+    let bad: [(&[f64], &[i8], &[Event]); 4] = [
+        (&run.states[3..], first, &run.events),
+        (&run.states, &first[..2], &run.events),
+        (&run.states, first, &early),
+        (&run.states, first, &unknown),
+    ];
+    for (states, first_modes, events) in bad {
+        let along = Along {
+            states,
+            first_modes,
+            events,
+        };
+        let out = drive_sensitivities_along(&COULOMB, 0.0, TS, &u, &along, None, &ALL);
+        assert!(matches!(out, Err(Error::InvalidArgument(_))));
+    }
 }
