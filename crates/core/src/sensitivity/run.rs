@@ -120,8 +120,9 @@ pub struct Along<'a> {
 /// As [`drive_sensitivities_from`], along `run`, the simulator's run of the same
 /// drive, grid and torque from `run`'s first state (the simulator's output for
 /// `x0 = run.states[..3]`): the joint fit has just simulated the point whose
-/// Jacobian it wants, and this skips simulating it again. The same arithmetic, so the same values to the bit as
-/// [`drive_sensitivities_from`] on that run. Returns `dx/dp` alone.
+/// Jacobian it wants, and this skips simulating it again. The same arithmetic, so
+/// the same values to the bit as [`drive_sensitivities_from`] on that run. Returns
+/// `dx/dp` alone.
 ///
 /// Errors: as [`drive_sensitivities_from`], and a run whose sizes do not match the
 /// grid or the drive's switches, whose states are not finite, or whose changes are
@@ -202,15 +203,17 @@ fn check_run(t0: f64, ts: f64, n: usize, run: &Along<'_>, sticky: &[usize]) -> R
             run.first_modes.len()
         ));
     }
-    let end = t0 + n.saturating_sub(1) as f64 * ts;
-    let mut last = t0;
+    // The grid's ends widened by a sample: what the simulator locates lies inside,
+    // and only rounding could put it a hair outside.
+    let (start, end) = (t0 - ts, t0 + n as f64 * ts);
+    let mut last = start;
     for ev in run.events {
         let mode = |m: i8| (-1..=1).contains(&m);
         let switch = ev.index == 0 || sticky.contains(&(ev.index - 1));
         if !(ev.time >= last && ev.time <= end && switch && mode(ev.from) && mode(ev.to)) {
             return bad(format!(
-                "has a change out of order, outside [{t0}, {end}] s or of no switch of this \
-                 drive: {ev:?}"
+                "has a change out of order, outside [{start}, {end}] s or of no switch of \
+                 this drive: {ev:?}"
             ));
         }
         last = ev.time;
