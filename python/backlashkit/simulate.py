@@ -368,10 +368,12 @@ class PackedRun(NamedTuple):
     follow it without simulating it again
     (:func:`backlashkit._sensitivity.sensitivities_along`).
 
-    Attributes
+    Parameters
     ----------
-    t0, ts : float
-        Its grid: first sample's time and sample time in s.
+    t0 : float
+        Time of the first sample in s.
+    ts : float
+        Sample time in s.
     torque : numpy.ndarray
         Motor torque in N m, ``(n,)``.
     states : numpy.ndarray
@@ -392,9 +394,23 @@ class PackedRun(NamedTuple):
 
 
 class PackedRuns(NamedTuple):
-    """A batch of :func:`simulate_packed_runs`: the grid, the torque ``(1, n)`` or
-    ``(b, n)``, the states ``(b, n, S)``, the modes ``(b, n, M)`` and each run's
-    changes of mode ``(E, 4)``."""
+    """A batch of :func:`simulate_packed_runs`.
+
+    Parameters
+    ----------
+    t0 : float
+        Time of the first sample in s.
+    ts : float
+        Sample time in s.
+    torque : numpy.ndarray
+        Motor torque in N m, ``(1, n)`` (shared) or ``(b, n)``.
+    states : numpy.ndarray
+        ``(b, n, S)``, as :func:`simulate_packed`.
+    modes : numpy.ndarray
+        ``(b, n, M)`` (int8): each sample's modes, as :class:`PackedRun`'s first.
+    events : list of numpy.ndarray
+        Each run's changes of mode, ``(E, 4)`` as :class:`PackedRun`'s.
+    """
 
     t0: float
     ts: float
@@ -404,7 +420,18 @@ class PackedRuns(NamedTuple):
     events: list[np.ndarray]
 
     def run(self, i: int) -> PackedRun:
-        """Run ``i`` alone."""
+        """Run ``i`` alone.
+
+        Parameters
+        ----------
+        i : int
+            Index of the run in the batch.
+
+        Returns
+        -------
+        PackedRun
+            Its grid, torque, states, first modes and changes (views, not copies).
+        """
         u = self.torque[i if self.torque.shape[0] > 1 else 0]
         return PackedRun(self.t0, self.ts, u, self.states[i], self.modes[i, 0],
                          self.events[i])
@@ -422,8 +449,20 @@ def simulate_packed_runs(
     workers: int | None,
     track_angle: bool = False,
 ) -> PackedRuns:
-    """As :func:`simulate_packed`, with each run's modes and changes of mode
-    (:class:`PackedRuns`): a run the compiled sensitivities may follow afterwards."""
+    """As :func:`simulate_packed`, with each run's modes and changes of mode: a run the
+    compiled sensitivities may follow afterwards.
+
+    Parameters
+    ----------
+    n_inertias, params, t0, ts, torque, x0, law, workers, track_angle
+        As :func:`simulate_packed`.
+
+    Returns
+    -------
+    PackedRuns
+        The grid, the torque, the states ``(b, n, S)``, the modes and each run's
+        changes; ``.run(i)`` gives run ``i`` alone.
+    """
     from . import _core
 
     torque = np.ascontiguousarray(torque, float)
