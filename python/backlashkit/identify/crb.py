@@ -173,20 +173,12 @@ def cramer_rao_bound(
     if zero:
         raise InputError(f"cannot estimate parameter(s) {zero} at value 0 (e.g. theta = {theta!r})")
     h = v.positive("fd_step", fd_step)
-    n = len(names)
     speeds, sensitivity = _exact(drive, names, tau_i, t, torque, law, initial_state)
     if sensitivity is None:
         speeds, sensitivity = _differenced(drive, names, values, h, tau_i, t, torque, law,
                                            initial_state)
     sig = _noise_levels(noise_std, snr_db, speeds)
-    ar, ratios = _autoregression(noise_ar)
-    fisher = np.zeros((n, n))
-    for c, s in enumerate(sig):
-        sens = sensitivity[c]
-        if ar is not None:  # whitened sensitivities, weighted by the innovation
-            s = s * math.sqrt(ratios[c])
-            sens = whiten(sens.T, ar[c]).T
-        fisher += sens.T @ sens / s**2
+    fisher = _information(sensitivity, sig, noise_ar)
     if prior_rel_std is not None:
         rel = rel_std(prior_rel_std, LINEAR_PARAMS)
         for i, name in enumerate(names[1:], start=1):
@@ -197,14 +189,35 @@ def cramer_rao_bound(
                           int(np.size(speeds[0])))
 
 
+def _information(sensitivity: np.ndarray, sig, noise_ar) -> np.ndarray:
+    """``sum_c S_c^T S_c / s_c^2`` of the sensitivities ``(samples, 2, n)`` of both
+    speeds and their noise levels ``sig``, whitened by ``A(q)`` first with
+    autoregressive noise (``s_c`` then the innovation's std). With white noise one
+    product of the ``(samples, 2 n)`` view serves both speeds, its two diagonal blocks:
+    one BLAS call on rows twice as wide in place of two (docs/design/sensitivities.md,
+    "The bound's information in one product")."""
+    n = sensitivity.shape[2]
+    ar, ratios = _autoregression(noise_ar)
+    if ar is None:
+        both = sensitivity.reshape(sensitivity.shape[0], 2 * n)
+        gram = both.T @ both
+        return gram[:n, :n] / sig[0] ** 2 + gram[n:, n:] / sig[1] ** 2
+    fisher = np.zeros((n, n))
+    for c, s in enumerate(sig):
+        s = s * math.sqrt(ratios[c])
+        sens = whiten(sensitivity[:, c, :].T, ar[c]).T
+        fisher += sens.T @ sens / s**2
+    return fisher
+
+
 def _exact(drive, names, tau_i, t, torque, law, initial_state):
-    """``((w_M, w_L), (S_M, S_L))`` of the nominal drive, ``S_c`` the exact sensitivities
-    ``(samples, len(names))`` of the compiled kernel, where the model is in its scope
-    (paper A's law, no current loop, breakaway torques tied to the Coulomb torques,
-    a Coulomb torque estimated only where positive, a known start); else
-    ``(None, None)``. One sensitivity run of the estimated parameters alone (the
-    speeds come from the same run), against ``2 n + 1`` simulations of central
-    differences."""
+    """``((w_M, w_L), S)`` of the nominal drive, ``S`` the exact sensitivities
+    ``(samples, 2, len(names))`` of both speeds (a view of the kernel's rows) of the
+    compiled kernel, where the model is in its scope (paper A's law, no current loop,
+    breakaway torques tied to the Coulomb torques, a Coulomb torque estimated only
+    where positive, a known start); else ``(None, None)``. One sensitivity run of the
+    estimated parameters alone (the speeds come from the same run), against ``2 n + 1``
+    simulations of central differences."""
     from .._sensitivity import PARAMS, trajectory_and_sensitivities
 
     if (law != "paper" or tau_i or drive.fs_M is not None or drive.fs_L is not None
@@ -219,7 +232,7 @@ def _exact(drive, names, tau_i, t, torque, law, initial_state):
                                                    params=names)
     except ValueError as exc:
         raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
-    return (x[:, 0], x[:, 1]), (sens[:, 0, :], sens[:, 1, :])
+    return (x[:, 0], x[:, 1]), sens[:, :2, :]
 
 
 def _differenced(drive, names, values, h, tau_i, t, torque, law, initial_state):
@@ -231,9 +244,9 @@ def _differenced(drive, names, values, h, tau_i, t, torque, law, initial_state):
             x[i] *= 1.0 + sgn * h
             points.append(x)
     speeds = _speeds(drive, names, points, tau_i, t, torque, law, initial_state)
-    return speeds[0], tuple(
+    return speeds[0], np.stack([
         np.column_stack([(speeds[1 + 2 * i][c] - speeds[2 + 2 * i][c]) / (2 * h * values[i])
-                         for i in range(len(names))]) for c in (0, 1))
+                         for i in range(len(names))]) for c in (0, 1)], axis=1)
 
 
 def _speeds(drive, names, points, tau_i, t, torque, law, initial_state
