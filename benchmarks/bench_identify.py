@@ -153,6 +153,30 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=
     return done[0] / samples, done[1]
 
 
+#: Timed simulations of the records for the steadier unit of ``--count``: the whole
+#: spans' rate inside a fit comes from some two dozen calls among the fit's other work,
+#: and moved by a fifth between runs of one commit.
+UNIT_REPEATS = 7
+
+
+def unit_simulation(recs, prior) -> float:
+    """Median wall time in s of one simulation of all the records, by the fit's own
+    kind of kernel call (``simulate_packed_runs``, one parameter row: the prior's
+    drive with paper A's ``theta``, from rest), of :data:`UNIT_REPEATS`."""
+    from backlashkit.identify._model import packed_row
+    from backlashkit.simulate import simulate_packed_runs
+
+    row = packed_row(prior.with_theta(THETA))[np.newaxis, :]
+    times = []
+    for _ in range(UNIT_REPEATS):
+        start = time.perf_counter()
+        for rec in recs:
+            simulate_packed_runs(2, row, float(rec.t[0]), TS, rec.torque[np.newaxis, :],
+                                 np.zeros((1, 3)), law="paper", workers=1)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
 def part_of(ts: float, n: int) -> str:
     """Which part of a fit a kernel call of ``n`` samples at ``ts`` runs: a hold on the
     coarse grid (another sample time than the records'), a window or a whole span."""
@@ -203,6 +227,10 @@ def count(recs, prior) -> None:
           f"and {sens[0]} sensitivity runs over {sens[1] / samples:.0f} times the records' "
           f"samples in the time of {n_sens:.0f} simulations (at the whole spans' rate): "
           f"{n_fit + n_sens:.0f} in all (issue 24's bar: 250)")
+    unit = unit_simulation(recs, prior)
+    print(f"  the same at a steadier unit, the median of {UNIT_REPEATS} kernel simulations of "
+          f"the records timed apart ({1e3 * unit:.2f} ms): "
+          f"{n_fit + sens[2] / unit:.0f} in all")
     plain = JointIdentifier(prior, workers=1, friction="viscous", actuator=None).fit
     sens_plain = [0, 0, 0.0]
     n_plain, calls = simulations(lambda: plain(recs), samples, sens=sens_plain)
