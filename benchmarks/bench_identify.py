@@ -155,7 +155,7 @@ def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=
 
 #: Timed simulations of the records for the steadier unit of ``--count``: the whole
 #: spans' rate inside a fit comes from some two dozen calls among the fit's other work,
-#: and moved by a fifth between runs of one commit.
+#: and moved by up to a half between runs of one commit.
 UNIT_REPEATS = 7
 
 
