@@ -29,12 +29,13 @@
 term tested), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
 seven parameters) of the same records cost in simulations of those records: the
 samples the compiled kernel advanced (every parameter row of every call, counted by
-wrapping ``simulate_packed_runs``), divided by the records' samples (issue 24's measure). The fit
-and the bound take the compiled sensitivities where their model is theirs: those runs
-are counted apart, the fit's weighed by their time at its simulations' rate on whole
-spans, and the bound's time is also given in times of one simulation of the record
-(medians of 7, interleaved, in CPU time of the process, all its threads: other
-jobs' time slices do not count).
+wrapping ``simulate_packed_runs``), divided by the records' samples (issue 24's
+measure). The fit and the bound take the compiled sensitivities where their model is
+theirs: those runs are counted apart, the fit's weighed by their time at its
+simulations' rate on whole spans, and again at a steadier unit, the median of
+``UNIT_REPEATS`` kernel simulations of the records timed apart; the bound's time is
+also given in times of one simulation of the record (medians of 7, interleaved, in CPU
+time of the process, all its threads: other jobs' time slices do not count).
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
