@@ -267,21 +267,26 @@ def crb_cost(drive, rec, estimate, repeats: int = 7
 
     from backlashkit.identify import crb
 
-    real, runs = core.drive_sensitivities, [0]
+    kernels = ("drive_sensitivities", "drive_information")
+    real, runs = {k: getattr(core, k) for k in kernels}, [0]
 
-    def counted(*args):
-        runs[0] += 1
-        return real(*args)
+    def counted(name):
+        def call(*args):
+            runs[0] += 1
+            return real[name](*args)
+        return call
 
     def bound():
         return cramer_rao_bound(drive, rec.t, rec.torque, snr_db=40.0, estimate=estimate)
 
-    core.drive_sensitivities = counted
+    for k in kernels:
+        setattr(core, k, counted(k))
     try:
         n_sim = simulations(bound, rec.t.size)[0]
     finally:
-        core.drive_sensitivities = real
-    exact = crb._exact
+        for k in kernels:
+            setattr(core, k, real[k])
+    exact = crb._exact_information
     times: dict[str, list[float]] = {"exact": [], "differences": [], "simulation": []}
     # CPU time of the process (all its threads; BLAS held to one): a few milliseconds
     # of wall time on a machine busy with other jobs measure their time slices more
@@ -291,14 +296,15 @@ def crb_cost(drive, rec, estimate, repeats: int = 7
         for _ in range(repeats):  # interleaved
             for name, fn in (("exact", bound), ("differences", bound),
                              ("simulation", lambda: drive.simulate(rec.t, rec.torque))):
-                crb._exact = exact if name == "exact" else lambda *a: (None, None)
+                crb._exact_information = (exact if name == "exact"
+                                          else lambda *a: (None, None))
                 try:
                     time.sleep(SETTLE_S)
                     t0 = time.process_time()
                     fn()
                     times[name].append(time.process_time() - t0)
                 finally:
-                    crb._exact = exact
+                    crb._exact_information = exact
     med = {k: statistics.median(x) for k, x in times.items()}
     return n_sim, runs[0], (med["exact"] / med["simulation"],
                             med["differences"] / med["simulation"], med["simulation"])

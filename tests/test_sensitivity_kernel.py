@@ -25,6 +25,7 @@ from backlashkit._sensitivity import (
     default_params,
     sensitivities,
     sensitivities_along,
+    trajectory_and_information,
     trajectory_and_sensitivities,
 )
 from backlashkit.papers.ravanbod2002 import A2, P_TRUE, THETA
@@ -125,6 +126,48 @@ def test_random_drives_match_differences(kind):
           f"differences, largest error {max(checked):.2e}, median {np.median(checked):.2e}")
     assert len(checked) >= least
     check_bar(checked)
+
+
+def _products(sens: np.ndarray) -> np.ndarray:
+    """``sum_k s_c s_c^T`` of the sensitivities ``(n, 2, m)``: ``(2, m, m)``."""
+    return np.einsum("kca,kcb->cab", sens, sens)
+
+
+def _gram_error(got: np.ndarray, ref: np.ndarray) -> float:
+    """Largest ``|got - ref|`` of the products, each over ``sqrt(ref_aa ref_bb)``."""
+    diag = np.sqrt(np.einsum("caa->ca", ref))
+    return float(np.max(np.abs(got - ref) / (diag[:, :, None] * diag[:, None, :])))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_random_drives_information_matches_numpy_twins_products(kind):
+    """The speeds' sums of outer products that the kernel accumulates as it walks
+    (the white-noise bound's, without the sensitivities written out) against the
+    same sums of the NumPy twin's sensitivities, on the random drives of each kind,
+    all columns and a subset out of order; and the states of the same run."""
+    checked: list[float] = []
+    frictions, reversing, draws, least = KINDS[kind]
+
+    @settings(max_examples=draws // 4, derandomize=True, deadline=None, database=None)
+    @given(LOG_FACTORS, LEVELS, frictions)
+    def check(logs, level, friction):
+        drive, t, u = drive_record(logs, level, friction, reversing=reversing)
+        if near_grazing(drive.simulate(t, u)):
+            return
+        for params in (default_params(drive), ("k_sh", "theta", "J_M")):
+            x, gram = trajectory_and_information(drive, t, u, params=params)
+            x_ref, sens = trajectory_and_sensitivities(drive, t, u, params=params)
+            np.testing.assert_array_equal(x, x_ref)
+            assert gram.shape == (2, len(params), len(params))
+            np.testing.assert_array_equal(gram, gram.transpose(0, 2, 1))
+            ref = _products(numpy_sensitivities(drive, t, u, params=params))
+            checked.append(_gram_error(gram, ref))
+            assert checked[-1] < 2 * RANDOM_RTOL
+
+    check()
+    print(f"{kind}: {len(checked) // 2} drives checked, largest difference "
+          f"{max(checked):.2e}, median {np.median(checked):.2e}")
+    assert len(checked) // 2 >= least // 4  # two sets of columns per drive
 
 
 #: Relative steps of the twist's central differences (the best is kept per parameter:

@@ -115,7 +115,49 @@ def trajectory_and_sensitivities(
     """
     from . import _core
 
-    names = check_scope(drive, params)
+    names, (t0, ts, u, x0) = check_scope(drive, params), _grid_and_start(t, torque,
+                                                                        initial_state)
+    s0 = None if initial_sensitivity is None else v.finite_array(
+        "initial_sensitivity", initial_sensitivity, ndim=2)
+    if s0 is not None and s0.shape != (3, len(names)):
+        raise InputError(f"initial_sensitivity must have shape (3, {len(names)}) (states by "
+                         f"parameters), got {s0.shape}")
+    x, out, grazes = _core.drive_sensitivities(_param_values(drive), t0, ts, u, x0,
+                                               [PARAMS.index(n) for n in names], s0)
+    _warn_near_grazing(grazes)
+    return x, out
+
+
+def trajectory_and_information(
+    drive: TwoMassDrive,
+    t: Sequence[float] | np.ndarray,
+    torque: Sequence[float] | np.ndarray,
+    *,
+    initial_state: Sequence[float] | np.ndarray | None = None,
+    params: Sequence[str] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The states ``(len(t), 3)`` and the sums ``G_c = sum_k s_c(k) s_c(k)^T`` of the
+    outer products of each speed's sensitivities ``s_c`` (``w_M``, then ``w_L``),
+    ``(2, len(params), len(params))`` in the parameters' SI units, from one run.
+
+    The products that white noise's Fisher information weighs
+    (``G_M / s_M^2 + G_L / s_L^2``), summed in the kernel as it walks: the
+    sensitivities themselves are never written out. The same values as the products
+    of :func:`trajectory_and_sensitivities`'s, to rounding (the order of the sums).
+    Arguments (from zero sensitivity), errors and warnings as :func:`sensitivities`.
+    """
+    from . import _core
+
+    names, (t0, ts, u, x0) = check_scope(drive, params), _grid_and_start(t, torque,
+                                                                        initial_state)
+    x, gram, grazes = _core.drive_information(_param_values(drive), t0, ts, u, x0,
+                                              [PARAMS.index(n) for n in names])
+    _warn_near_grazing(grazes)
+    return x, gram
+
+
+def _grid_and_start(t, torque, initial_state) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """The kernel's start time, sample time, torques and initial state, checked."""
     t_arr, ts = v.time_grid(t)
     u = v.finite_array("torque", torque)
     if u.shape != t_arr.shape:
@@ -123,23 +165,23 @@ def trajectory_and_sensitivities(
                          f"got {u.size}")
     x0 = np.zeros(3) if initial_state is None else v.finite_array("initial_state",
                                                                    initial_state)
-    s0 = None if initial_sensitivity is None else v.finite_array(
-        "initial_sensitivity", initial_sensitivity, ndim=2)
-    if s0 is not None and s0.shape != (3, len(names)):
-        raise InputError(f"initial_sensitivity must have shape (3, {len(names)}) (states by "
-                         f"parameters), got {s0.shape}")
-    p = np.array([getattr(drive, n) for n in PARAMS], float)
-    x, out, grazes = _core.drive_sensitivities(p, float(t_arr[0]), ts, u,
-                                               np.ascontiguousarray(x0),
-                                               [PARAMS.index(n) for n in names], s0)
+    return float(t_arr[0]), ts, u, np.ascontiguousarray(x0)
+
+
+def _param_values(drive: TwoMassDrive) -> np.ndarray:
+    """The drive's values of :data:`PARAMS`, in order."""
+    return np.array([getattr(drive, n) for n in PARAMS], float)
+
+
+def _warn_near_grazing(grazes: np.ndarray) -> None:
+    """A :class:`SensitivityWarning` where the run passed near a grazing contact."""
     if len(grazes):
         time, _, margin = grazes[0]
         warnings.warn(
             f"the run passed within {abs(margin):.3g} (relative) of a grazing contact "
             f"(t = {time:.6g} s; {len(grazes)} such pass(es)): the sensitivities after it "
             "are ill-conditioned (the derivative barely exists there)",
-            SensitivityWarning, stacklevel=3)
-    return x, out
+            SensitivityWarning, stacklevel=4)
 
 
 def sensitivities_along(
@@ -173,9 +215,8 @@ def sensitivities_along(
     names = check_scope(drive, params)
     s0 = None if initial_sensitivity is None else np.ascontiguousarray(
         initial_sensitivity, float)
-    p = np.array([getattr(drive, n) for n in PARAMS], float)
     return _core.drive_sensitivities_along(
-        p, run.t0, run.ts, np.ascontiguousarray(run.torque, float),
+        _param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
         np.ascontiguousarray(run.states, float),
         np.ascontiguousarray(run.first_modes, np.int8),
         np.ascontiguousarray(run.events, float).reshape(-1, 4),

@@ -44,11 +44,6 @@ fn drive_sensitivities<'py>(
         .detach(|| sensitivity::drive_sensitivities_from(&p, t0, ts, u, x0, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
-    let grazes: Vec<f64> = out
-        .grazes
-        .iter()
-        .flat_map(|g| [g.time, g.index as f64, g.margin])
-        .collect();
     Ok((
         Array2::from_shape_vec((u.len(), N_STATES), out.states)
             .map_err(shape_err)?
@@ -56,10 +51,56 @@ fn drive_sensitivities<'py>(
         Array3::from_shape_vec((u.len(), N_STATES, wanted.len()), out.values)
             .map_err(shape_err)?
             .into_pyarray(py),
-        Array2::from_shape_vec((out.grazes.len(), 3), grazes)
+        graze_rows(py, &out.grazes)?,
+    ))
+}
+
+/// The states `(len(u), 3)` of a two-mass drive and the sums `sum_k s_c s_c^T` of the
+/// outer products of each speed's sensitivities `s_c` (motor, load), shape
+/// `(2, len(wanted), len(wanted))`, arguments as `drive_sensitivities` from zero
+/// sensitivity; and the run's near-grazing passes. The white-noise Fisher
+/// information without the sensitivities written out.
+#[pyfunction]
+#[pyo3(signature = (params, t0, ts, u, x0, wanted))]
+fn drive_information<'py>(
+    py: Python<'py>,
+    params: PyReadonlyArray1<'py, f64>,
+    t0: f64,
+    ts: f64,
+    u: PyReadonlyArray1<'py, f64>,
+    x0: PyReadonlyArray1<'py, f64>,
+    wanted: Vec<usize>,
+) -> PyResult<SensitivityOutput<'py>> {
+    let p = param_array(&params)?;
+    let (u, x0) = (u.as_slice()?, x0.as_slice()?);
+    let out = py
+        .detach(|| sensitivity::drive_information(&p, t0, ts, u, x0, &wanted))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
+    let m = wanted.len();
+    Ok((
+        Array2::from_shape_vec((u.len(), N_STATES), out.states)
             .map_err(shape_err)?
             .into_pyarray(py),
+        Array3::from_shape_vec((2, m, m), out.gram)
+            .map_err(shape_err)?
+            .into_pyarray(py),
+        graze_rows(py, &out.grazes)?,
     ))
+}
+
+/// Near-grazing passes as rows `[time, shaft, margin]`.
+fn graze_rows<'py>(
+    py: Python<'py>,
+    grazes: &[backlashkit_core::hybrid::Graze],
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let flat: Vec<f64> = grazes
+        .iter()
+        .flat_map(|g| [g.time, g.index as f64, g.margin])
+        .collect();
+    Ok(Array2::from_shape_vec((grazes.len(), 3), flat)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?
+        .into_pyarray(py))
 }
 
 /// As `drive_sensitivities`, along the run the simulator has made of the same drive,
@@ -142,5 +183,6 @@ fn event_list(events: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Event>> {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(drive_sensitivities, m)?)?;
     m.add_function(wrap_pyfunction!(drive_sensitivities_along, m)?)?;
+    m.add_function(wrap_pyfunction!(drive_information, m)?)?;
     Ok(())
 }

@@ -12,6 +12,7 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -173,12 +174,14 @@ def cramer_rao_bound(
     if zero:
         raise InputError(f"cannot estimate parameter(s) {zero} at value 0 (e.g. theta = {theta!r})")
     h = v.positive("fd_step", fd_step)
-    speeds, sensitivity = _exact(drive, names, tau_i, t, torque, law, initial_state)
-    if sensitivity is None:
+    speeds, fisher_at = _exact_information(drive, names, tau_i, t, torque, law,
+                                           initial_state, noise_ar)
+    if fisher_at is None:
         speeds, sensitivity = _differenced(drive, names, values, h, tau_i, t, torque, law,
                                            initial_state)
+        fisher_at = partial(_information, sensitivity, noise_ar=noise_ar)
     sig = _noise_levels(noise_std, snr_db, speeds)
-    fisher = _information(sensitivity, sig, noise_ar)
+    fisher = fisher_at(sig)
     if prior_rel_std is not None:
         rel = rel_std(prior_rel_std, LINEAR_PARAMS)
         for i, name in enumerate(names[1:], start=1):
@@ -210,29 +213,61 @@ def _information(sensitivity: np.ndarray, sig, noise_ar) -> np.ndarray:
     return fisher
 
 
+def _exact_information(drive, names, tau_i, t, torque, law, initial_state, noise_ar):
+    """``((w_M, w_L), fisher_at)`` of the nominal drive, ``fisher_at(sig)`` the Fisher
+    information at noise levels ``sig`` from the compiled kernel's exact sensitivities,
+    where the model is in its scope (:func:`_in_scope`); else ``(None, None)``. With
+    white noise the kernel sums the speeds' products as it walks
+    (:func:`~backlashkit._sensitivity.trajectory_and_information`), and the
+    sensitivities are never written out; autoregressive noise whitens them first
+    (:func:`_exact`)."""
+    from .._sensitivity import trajectory_and_information
+
+    if noise_ar is not None:
+        speeds, sens = _exact(drive, names, tau_i, t, torque, law, initial_state)
+        return (None, None) if sens is None else (
+            speeds, partial(_information, sens, noise_ar=noise_ar))
+    if not _in_scope(drive, names, tau_i, law, initial_state):
+        return None, None
+    x, gram = _kernel(trajectory_and_information, drive, names, t, torque, initial_state)
+    return (x[:, 0], x[:, 1]), lambda sig: gram[0] / sig[0] ** 2 + gram[1] / sig[1] ** 2
+
+
 def _exact(drive, names, tau_i, t, torque, law, initial_state):
     """``((w_M, w_L), S)`` of the nominal drive, ``S`` the exact sensitivities
     ``(samples, 2, len(names))`` of both speeds (a view of the kernel's rows) of the
-    compiled kernel, where the model is in its scope (paper A's law, no current loop,
-    breakaway torques tied to the Coulomb torques, a Coulomb torque estimated only
-    where positive, a known start); else ``(None, None)``. One sensitivity run of the
-    estimated parameters alone (the speeds come from the same run), against ``2 n + 1``
-    simulations of central differences."""
-    from .._sensitivity import PARAMS, trajectory_and_sensitivities
+    compiled kernel, where the model is in its scope (:func:`_in_scope`); else
+    ``(None, None)``. One sensitivity run of the estimated parameters alone (the speeds
+    come from the same run), against ``2 n + 1`` simulations of central differences."""
+    from .._sensitivity import trajectory_and_sensitivities
 
-    if (law != "paper" or tau_i or drive.fs_M is not None or drive.fs_L is not None
-            or not set(names) <= set(PARAMS) or isinstance(initial_state, str)
-            or any(getattr(drive, n) == 0 for n in names if n in PARAMS[7:])):
+    if not _in_scope(drive, names, tau_i, law, initial_state):
         return None, None
+    x, sens = _kernel(trajectory_and_sensitivities, drive, names, t, torque, initial_state)
+    return (x[:, 0], x[:, 1]), sens[:, :2, :]
+
+
+def _in_scope(drive, names, tau_i, law, initial_state) -> bool:
+    """Whether the compiled sensitivities serve: paper A's law, no current loop,
+    breakaway torques tied to the Coulomb torques, a Coulomb torque estimated only
+    where positive, a known start."""
+    from .._sensitivity import PARAMS
+
+    return not (law != "paper" or tau_i or drive.fs_M is not None or drive.fs_L is not None
+                or not set(names) <= set(PARAMS) or isinstance(initial_state, str)
+                or any(getattr(drive, n) == 0 for n in names if n in PARAMS[7:]))
+
+
+def _kernel(run, drive, names, t, torque, initial_state):
+    """``run(drive, t, torque, ...)`` of the estimated parameters, quiet near grazing
+    (as the differences are), its errors the bound's."""
     x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
     try:
-        with warnings.catch_warnings():  # quiet near grazing, as the differences are
+        with warnings.catch_warnings():
             warnings.simplefilter("ignore", SensitivityWarning)
-            x, sens = trajectory_and_sensitivities(drive, t, torque, initial_state=x0,
-                                                   params=names)
+            return run(drive, t, torque, initial_state=x0, params=names)
     except ValueError as exc:
         raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
-    return (x[:, 0], x[:, 1]), sens[:, :2, :]
 
 
 def _differenced(drive, names, values, h, tau_i, t, torque, law, initial_state):

@@ -1,26 +1,57 @@
 //! The carried columns over the whole samples of one mode, side by side.
 //!
 //! Between contact changes every column follows `s <- e s + coupling_j x + su_j u +
-//! s1_j` with the same `e` and the simulator's state `x`: up to [`LANES`] columns
-//! advance together as one array of lanes, which the compiler turns into vector
-//! instructions. Each lane's arithmetic is the same whichever columns share the
-//! group, so a column does not depend on the others carried.
+//! s1_j` with the same `e` and the simulator's state `x`: the columns advance in groups
+//! of [`LANES`], each group one array of lanes, which the compiler turns into vector
+//! instructions. Each lane's arithmetic is the same whichever columns share the group
+//! and whichever instructions carry it (no fused multiply-add), so a column depends
+//! neither on the others carried nor on the machine.
+//!
+//! The samples are the outer loop: each sample's row (every column, unscaled) goes to
+//! a [`Sink`] in order, which writes it out or folds it into a sum and keeps nothing
+//! else (`information`).
 
 use super::flow::Flow;
 use super::{N_PARAMS, N_STATES};
 use crate::linalg::{Mat, Vector};
 
-/// Columns per group: two doubles fill a 128-bit register, the vectors of the
-/// baseline x86-64 build, and a lone column (`theta`'s, the bound's default) wastes
-/// one lane at most.
-pub(super) const LANES: usize = 2;
+/// Columns per group: four doubles fill a 256-bit register (AVX2, chosen at run time
+/// where the processor has it; two 128-bit registers in the baseline x86-64 build).
+pub(super) const LANES: usize = 4;
 type Lanes = [f64; LANES];
+/// Groups at most: every parameter carried.
+const MAX_GROUPS: usize = N_PARAMS.div_ceil(LANES);
+/// Lanes of a [`Row`]: every group's, side by side.
+pub(super) const WIDTH: usize = MAX_GROUPS * LANES;
 
-/// Up to [`LANES`] carried columns of one mode's whole-sample flow, side by side.
+/// One sample's carried columns in the parameters' units: a state's row of
+/// [`WIDTH`] lanes, the columns in the order wanted, zero beyond them.
+pub(super) type Row = [[f64; WIDTH]; N_STATES];
+
+/// Where the rows of a run go, one per sample, in order.
+pub(super) trait Sink {
+    fn take(&mut self, row: &Row);
+}
+
+/// The lanes of the first `groups` groups of `lanes` pushed onto `out`: a copy of a
+/// length known when compiling (one per arm) is a few vector moves, where a length
+/// known only when running is a call to `memcpy`, per state and sample.
+#[inline(always)]
+pub(super) fn push_lanes(out: &mut Vec<f64>, lanes: &[f64; WIDTH], groups: usize) {
+    match groups {
+        0 => {}
+        1 => out.extend_from_slice(&lanes[..LANES]),
+        2 => out.extend_from_slice(&lanes[..2 * LANES]),
+        _ => out.extend_from_slice(lanes),
+    }
+}
+
+/// Up to [`LANES`] carried columns of one mode's whole-sample flow, side by side; the
+/// group `g` of a run carries the wanted columns `g LANES ..`.
 #[derive(Clone, Debug)]
 pub(super) struct Group {
-    /// Each lane's parameter and its position among the written columns.
-    cols: Vec<(usize, usize)>,
+    /// Each lane's parameter.
+    params: Vec<usize>,
     e: Mat<N_STATES>,
     /// `coupling[r][q][lane]`, and so on: lane-innermost for the vector instructions.
     coupling: [[Lanes; N_STATES]; N_STATES],
@@ -32,14 +63,14 @@ pub(super) struct Group {
 /// The columns `wanted` of `flow` in groups of [`LANES`]; a column `j` is written
 /// times `unscale[j]`.
 pub(super) fn groups(flow: &Flow, wanted: &[usize], unscale: &[f64; N_PARAMS]) -> Vec<Group> {
-    let cols: Vec<(usize, usize)> = wanted.iter().enumerate().map(|(c, &j)| (j, c)).collect();
-    cols.chunks(LANES)
+    wanted
+        .chunks(LANES)
         .map(|chunk| {
             let lane = |f: &dyn Fn(usize) -> f64| -> Lanes {
-                std::array::from_fn(|l| chunk.get(l).map_or(0.0, |&(j, _)| f(j)))
+                std::array::from_fn(|l| chunk.get(l).map_or(0.0, |&j| f(j)))
             };
             Group {
-                cols: chunk.to_vec(),
+                params: chunk.to_vec(),
                 e: flow.e,
                 coupling: std::array::from_fn(|r| {
                     std::array::from_fn(|q| lane(&|j| flow.coupling[j][r][q]))
@@ -52,43 +83,81 @@ pub(super) fn groups(flow: &Flow, wanted: &[usize], unscale: &[f64; N_PARAMS]) -
         .collect()
 }
 
-impl Group {
-    /// The group's columns of `s` carried over whole samples, one per torque of `u`,
-    /// along the simulator's states `x` (one row of 3 per sample's start); each
-    /// sample's start is written, unscaled, to its row of `out` (rows of `3 m`,
-    /// state by column).
-    pub fn stream(
-        &self,
-        s: &mut [Vector<N_STATES>; N_PARAMS],
-        m: usize,
-        u: &[f64],
-        x: &[f64],
-        out: &mut [f64],
-    ) {
-        let mut v = [[0.0; LANES]; N_STATES];
-        for (l, &(j, _)) in self.cols.iter().enumerate() {
+/// The columns of `s` that `groups` carry, over whole samples, one per torque of `u`,
+/// along the simulator's states `x` (one row of 3 per sample's start); each sample's
+/// start goes to `sink`. Runs the same arithmetic with AVX2's wider registers where
+/// the processor has them.
+pub(super) fn stream<S: Sink>(
+    groups: &[Group],
+    s: &mut [Vector<N_STATES>; N_PARAMS],
+    u: &[f64],
+    x: &[f64],
+    sink: &mut S,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2, checked just above.
+        return unsafe { stream_avx2(groups, s, u, x, sink) };
+    }
+    stream_lanes(groups, s, u, x, sink)
+}
+
+/// [`stream_lanes`] compiled for AVX2.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn stream_avx2<S: Sink>(
+    groups: &[Group],
+    s: &mut [Vector<N_STATES>; N_PARAMS],
+    u: &[f64],
+    x: &[f64],
+    sink: &mut S,
+) {
+    stream_lanes(groups, s, u, x, sink)
+}
+
+/// The body of [`stream`].
+#[inline(always)]
+fn stream_lanes<S: Sink>(
+    groups: &[Group],
+    s: &mut [Vector<N_STATES>; N_PARAMS],
+    u: &[f64],
+    x: &[f64],
+    sink: &mut S,
+) {
+    let mut v = [[[0.0; LANES]; N_STATES]; MAX_GROUPS];
+    for (group, vg) in groups.iter().zip(v.iter_mut()) {
+        for (l, &j) in group.params.iter().enumerate() {
             for r in 0..N_STATES {
-                v[r][l] = s[j][r];
-            }
-        }
-        let rows = out
-            .chunks_exact_mut(N_STATES * m)
-            .zip(x.chunks_exact(N_STATES));
-        for ((row, xi), &ui) in rows.zip(u) {
-            for (l, &(_, c)) in self.cols.iter().enumerate() {
-                for r in 0..N_STATES {
-                    row[r * m + c] = v[r][l] * self.unscale[l];
-                }
-            }
-            v = self.step(&v, [xi[0], xi[1], xi[2]], ui);
-        }
-        for (l, &(j, _)) in self.cols.iter().enumerate() {
-            for r in 0..N_STATES {
-                s[j][r] = v[r][l];
+                vg[r][l] = s[j][r];
             }
         }
     }
+    let mut row: Row = [[0.0; WIDTH]; N_STATES];
+    for (xi, &ui) in x.chunks_exact(N_STATES).zip(u) {
+        let xi = [xi[0], xi[1], xi[2]];
+        for (g, (group, vg)) in groups.iter().zip(v.iter_mut()).enumerate() {
+            for r in 0..N_STATES {
+                for l in 0..LANES {
+                    row[r][g * LANES + l] = vg[r][l] * group.unscale[l];
+                }
+            }
+            *vg = group.step(vg, xi, ui);
+        }
+        sink.take(&row);
+    }
+    for (group, vg) in groups.iter().zip(v.iter()) {
+        for (l, &j) in group.params.iter().enumerate() {
+            for r in 0..N_STATES {
+                s[j][r] = vg[r][l];
+            }
+        }
+    }
+}
 
+impl Group {
     /// One whole sample: `e v + coupling x + su u + s1`, lane by lane (plain loops:
     /// the compiler vectorises them; `array::from_fn` closures it did not inline).
     #[inline(always)]

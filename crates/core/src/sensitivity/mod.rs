@@ -23,12 +23,14 @@
 
 mod coupled;
 mod flow;
+mod information;
 mod lanes;
 mod mode;
 mod run;
 #[cfg(test)]
 mod tests;
 
+pub use information::{drive_information, DriveInformation};
 pub use run::{
     drive_sensitivities, drive_sensitivities_along, drive_sensitivities_from,
     drive_sensitivities_of, Along, DriveSensitivities,

@@ -3,7 +3,7 @@
 
 use super::flow::{Augmented, Flow};
 use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, THETA};
-use super::lanes::{groups, Group};
+use super::lanes::{groups, push_lanes, stream, Group, Row, Sink, LANES, WIDTH};
 use super::mode::{balance, balance_derivative, system, Mode, N_MODES};
 use super::{N_LINEAR, N_PARAMS, N_STATES, PARAMS};
 use crate::chain::{simulate_chain, ChainParams, Law};
@@ -82,6 +82,29 @@ pub fn drive_sensitivities_from(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<DriveSensitivities, Error> {
+    let mut rows = Rows::new(u.len(), wanted.len());
+    let (states, grazes) = simulate_and_walk(p, t0, ts, u, x0, s0, wanted, &mut rows)?;
+    Ok(DriveSensitivities {
+        values: rows.out,
+        states,
+        grazes,
+    })
+}
+
+/// The run of the simulator (its states, row-major `(samples, 3)`, and its
+/// near-grazing passes), and the sensitivities along it to `sink`: the body of
+/// [`drive_sensitivities_from`], whatever becomes of the rows.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn simulate_and_walk<S: Sink>(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    x0: &[f64],
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+    sink: &mut S,
+) -> Result<(Vec<f64>, Vec<Graze>), Error> {
     let active = checked(p, s0, wanted)?;
     let chain = chain_params(p)?;
     if !t0.is_finite() {
@@ -91,20 +114,15 @@ pub fn drive_sensitivities_from(
     }
     let run = simulate_chain(&chain, Law::Paper, t0, ts, u, x0)?;
     let sticky = chain.sticky();
-    let Some(first) = run.modes.get(..1 + sticky.len()) else {
-        return Ok(DriveSensitivities::default());
-    };
-    let along = Along {
-        states: &run.states,
-        first_modes: first,
-        events: &run.events,
-    };
-    let values = walk(p, &sticky, t0, ts, u, &along, s0, wanted, active)?;
-    Ok(DriveSensitivities {
-        values,
-        states: run.states,
-        grazes: run.grazes,
-    })
+    if let Some(first) = run.modes.get(..1 + sticky.len()) {
+        let along = Along {
+            states: &run.states,
+            first_modes: first,
+            events: &run.events,
+        };
+        walk(p, &sticky, t0, ts, u, &along, s0, wanted, active, sink)?;
+    }
+    Ok((run.states, run.grazes))
 }
 
 /// A run of the simulator that the sensitivities can follow without simulating it
@@ -139,10 +157,41 @@ pub fn drive_sensitivities_along(
     let active = checked(p, s0, wanted)?;
     let sticky = chain_params(p)?.sticky();
     check_run(t0, ts, u.len(), run, &sticky)?;
-    if u.is_empty() {
-        return Ok(Vec::new());
+    let mut rows = Rows::new(u.len(), wanted.len());
+    if !u.is_empty() {
+        walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut rows)?;
     }
-    walk(p, &sticky, t0, ts, u, run, s0, wanted, active)
+    Ok(rows.out)
+}
+
+/// The rows written out, row-major `(samples, 3, m)`.
+struct Rows {
+    m: usize,
+    groups: usize,
+    out: Vec<f64>,
+}
+
+impl Rows {
+    fn new(samples: usize, m: usize) -> Self {
+        Rows {
+            m,
+            groups: m.div_ceil(LANES),
+            out: Vec::with_capacity(samples * N_STATES * m + WIDTH),
+        }
+    }
+}
+
+impl Sink for Rows {
+    /// Each state's lanes of the groups carried, then back to its first `m` (see
+    /// [`push_lanes`]; the capacity has a row's room to spare).
+    #[inline(always)]
+    fn take(&mut self, row: &Row) {
+        for r in row {
+            let len = self.out.len();
+            push_lanes(&mut self.out, r, self.groups);
+            self.out.truncate(len + self.m);
+        }
+    }
 }
 
 /// Which parameters are carried: `wanted`, checked (distinct, in range, a Coulomb
@@ -222,9 +271,9 @@ fn check_run(t0: f64, ts: f64, n: usize, run: &Along<'_>, sticky: &[usize]) -> R
 }
 
 /// The sensitivities along a run of the drive (`run`, checked; `sticky`: its inertias
-/// with a friction switch), from `s0`.
+/// with a friction switch), from `s0`, each sample's row to `sink`.
 #[allow(clippy::too_many_arguments)]
-fn walk(
+pub(super) fn walk<S: Sink>(
     p: &[f64; N_PARAMS],
     sticky: &[usize],
     t0: f64,
@@ -234,7 +283,8 @@ fn walk(
     s0: Option<&[f64]>,
     wanted: &[usize],
     active: [bool; N_PARAMS],
-) -> Result<Vec<f64>, Error> {
+    sink: &mut S,
+) -> Result<(), Error> {
     let mut mode = Mode::contact(run.first_modes[0]);
     for (r, &i) in sticky.iter().enumerate() {
         mode.slip[i] = run.first_modes[1 + r];
@@ -260,7 +310,7 @@ fn walk(
         last: (f64::NAN, [0.0; N_PARAMS]),
         full: std::array::from_fn(|_| None),
     };
-    walk.run(t0, ts, u, run.states, run.events)
+    walk.run(t0, ts, u, run.states, run.events, sink)
 }
 
 /// The chain of the two-mass drive, validated; `theta` must be positive, the NumPy
@@ -312,16 +362,16 @@ impl Walk<'_> {
     /// `(u.len(), 3)`). Between the samples that hold contact changes the mode is
     /// fixed, and the columns advance over those whole samples side by side (see
     /// `lanes`); a sample holding changes is split at them.
-    fn run(
+    fn run<S: Sink>(
         &mut self,
         t0: f64,
         ts: f64,
         u: &[f64],
         states: &[f64],
         events: &[Event],
-    ) -> Result<Vec<f64>, Error> {
-        let (n, row) = (u.len(), N_STATES * self.wanted.len());
-        let mut out = vec![0.0; n * row];
+        sink: &mut S,
+    ) -> Result<(), Error> {
+        let n = u.len();
         let (mut k, mut next_event) = (0, 0);
         loop {
             // Changes up to a sample's end, inclusive, belong to that sample; but a
@@ -330,11 +380,11 @@ impl Walk<'_> {
             let split = (k..n - 1)
                 .find(|&i| next.is_some_and(|e| within(e, t0 + (i + 1) as f64 * ts)))
                 .unwrap_or(n - 1);
-            self.steady(ts, k, split, u, states, &mut out[k * row..]);
+            self.steady(ts, k, split, u, states, sink);
             self.z.x = std::array::from_fn(|i| states[split * N_STATES + i]);
-            self.write(&mut out[split * row..(split + 1) * row]);
+            sink.take(&self.row());
             if split + 1 == n {
-                return Ok(out);
+                return Ok(());
             }
             let (t_start, t_end) = (t0 + split as f64 * ts, t0 + (split + 1) as f64 * ts);
             let mut t_now = t_start;
@@ -348,16 +398,16 @@ impl Walk<'_> {
         }
     }
 
-    /// Rows `k..end` of `out` (which starts at row `k`) over the whole samples `k..end`
-    /// in the current mode, leaving the carried columns at sample `end`'s start.
-    fn steady(
+    /// Rows `k..end` to `sink`, over the whole samples `k..end` in the current mode,
+    /// leaving the carried columns at sample `end`'s start.
+    fn steady<S: Sink>(
         &mut self,
         ts: f64,
         k: usize,
         end: usize,
         u: &[f64],
         states: &[f64],
-        out: &mut [f64],
+        sink: &mut S,
     ) {
         if end == k || self.wanted.is_empty() {
             return;
@@ -367,19 +417,18 @@ impl Walk<'_> {
         let groups = self.full[mode.slot()]
             .get_or_insert_with(|| groups(&Flow::new(p, scale, mode, ts, active), wanted, unscale));
         let x = &states[k * N_STATES..end * N_STATES];
-        for group in groups.iter() {
-            group.stream(&mut self.z.s, wanted.len(), &u[k..end], x, out);
-        }
+        stream(groups, &mut self.z.s, &u[k..end], x, sink);
     }
 
-    /// Rows `state x wanted parameter` of `dx/dp` into `row`.
-    fn write(&self, row: &mut [f64]) {
-        let m = self.wanted.len();
+    /// The current sample's row of `dx/dp`.
+    fn row(&self) -> Row {
+        let mut row = [[0.0; WIDTH]; N_STATES];
         for i in 0..N_STATES {
             for (c, &j) in self.wanted.iter().enumerate() {
-                row[i * m + c] = self.z.s[j][i] * self.unscale[j];
+                row[i][c] = self.z.s[j][i] * self.unscale[j];
             }
         }
+        row
     }
 
     /// Advance by `tau` in the current mode (nothing for `tau <= 0`).

@@ -524,3 +524,50 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
         assert!(matches!(out, Err(Error::InvalidArgument(_))));
     }
 }
+
+/// `sum_k s_c s_c^T` of the written sensitivities, both speeds, row-major `(2, m, m)`.
+fn products(values: &[f64], m: usize) -> Vec<f64> {
+    let mut out = vec![0.0; 2 * m * m];
+    for row in values.chunks_exact(N_STATES * m) {
+        for c in 0..2 {
+            let s = &row[c * m..(c + 1) * m];
+            for a in 0..m {
+                for b in 0..m {
+                    out[(c * m + a) * m + b] += s[a] * s[b];
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_information_sums_the_written_sensitivities_products() {
+    // Groups of lanes from one to three, a lone column, and the columns out of order.
+    let u = step_down(4.0, LEVEL);
+    let cases: [(&[f64; N_PARAMS], &[usize]); 4] = [
+        (&PAPER, &[0, 1, 2, 3, 4, 5, 6]),
+        (&PAPER, &[THETA]),
+        (&COULOMB, &ALL),
+        (&COULOMB, &[FC_L, THETA, J_M, F_M, 2]),
+    ];
+    for (p, wanted) in cases {
+        let m = wanted.len();
+        let info = drive_information(p, 0.0, TS, &u, &[0.0; 3], wanted).unwrap();
+        let sens = drive_sensitivities_of(p, 0.0, TS, &u, &[0.0; 3], wanted).unwrap();
+        assert_eq!(info.states, sens.states);
+        let want = products(&sens.values, m);
+        assert_eq!(info.gram.len(), want.len());
+        for (i, (&got, &w)) in info.gram.iter().zip(&want).enumerate() {
+            let (c, a, b) = (i / (m * m), i / m % m, i % m);
+            let scale = (want[(c * m + a) * m + a] * want[(c * m + b) * m + b]).sqrt();
+            assert!(
+                (got - w).abs() <= 1e-12 * scale,
+                "{wanted:?}: speed {c}, ({a}, {b}): {got} against {w}"
+            );
+            assert_eq!(got, info.gram[(c * m + b) * m + a], "symmetric");
+        }
+    }
+    let err = drive_information(&PAPER, 0.0, TS, &u, &[0.0; 3], &[THETA, THETA]).unwrap_err();
+    assert!(matches!(err, Error::InvalidArgument(_)));
+}
