@@ -15,6 +15,9 @@ jobs then weigh on none of them):
 * ``compiled, theta alone``: the same for the one parameter ``theta`` (what
   ``cramer_rao_bound`` computes by default: the kernel carries only the columns
   asked for);
+* ``compiled information``: :func:`backlashkit._sensitivity.trajectory_and_information`
+  of the seven, the sums of the speeds' outer products that the white-noise bound
+  weighs, summed as the kernel walks (nothing written out);
 * ``numpy twin``: :func:`backlashkit._numpy_sensitivity.sensitivities`, the same
   recurrence in plain NumPy;
 * ``1 simulation``: the compiled simulator at the nominal parameters
@@ -25,14 +28,19 @@ jobs then weigh on none of them):
 ``--seconds 80`` times paper A's 80 s records instead (the step-down half-way), where
 the output, tens of megabytes, weighs on the compiled run.
 
+``--digest`` times nothing and prints the SHA-1 of the compiled sensitivities' bytes
+for several sets of columns, with and without Coulomb friction: run at two commits, it
+shows whether a change of the kernel kept its values to the bit.
+
 Usage::
 
-    python benchmarks/bench_sensitivity.py [--repeats 5] [--seconds 8]
+    python benchmarks/bench_sensitivity.py [--repeats 5] [--seconds 8] [--digest]
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import statistics
 import time
 
@@ -65,24 +73,50 @@ def median_times(fns, repeats: int) -> tuple[list[float], list[object]]:
     return [statistics.median(ts) for ts in times], outs
 
 
+#: Column sets of ``--digest``: the seven, one, a few out of order, and with Coulomb
+#: friction all nine and two.
+DIGESTS = ((None, None), (None, ("theta",)), (None, ("theta", "k_sh", "J_L")),
+           ((0.01, 0.02), None), ((0.01, 0.02), ("fc_L", "theta")))
+
+
+def digests(t: np.ndarray, u: np.ndarray) -> None:
+    """Print the SHA-1 of the compiled sensitivities of each of :data:`DIGESTS`."""
+    for coulomb, params in DIGESTS:
+        fc = {} if coulomb is None else {"fc_M": coulomb[0], "fc_L": coulomb[1]}
+        drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, **fc)
+        sens = sensitivities(drive, t, u, params=params, states=True)
+        print(f"  Coulomb {coulomb}, params {params}: {sens.shape}, sha1 "
+              f"{hashlib.sha1(sens.tobytes()).hexdigest()}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=DURATION,
                     help=f"record length in s (default {DURATION:g})")
+    ap.add_argument("--digest", action="store_true",
+                    help="print the sensitivities' SHA-1 digests instead of timing")
     args = ap.parse_args()
 
     drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
     t = bk.signals.time_grid(args.seconds, TS)
     u = bk.signals.step_down(t, A1, t_s=args.seconds / 2)
     values = {n: getattr(drive, n) for n in PARAMS}
+    if args.digest:
+        print(f"paper A's drive, {t.size} samples")
+        digests(t, u)
+        return
+    # imported here, so that --digest runs at commits before it existed
+    from backlashkit._sensitivity import LINEAR_AND_THETA, trajectory_and_information
+
     perturbed = [drive] + [bk.TwoMassDrive(**{**values, n: values[n] * (1 + FD_STEP)})
                            for n in PARAMS]
 
     with threadpool_limits(1):
-        (t_fast, t_one, t_np, t_sim, t_fd), (fast, _, ref, _, _) = median_times(
+        (t_fast, t_one, t_info, t_np, t_sim, t_fd), (fast, _, _, ref, _, _) = median_times(
             [lambda: sensitivities(drive, t, u),
              lambda: sensitivities(drive, t, u, params=("theta",)),
+             lambda: trajectory_and_information(drive, t, u, params=LINEAR_AND_THETA),
              lambda: numpy_sensitivities(drive, t, u), lambda: drive.simulate(t, u),
              lambda: [d.simulate(t, u) for d in perturbed]], args.repeats)
 
@@ -92,6 +126,7 @@ def main() -> None:
           f"median of {args.repeats}")
     print(f"  compiled sensitivities {1e3 * t_fast:9.2f} ms   ({t_fast / t_sim:.2f} simulations)")
     print(f"  compiled, theta alone  {1e3 * t_one:9.2f} ms   ({t_one / t_sim:.2f} simulations)")
+    print(f"  compiled information   {1e3 * t_info:9.2f} ms   ({t_info / t_sim:.2f} simulations)")
     print(f"  numpy twin             {1e3 * t_np:9.2f} ms   ({t_np / t_fast:.1f}x compiled)")
     print(f"  1 simulation           {1e3 * t_sim:9.2f} ms")
     print(f"  8 simulations          {1e3 * t_fd:9.2f} ms   ({t_fd / t_fast:.2f}x compiled)")
