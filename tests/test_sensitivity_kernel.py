@@ -254,7 +254,8 @@ def test_along_the_simulators_run_the_same_values_to_the_bit():
     (``sensitivities_along``): the same values to the bit as a run that simulates
     again, on paper A's step-down with both Coulomb torques (sticks and breakaways)
     and with the load's alone (its switch is the simulator's third), from a start with
-    a sensitivity. A run that does not fit the drive is a one-line ValueError."""
+    a sensitivity; into an array given, as into a new one. A run that does not fit the
+    drive, or an array of another shape, is a one-line ValueError."""
     from backlashkit.identify._model import packed_row
     from backlashkit.simulate import simulate_packed_runs
 
@@ -274,6 +275,14 @@ def test_along_the_simulators_run_the_same_values_to_the_bit():
                                                initial_sensitivity=s0)
         got = sensitivities_along(drive, run, initial_sensitivity=s0)
         assert np.array_equal(got, want), fc
+        # into a kept array (NaN: every value is written), as the fit's Jacobians ask
+        out = np.full(want.shape, np.nan)
+        for _ in range(2):
+            assert sensitivities_along(drive, run, initial_sensitivity=s0, out=out) is out
+            assert np.array_equal(out, want), fc
+    shapes = r"^out must have shape \[1537, 3, 8\], got \[1537, 3, 7\]$"
+    with pytest.raises(ValueError, match=shapes):
+        sensitivities_along(drive, run, out=np.empty((1537, 3, 7)))
     for bad, match in ((run._replace(events=run.events[::-1]), "out of order"),
                        (run._replace(states=run.states[1:]), "finite states"),
                        (run._replace(first_modes=run.first_modes[:1]), "first sample's 2 "

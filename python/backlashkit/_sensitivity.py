@@ -190,6 +190,7 @@ def sensitivities_along(
     *,
     initial_sensitivity: np.ndarray | None = None,
     params: Sequence[str] | None = None,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """The sensitivities ``(n, 3, len(params))`` of the states along ``run``, the
     simulator's run of ``drive`` (:func:`backlashkit.simulate.simulate_packed_runs`,
@@ -199,7 +200,9 @@ def sensitivities_along(
     on that grid and torque, without simulating the drive again: the joint fit has
     just simulated the point whose Jacobian it wants. ``initial_sensitivity`` and
     ``params`` as there; no warning (the run's near-grazing passes are its
-    simulator's).
+    simulator's). ``out``: a C-contiguous float array of that shape to write them
+    into and return (a caller asking again and again for runs of one size keeps one,
+    where a new array each time costs its fresh pages).
 
     Raises
     ------
@@ -220,7 +223,7 @@ def sensitivities_along(
         np.ascontiguousarray(run.states, float),
         np.ascontiguousarray(run.first_modes, np.int8),
         np.ascontiguousarray(run.events, float).reshape(-1, 4),
-        [PARAMS.index(n) for n in names], s0)
+        [PARAMS.index(n) for n in names], s0, out)
 
 
 def check_scope(drive: TwoMassDrive, params: Sequence[str] | None) -> list[str]:

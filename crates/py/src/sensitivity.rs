@@ -3,7 +3,10 @@
 use backlashkit_core::hybrid::Event;
 use backlashkit_core::sensitivity::{self, N_PARAMS, N_STATES};
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    IntoPyArray, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -107,9 +110,10 @@ fn graze_rows<'py>(
 /// grid and torque (`simulate_chain_batch`'s row): its states `(len(u), 3)`, its
 /// first sample's modes and its events `(E, 4)` = `[time, switch, from, to]`; the run
 /// starts from its first state. The same values to the bit, without simulating again.
-/// Returns the sensitivities alone.
+/// Returns the sensitivities alone: in `out` where given (C-contiguous, of that shape;
+/// a caller asking again and again for runs of one size keeps one array).
 #[pyfunction]
-#[pyo3(signature = (params, t0, ts, u, states, first_modes, events, wanted, s0=None))]
+#[pyo3(signature = (params, t0, ts, u, states, first_modes, events, wanted, s0=None, out=None))]
 #[allow(clippy::too_many_arguments)]
 fn drive_sensitivities_along<'py>(
     py: Python<'py>,
@@ -122,6 +126,7 @@ fn drive_sensitivities_along<'py>(
     events: PyReadonlyArray2<'py, f64>,
     wanted: Vec<usize>,
     s0: Option<PyReadonlyArray2<'py, f64>>,
+    out: Option<Bound<'py, PyArray3<f64>>>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
@@ -132,6 +137,24 @@ fn drive_sensitivities_along<'py>(
     };
     let u = u.as_slice()?;
     let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
+    if let Some(out) = out {
+        let shape = [u.len(), N_STATES, wanted.len()];
+        if out.shape() != shape {
+            return Err(PyValueError::new_err(format!(
+                "out must have shape {shape:?}, got {:?}",
+                out.shape()
+            )));
+        }
+        {
+            let mut view = out.readwrite();
+            let slice = view.as_slice_mut()?;
+            py.detach(|| {
+                sensitivity::drive_sensitivities_along_into(&p, t0, ts, u, &run, s0, &wanted, slice)
+            })
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        }
+        return Ok(out);
+    }
     let values = py
         .detach(|| sensitivity::drive_sensitivities_along(&p, t0, ts, u, &run, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;

@@ -253,6 +253,10 @@ class Residual:
         # single points' runs of the spans, by the point's bytes, newest last: the
         # exact Jacobian at one of them follows its runs (:meth:`exact_jacobian`)
         self.kept: dict[bytes, list[SpanRun]] = {}
+        # each span's sensitivities, written again at each exact Jacobian: one array
+        # per span and column count, as a new one each time costs its fresh pages
+        # (docs/design/sensitivities.md, "The spans' sensitivities in kept arrays")
+        self.sens_out: dict[tuple[int, int], np.ndarray] = {}
 
     def __call__(self, z_rows: np.ndarray) -> np.ndarray:
         pb, lag = self.problem, self.lag
@@ -350,11 +354,12 @@ class Residual:
         pos = 0
         try:
             runs = self.runs_at(z)
-            for sp, s_, m, run in zip(self.spans, self.sels, self.sizes, runs, strict=True):
+            for i, (sp, s_, m, run) in enumerate(zip(self.spans, self.sels, self.sizes, runs,
+                                                     strict=True)):
                 # along a run the kernel does not warn (the differences would not)
                 _, s0 = span_start(drive, sp, names, run.hold)
                 sens = sensitivities_along(drive, run.span, initial_sensitivity=s0,
-                                           params=names)
+                                           params=names, out=self._sens_out(i, run, names))
                 for c in (0, 1):
                     rows = out[pos : pos + m - self.lag]
                     if self.ar is None:  # weigh's arithmetic in place (the spans are speeds)
@@ -369,6 +374,14 @@ class Residual:
             prior = np.nan_to_num(scale[1:] / (pb.pen * pb.p_prior))
         out[pos:] = 0.0
         out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
+        return out
+
+    def _sens_out(self, i: int, run: SpanRun, names: Sequence[str]) -> np.ndarray:
+        """The kept array for span ``i``'s sensitivities to ``names`` along ``run``."""
+        shape = (len(run.span.torque), 3, len(names))
+        out = self.sens_out.get((i, len(names)))
+        if out is None or out.shape != shape:
+            out = self.sens_out[i, len(names)] = np.empty(shape)
         return out
 
     def channels(self, r: np.ndarray):

@@ -46,6 +46,18 @@ pub(super) fn push_lanes(out: &mut Vec<f64>, lanes: &[f64; WIDTH], groups: usize
     }
 }
 
+/// The lanes of the first `groups` groups of `lanes` copied to the start of `dst`,
+/// which holds at least as many: as [`push_lanes`], lengths known when compiling.
+#[inline(always)]
+pub(super) fn copy_lanes(dst: &mut [f64], lanes: &[f64; WIDTH], groups: usize) {
+    match groups {
+        0 => {}
+        1 => dst[..LANES].copy_from_slice(&lanes[..LANES]),
+        2 => dst[..2 * LANES].copy_from_slice(&lanes[..2 * LANES]),
+        _ => dst[..WIDTH].copy_from_slice(lanes),
+    }
+}
+
 /// Up to [`LANES`] carried columns of one mode's whole-sample flow, side by side; the
 /// group `g` of a run carries the wanted columns `g LANES ..`.
 #[derive(Clone, Debug)]

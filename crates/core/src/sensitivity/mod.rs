@@ -32,8 +32,8 @@ mod tests;
 
 pub use information::{drive_information, DriveInformation};
 pub use run::{
-    drive_sensitivities, drive_sensitivities_along, drive_sensitivities_from,
-    drive_sensitivities_of, Along, DriveSensitivities,
+    drive_sensitivities, drive_sensitivities_along, drive_sensitivities_along_into,
+    drive_sensitivities_from, drive_sensitivities_of, Along, DriveSensitivities,
 };
 
 /// The parameters, in the order of a parameter vector: motor and load inertias, shaft

@@ -3,7 +3,7 @@
 
 use super::flow::{Augmented, Flow};
 use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, THETA};
-use super::lanes::{groups, push_lanes, stream, Group, Row, Sink, LANES, WIDTH};
+use super::lanes::{copy_lanes, groups, push_lanes, stream, Group, Row, Sink, LANES, WIDTH};
 use super::mode::{balance, balance_derivative, system, Mode, N_MODES};
 use super::{N_LINEAR, N_PARAMS, N_STATES, PARAMS};
 use crate::chain::{simulate_chain, ChainParams, Law};
@@ -154,14 +154,81 @@ pub fn drive_sensitivities_along(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<Vec<f64>, Error> {
+    let mut out = vec![0.0; u.len() * N_STATES * wanted.len()];
+    drive_sensitivities_along_into(p, t0, ts, u, run, s0, wanted, &mut out)?;
+    Ok(out)
+}
+
+/// As [`drive_sensitivities_along`], into `out` (row-major `(u.len(), 3,
+/// wanted.len())`): a caller that asks again and again for runs of one size (the joint
+/// fit's Jacobians) keeps one array, where a new one each time costs its fresh pages.
+///
+/// Errors: as [`drive_sensitivities_along`], and `out` of another size.
+#[allow(clippy::too_many_arguments)]
+pub fn drive_sensitivities_along_into(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    run: &Along<'_>,
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+    out: &mut [f64],
+) -> Result<(), Error> {
     let active = checked(p, s0, wanted)?;
     let sticky = chain_params(p)?.sticky();
     check_run(t0, ts, u.len(), run, &sticky)?;
-    let mut rows = Rows::new(u.len(), wanted.len());
+    let size = u.len() * N_STATES * wanted.len();
+    if out.len() != size {
+        return Err(Error::InvalidArgument(format!(
+            "the output must hold {} x {N_STATES} x {} values, got {}",
+            u.len(),
+            wanted.len(),
+            out.len()
+        )));
+    }
     if !u.is_empty() {
+        let mut rows = RowsInto::new(out, wanted.len());
         walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut rows)?;
     }
-    Ok(rows.out)
+    Ok(())
+}
+
+/// The rows written into a given array, row-major `(samples, 3, m)`, in order.
+struct RowsInto<'a> {
+    out: &'a mut [f64],
+    m: usize,
+    groups: usize,
+    pos: usize,
+}
+
+impl<'a> RowsInto<'a> {
+    fn new(out: &'a mut [f64], m: usize) -> Self {
+        RowsInto {
+            out,
+            m,
+            groups: m.div_ceil(LANES),
+            pos: 0,
+        }
+    }
+}
+
+impl Sink for RowsInto<'_> {
+    /// Each state's lanes of the groups carried where the array has room for them
+    /// (the next row overwrites what lies past this one's `m`; see [`copy_lanes`]),
+    /// else its `m` values.
+    #[inline(always)]
+    fn take(&mut self, row: &Row) {
+        for r in row {
+            let (pos, m) = (self.pos, self.m);
+            if pos + self.groups * LANES <= self.out.len() {
+                copy_lanes(&mut self.out[pos..], r, self.groups);
+            } else {
+                self.out[pos..pos + m].copy_from_slice(&r[..m]);
+            }
+            self.pos += m;
+        }
+    }
 }
 
 /// The rows written out, row-major `(samples, 3, m)`.

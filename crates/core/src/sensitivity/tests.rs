@@ -496,6 +496,16 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
         };
         let got = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
         assert!(got == want.values, "{wanted:?}");
+        // into an array given (filled with NaN: every value must be written), twice
+        let mut into = vec![f64::NAN; got.len()];
+        for _ in 0..2 {
+            drive_sensitivities_along_into(p, 0.0, TS, &u, &along, Some(&s0), &wanted, &mut into)
+                .unwrap();
+            assert!(into == want.values, "{wanted:?} into an array");
+        }
+        let mut short = vec![0.0; got.len() - 1];
+        let err = drive_sensitivities_along_into(p, 0.0, TS, &u, &along, None, &wanted, &mut short);
+        assert!(matches!(err, Err(Error::InvalidArgument(_))));
     }
     // A run that does not fit the grid or the drive is refused.
     let run = simulate(&COULOMB, &u);
