@@ -188,3 +188,50 @@ impl Group {
         next
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::mode::Mode;
+    use super::*;
+
+    /// Every row the walk hands over.
+    struct Record(Vec<Row>);
+
+    impl Sink for Record {
+        fn take(&mut self, row: &Row) {
+            self.0.push(*row);
+        }
+    }
+
+    #[test]
+    fn the_wide_registers_give_the_baseline_builds_bits() {
+        // The walk picks the AVX2 build where the processor has it; its lanes must
+        // carry the baseline build's arithmetic to the bit (no fused multiply-add).
+        // Paper A's drive with Coulomb torques, all nine columns (three groups), in
+        // contact and in the play, from a start with a sensitivity.
+        let p = [
+            4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.01, 0.02,
+        ];
+        let wanted: Vec<usize> = (0..N_PARAMS).collect();
+        let unscale = p.map(|v| 1.0 / v);
+        let u: Vec<f64> = (0..500).map(|i| 0.9 * (i as f64 * 0.03).sin()).collect();
+        let x: Vec<f64> = (0..3 * u.len())
+            .map(|i| 0.1 * (i as f64 * 0.011).cos())
+            .collect();
+        for flank in [1, 0] {
+            let flow = Flow::new(&p, &p, Mode::contact(flank), 1e-3, &[true; N_PARAMS]);
+            let groups = groups(&flow, &wanted, &unscale);
+            let start: [Vector<N_STATES>; N_PARAMS] =
+                std::array::from_fn(|j| std::array::from_fn(|r| 1e-2 * (j * 3 + r) as f64));
+            let (mut s_wide, mut s_base) = (start, start);
+            let (mut wide, mut base) = (Record(Vec::new()), Record(Vec::new()));
+            stream(&groups, &mut s_wide, &u, &x, &mut wide);
+            stream_lanes(&groups, &mut s_base, &u, &x, &mut base);
+            assert!(wide.0 == base.0 && s_wide == s_base, "flank {flank}");
+            assert!(base
+                .0
+                .iter()
+                .all(|r| r.iter().flatten().all(|v| v.is_finite())));
+        }
+    }
+}
