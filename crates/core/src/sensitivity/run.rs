@@ -231,7 +231,8 @@ impl Sink for RowsInto<'_> {
     }
 }
 
-/// The rows written out, row-major `(samples, 3, m)`.
+/// The rows pushed onto a new array, row-major `(samples, 3, m)`: unlike [`RowsInto`]
+/// on a zeroed one, nothing is written twice.
 struct Rows {
     m: usize,
     groups: usize,
