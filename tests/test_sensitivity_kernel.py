@@ -283,6 +283,10 @@ def test_along_the_simulators_run_the_same_values_to_the_bit():
     shapes = r"^out must have shape \[1537, 3, 8\], got \[1537, 3, 7\]$"
     with pytest.raises(ValueError, match=shapes):
         sensitivities_along(drive, run, out=np.empty((1537, 3, 7)))
+    frozen = np.empty((1537, 3, 8))
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="^out must be a writeable array"):
+        sensitivities_along(drive, run, out=frozen)
     for bad, match in ((run._replace(events=run.events[::-1]), "out of order"),
                        (run._replace(states=run.states[1:]), "finite states"),
                        (run._replace(first_modes=run.first_modes[:1]), "first sample's 2 "

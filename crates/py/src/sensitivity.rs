@@ -146,7 +146,9 @@ fn drive_sensitivities_along<'py>(
             )));
         }
         {
-            let mut view = out.readwrite();
+            let mut view = out.try_readwrite().map_err(|e| {
+                PyValueError::new_err(format!("out must be a writeable array: {e}"))
+            })?;
             let slice = view.as_slice_mut()?;
             py.detach(|| {
                 sensitivity::drive_sensitivities_along_into(&p, t0, ts, u, &run, s0, &wanted, slice)

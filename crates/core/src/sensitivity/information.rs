@@ -52,8 +52,8 @@ pub fn drive_information(
 const SPEEDS: usize = 2;
 /// Samples whose speed rows are gathered before their products are summed: the sums
 /// then run in registers over a block, where adding each sample to the sums in
-/// memory waits on the last sample's store (several times slower, measured by
-/// `benchmarks/bench_identify.py --count`); 64 rows of at most 2 x 12 lanes take
+/// memory waits on the last sample's store (found with `perf` on the bound's loop;
+/// docs/design/sensitivities.md gives the bound's cost since); 64 rows of at most 2 x 12 lanes take
 /// 12 KiB, well inside the first-level cache.
 const BLOCK: usize = 64;
 
@@ -123,7 +123,7 @@ impl Sink for Gram {
 /// when compiling keep the `LANES G` sums in registers, as chains of additions
 /// independent enough to fill the pipeline; one row at a time waits on each
 /// addition's latency, and a range from `a`'s own group on left the sums on the
-/// stack (each measured as for [`BLOCK`]).
+/// stack (each found as for [`BLOCK`]).
 #[inline(always)]
 fn add_products<const G: usize>(
     sums: &mut [[[f64; WIDTH]; WIDTH]; SPEEDS],
