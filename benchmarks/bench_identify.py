@@ -91,8 +91,10 @@ def _median(fn, repeats: int) -> float:
 #: from the holds the windows start after.
 WINDOW_SAMPLES = 10_000
 #: The compiled sensitivity runs: simulating the drive first, or along a run the fit
-#: has just simulated (the first four arguments of both: parameters, t0, ts, torque).
-SENSITIVITY_KERNELS = ("drive_sensitivities", "drive_sensitivities_along")
+#: has just simulated, written out, as the Jacobian's rows or only at the run's end
+#: (the first four arguments of each: parameters, t0, ts, torque).
+SENSITIVITY_KERNELS = ("drive_sensitivities", "drive_sensitivities_along",
+                       "drive_jacobian_rows_along", "drive_sensitivity_at_end_along")
 
 
 def simulations(fn, samples: int, done=None, kernel=None, sens=None, sens_parts=None

@@ -23,8 +23,11 @@ from backlashkit._sensitivity import (
     LINEAR_AND_THETA,
     PARAMS,
     default_params,
+    jacobian_rows,
+    jacobian_rows_along,
     sensitivities,
     sensitivities_along,
+    sensitivity_at_end_along,
     trajectory_and_information,
     trajectory_and_sensitivities,
 )
@@ -168,6 +171,81 @@ def test_random_drives_information_matches_numpy_twins_products(kind):
     print(f"{kind}: {len(checked) // 2} drives checked, largest difference "
           f"{max(checked):.2e}, median {np.median(checked):.2e}")
     assert len(checked) // 2 >= least // 4  # two sets of columns per drive
+
+
+def _run_of(drive, t, u):
+    """The compiled simulator's run of ``drive`` from rest, as the fit keeps it."""
+    from backlashkit.identify._model import packed_row
+    from backlashkit.simulate import simulate_packed_runs
+
+    return simulate_packed_runs(2, packed_row(drive)[np.newaxis, :], float(t[0]),
+                                float(t[1] - t[0]), u[np.newaxis, :], np.zeros((1, 3)),
+                                law="paper", workers=1).run(0)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_random_drives_jacobian_rows_match_numpy_twins(kind):
+    """The fit's Jacobian rows that the kernel writes as it walks
+    (``jacobian_rows_along``: each selected sample's speed rows times a factor per
+    column, divided by the speed's noise level) against the same rows of the NumPy
+    twin's sensitivities (``jacobian_rows``), on the random drives of each kind, for
+    two windows and for every sample; to the bit against the rows of the compiled
+    sensitivities written out, and the end of a run (``sensitivity_at_end_along``,
+    a held torque's) to the bit against their last row."""
+    checked: list[float] = []
+    frictions, reversing, draws, least = KINDS[kind]
+    rng = np.random.default_rng(24)
+
+    @settings(max_examples=draws // 4, derandomize=True, deadline=None, database=None)
+    @given(LOG_FACTORS, LEVELS, frictions)
+    def check(logs, level, friction):
+        drive, t, u = drive_record(logs, level, friction, reversing=reversing)
+        if near_grazing(drive.simulate(t, u)):
+            return
+        run, names = _run_of(drive, t, u), default_params(drive)
+        factor = -rng.uniform(0.5, 2.0, len(names))
+        level2 = tuple(rng.uniform(1e-3, 1e-1, 2))
+        sens = sensitivities_along(drive, run)
+        twin = numpy_sensitivities(drive, t, u, params=names)
+        scale = np.max(np.abs(jacobian_rows(twin, slice(None), factor, level2)), axis=0)
+        n = t.size
+        for selected in (np.r_[3 : n // 4, n // 2 : n // 2 + 40], np.arange(n)):
+            out = np.full((2 * selected.size, len(names)), np.nan)
+            got = jacobian_rows_along(drive, run, selected=selected, factor=factor,
+                                      level=level2, out=out)
+            assert got is out
+            np.testing.assert_array_equal(got, jacobian_rows(sens, selected, factor, level2))
+            ref = jacobian_rows(twin, selected, factor, level2)
+            checked.append(float(np.max(np.abs(got - ref) / scale)))
+            assert checked[-1] < RANDOM_RTOL
+        np.testing.assert_array_equal(sensitivity_at_end_along(drive, run), sens[-1])
+
+    check()
+    print(f"{kind}: {len(checked) // 2} drives checked, largest difference "
+          f"{max(checked):.2e}, median {np.median(checked):.2e}")
+    assert len(checked) // 2 >= least // 4  # two selections per drive
+
+
+def test_jacobian_rows_refuse_what_does_not_fit():
+    """Samples out of order or past the run, a factor per column missing, a level of
+    0 or an output of another shape or read-only: a one-line ValueError each."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+    t = np.arange(400) * 2.0**-10
+    run = _run_of(drive, t, bk.signals.step_down(t, A2, t_s=0.2))
+    names = default_params(drive)
+    good = {"selected": np.arange(5, 10), "factor": -np.ones(len(names)),
+            "level": (0.01, 0.02), "out": np.empty((10, len(names)))}
+    frozen = np.empty((10, len(names)))
+    frozen.flags.writeable = False
+    for change, match in (({"selected": np.arange(9, 4, -1)}, "increase strictly"),
+                          ({"selected": np.r_[5:9, 400]}, "below the grid's 400"),
+                          ({"factor": -np.ones(3)}, "7 finite values"),
+                          ({"level": (0.0, 0.02)}, "finite and > 0"),
+                          ({"out": np.empty((9, len(names)))}, r"shape \[10, 7\]"),
+                          ({"out": frozen}, "writeable")):
+        with pytest.raises(ValueError, match=match) as err:
+            jacobian_rows_along(drive, run, **{**good, **change})
+        assert "\n" not in str(err.value)
 
 
 #: Relative steps of the twist's central differences (the best is kept per parameter:

@@ -226,6 +226,85 @@ def sensitivities_along(
         [PARAMS.index(n) for n in names], s0, out)
 
 
+def sensitivity_at_end_along(
+    drive: TwoMassDrive,
+    run: PackedRun,
+    *,
+    initial_sensitivity: np.ndarray | None = None,
+    params: Sequence[str] | None = None,
+) -> np.ndarray:
+    """The last row ``(3, len(params))`` of :func:`sensitivities_along`, to the bit,
+    without the others written out: a held torque's run, whose end alone the window
+    after it starts from. Arguments and errors as :func:`sensitivities_along` (and a
+    run of no sample is refused)."""
+    from . import _core
+
+    names = check_scope(drive, params)
+    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
+        initial_sensitivity, float)
+    return _core.drive_sensitivity_at_end_along(
+        _param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
+        np.ascontiguousarray(run.states, float),
+        np.ascontiguousarray(run.first_modes, np.int8),
+        np.ascontiguousarray(run.events, float).reshape(-1, 4),
+        [PARAMS.index(n) for n in names], s0)
+
+
+def jacobian_rows_along(
+    drive: TwoMassDrive,
+    run: PackedRun,
+    *,
+    selected: np.ndarray,
+    factor: np.ndarray,
+    level: tuple[float, float],
+    out: np.ndarray,
+    initial_sensitivity: np.ndarray | None = None,
+    params: Sequence[str] | None = None,
+) -> np.ndarray:
+    """The joint fit's Jacobian rows of the speeds' sensitivities along ``run``, written
+    into ``out`` and returned: :func:`jacobian_rows` of :func:`sensitivities_along`'s
+    values, to the bit, without those values written out.
+
+    ``selected``: the samples (int64, strictly increasing) whose rows are wanted;
+    ``factor``: one multiplier per parameter of ``params`` (the fit's ``-dp/dz``);
+    ``level``: the two speeds' noise levels in rad/s, which the products are divided
+    by; ``out``: a C-contiguous, writeable float array ``(2 len(selected),
+    len(params))``. ``run``, ``initial_sensitivity`` and ``params`` as
+    :func:`sensitivities_along`.
+
+    Raises
+    ------
+    InputError
+        As :func:`sensitivities`.
+    ValueError
+        From the kernel: as :func:`sensitivities_along`, and samples, factors, levels
+        or ``out`` that do not fit.
+    """
+    from . import _core
+
+    names = check_scope(drive, params)
+    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
+        initial_sensitivity, float)
+    _core.drive_jacobian_rows_along(
+        _param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
+        np.ascontiguousarray(run.states, float),
+        np.ascontiguousarray(run.first_modes, np.int8),
+        np.ascontiguousarray(run.events, float).reshape(-1, 4),
+        [PARAMS.index(n) for n in names], np.ascontiguousarray(selected, np.int64),
+        np.ascontiguousarray(factor, float), (float(level[0]), float(level[1])), out, s0)
+    return out
+
+
+def jacobian_rows(sens: np.ndarray, selected, factor: np.ndarray,
+                  level: tuple[float, float]) -> np.ndarray:
+    """The NumPy twin of :func:`jacobian_rows_along`'s rows, from sensitivities ``sens``
+    ``(n, 3, m)``: the motor speed's rows ``(sens[k, 0, :] * factor) / level[0]`` for
+    the samples ``selected`` (indices or a slice), then the load speed's; the same two
+    operations in the same order, so the same values to the bit from the same
+    sensitivities."""
+    return np.concatenate([sens[selected, c, :] * factor / level[c] for c in (0, 1)])
+
+
 def check_scope(drive: TwoMassDrive, params: Sequence[str] | None) -> list[str]:
     """The names of ``params`` (None: :func:`default_params`), checked against the
     sensitivities' scope (the twin's too); a one-line :class:`InputError` otherwise."""

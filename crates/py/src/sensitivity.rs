@@ -167,6 +167,106 @@ fn drive_sensitivities_along<'py>(
     )
 }
 
+/// The joint fit's Jacobian rows of the sensitivities along a run (as
+/// `drive_sensitivities_along`'s), written into `out` `(2 len(selected), len(wanted))`
+/// (C-contiguous, writeable): for each selected sample `k` (strictly increasing), the
+/// motor speed's row `(dw_M(k)/dp * factor) / level[0]`, then in a second block the
+/// load speed's, `/ level[1]`.
+#[pyfunction]
+#[pyo3(signature = (params, t0, ts, u, states, first_modes, events, wanted, selected, factor, level, out, s0=None))]
+#[allow(clippy::too_many_arguments)]
+fn drive_jacobian_rows_along<'py>(
+    py: Python<'py>,
+    params: PyReadonlyArray1<'py, f64>,
+    t0: f64,
+    ts: f64,
+    u: PyReadonlyArray1<'py, f64>,
+    states: PyReadonlyArray2<'py, f64>,
+    first_modes: PyReadonlyArray1<'py, i8>,
+    events: PyReadonlyArray2<'py, f64>,
+    wanted: Vec<usize>,
+    selected: PyReadonlyArray1<'py, i64>,
+    factor: PyReadonlyArray1<'py, f64>,
+    level: (f64, f64),
+    out: Bound<'py, PyArray2<f64>>,
+    s0: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<()> {
+    let p = param_array(&params)?;
+    let events = event_list(&events)?;
+    let run = sensitivity::Along {
+        states: states.as_slice()?,
+        first_modes: first_modes.as_slice()?,
+        events: &events,
+    };
+    let selected = selected
+        .as_slice()?
+        .iter()
+        .map(|&k| usize::try_from(k))
+        .collect::<Result<Vec<usize>, _>>()
+        .map_err(|_| PyValueError::new_err("selected samples must be >= 0"))?;
+    let shape = [2 * selected.len(), wanted.len()];
+    if out.shape() != shape {
+        return Err(PyValueError::new_err(format!(
+            "out must have shape {shape:?}, got {:?}",
+            out.shape()
+        )));
+    }
+    let weights = sensitivity::RowWeights {
+        selected: &selected,
+        factor: factor.as_slice()?,
+        level: [level.0, level.1],
+    };
+    let (u, s0) = (
+        u.as_slice()?,
+        s0.as_ref().map(|s| s.as_slice()).transpose()?,
+    );
+    let mut view = out
+        .try_readwrite()
+        .map_err(|e| PyValueError::new_err(format!("out must be a writeable array: {e}")))?;
+    let slice = view.as_slice_mut()?;
+    py.detach(|| {
+        sensitivity::drive_jacobian_rows_along(&p, t0, ts, u, &run, s0, &wanted, &weights, slice)
+    })
+    .map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// The sensitivities `(3, len(wanted))` at the last sample of a run, as the last row
+/// of `drive_sensitivities_along`'s, without the others written out.
+#[pyfunction]
+#[pyo3(signature = (params, t0, ts, u, states, first_modes, events, wanted, s0=None))]
+#[allow(clippy::too_many_arguments)]
+fn drive_sensitivity_at_end_along<'py>(
+    py: Python<'py>,
+    params: PyReadonlyArray1<'py, f64>,
+    t0: f64,
+    ts: f64,
+    u: PyReadonlyArray1<'py, f64>,
+    states: PyReadonlyArray2<'py, f64>,
+    first_modes: PyReadonlyArray1<'py, i8>,
+    events: PyReadonlyArray2<'py, f64>,
+    wanted: Vec<usize>,
+    s0: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let p = param_array(&params)?;
+    let events = event_list(&events)?;
+    let run = sensitivity::Along {
+        states: states.as_slice()?,
+        first_modes: first_modes.as_slice()?,
+        events: &events,
+    };
+    let (u, s0) = (
+        u.as_slice()?,
+        s0.as_ref().map(|s| s.as_slice()).transpose()?,
+    );
+    let m = wanted.len();
+    let values = py
+        .detach(|| sensitivity::drive_sensitivity_at_end_along(&p, t0, ts, u, &run, s0, &wanted))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(Array2::from_shape_vec((N_STATES, m), values)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?
+        .into_pyarray(py))
+}
+
 fn param_array(params: &PyReadonlyArray1<'_, f64>) -> PyResult<[f64; N_PARAMS]> {
     let params = params.as_slice()?;
     params.try_into().map_err(|_| {
@@ -209,5 +309,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(drive_sensitivities, m)?)?;
     m.add_function(wrap_pyfunction!(drive_sensitivities_along, m)?)?;
     m.add_function(wrap_pyfunction!(drive_information, m)?)?;
+    m.add_function(wrap_pyfunction!(drive_jacobian_rows_along, m)?)?;
+    m.add_function(wrap_pyfunction!(drive_sensitivity_at_end_along, m)?)?;
     Ok(())
 }

@@ -282,11 +282,11 @@ def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str],
     None)`` from rest; the end of the held torque's run on the coarse grid of
     :func:`simulate_span` (along ``hold``, that run of ``drive``, where given); or the
     steady state and :func:`steady_sensitivity`."""
-    from .._sensitivity import sensitivities_along, trajectory_and_sensitivities
+    from .._sensitivity import sensitivity_at_end_along, trajectory_and_sensitivities
 
     if span.hold is not None:
         if hold is not None:
-            return hold.states[-1], sensitivities_along(drive, hold, params=names)[-1]
+            return hold.states[-1], sensitivity_at_end_along(drive, hold, params=names)
         n, _ = hold_grid(span)  # the grid's step as time_grid finds it: hold / n
         x, sens = trajectory_and_sensitivities(
             drive, np.linspace(0.0, span.hold, n + 1), np.full(n + 1, span.level),

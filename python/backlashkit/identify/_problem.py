@@ -257,6 +257,7 @@ class Residual:
         # per span and column count, as a new one each time costs its fresh pages
         # (docs/design/sensitivities.md, "The spans' sensitivities in kept arrays")
         self.sens_out: dict[tuple[int, int], np.ndarray] = {}
+        self.selected: dict[int, np.ndarray] = {}  # :meth:`_selected`
 
     def __call__(self, z_rows: np.ndarray) -> np.ndarray:
         pb, lag = self.problem, self.lag
@@ -343,7 +344,7 @@ class Residual:
         drive = pb.exact_drive(z)
         if drive is None:
             return None
-        from .._sensitivity import sensitivities_along
+        from .._sensitivity import jacobian_rows_along, sensitivities_along
 
         first = 0 if with_theta else 1
         names = pb.names[first:]
@@ -358,16 +359,17 @@ class Residual:
                                                      strict=True)):
                 # along a run the kernel does not warn (the differences would not)
                 _, s0 = span_start(drive, sp, names, run.hold)
-                sens = sensitivities_along(drive, run.span, initial_sensitivity=s0,
-                                           params=names, out=self._sens_out(i, run, names))
-                for c in (0, 1):
-                    rows = out[pos : pos + m - self.lag]
-                    if self.ar is None:  # weigh's arithmetic in place (the spans are speeds)
-                        np.multiply(sens[s_, c, :], minus_per_z, out=rows)
-                        np.divide(rows, self.sig[sp.k, c], out=rows)
-                    else:
-                        rows[...] = self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T
-                    pos += m - self.lag
+                block = out[pos : pos + 2 * (m - self.lag)]
+                if self.ar is None:  # weigh's arithmetic, by the kernel (the spans are speeds)
+                    jacobian_rows_along(drive, run.span, selected=self._selected(i),
+                                        factor=minus_per_z, level=tuple(self.sig[sp.k]),
+                                        out=block, initial_sensitivity=s0, params=names)
+                else:
+                    sens = sensitivities_along(drive, run.span, initial_sensitivity=s0,
+                                               params=names, out=self._sens_out(i, run, names))
+                    block[...] = np.concatenate([
+                        self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T for c in (0, 1)])
+                pos += 2 * (m - self.lag)
         except ValueError:
             return None
         with np.errstate(invalid="ignore"):  # no penalty (inf) on the terms' parameters
@@ -375,6 +377,15 @@ class Residual:
         out[pos:] = 0.0
         out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
         return out
+
+    def _selected(self, i: int) -> np.ndarray:
+        """Span ``i``'s selected samples as indices (int64), made once."""
+        sel = self.selected.get(i)
+        if sel is None:
+            s_ = self.sels[i]
+            sel = self.selected[i] = (np.arange(s_.start, s_.stop) if isinstance(s_, slice)
+                                      else np.asarray(s_, np.int64))
+        return sel
 
     def _sens_out(self, i: int, run: SpanRun, names: Sequence[str]) -> np.ndarray:
         """The kept array for span ``i``'s sensitivities to ``names`` along ``run``."""

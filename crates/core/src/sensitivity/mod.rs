@@ -24,6 +24,7 @@
 mod coupled;
 mod flow;
 mod information;
+mod jacobian;
 mod lanes;
 mod mode;
 mod run;
@@ -31,9 +32,11 @@ mod run;
 mod tests;
 
 pub use information::{drive_information, DriveInformation};
+pub use jacobian::{drive_jacobian_rows_along, RowWeights};
 pub use run::{
     drive_sensitivities, drive_sensitivities_along, drive_sensitivities_along_into,
-    drive_sensitivities_from, drive_sensitivities_of, Along, DriveSensitivities,
+    drive_sensitivities_from, drive_sensitivities_of, drive_sensitivity_at_end_along, Along,
+    DriveSensitivities,
 };
 
 /// The parameters, in the order of a parameter vector: motor and load inertias, shaft

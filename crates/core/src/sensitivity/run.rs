@@ -175,9 +175,7 @@ pub fn drive_sensitivities_along_into(
     wanted: &[usize],
     out: &mut [f64],
 ) -> Result<(), Error> {
-    let active = checked(p, s0, wanted)?;
-    let sticky = chain_params(p)?.sticky();
-    check_run(t0, ts, u.len(), run, &sticky)?;
+    let (active, sticky) = checked_along(p, t0, ts, u, run, s0, wanted)?;
     let size = u.len() * N_STATES * wanted.len();
     if out.len() != size {
         return Err(Error::InvalidArgument(format!(
@@ -192,6 +190,63 @@ pub fn drive_sensitivities_along_into(
         walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut rows)?;
     }
     Ok(())
+}
+
+/// The parameters carried (see [`checked`]) and the drive's inertias with a friction
+/// switch, for a walk along `run` (checked against the grid and those switches).
+pub(super) fn checked_along(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    run: &Along<'_>,
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+) -> Result<([bool; N_PARAMS], Vec<usize>), Error> {
+    let active = checked(p, s0, wanted)?;
+    let sticky = chain_params(p)?.sticky();
+    check_run(t0, ts, u.len(), run, &sticky)?;
+    Ok((active, sticky))
+}
+
+/// As [`drive_sensitivities_along`], the last sample's sensitivities alone, row-major
+/// `(3, wanted.len())`: a run whose end alone is wanted (a held torque's, which the
+/// window after it starts from) writes no other row.
+///
+/// Errors: as [`drive_sensitivities_along`], and a run of no sample.
+pub fn drive_sensitivity_at_end_along(
+    p: &[f64; N_PARAMS],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    run: &Along<'_>,
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+) -> Result<Vec<f64>, Error> {
+    let (active, sticky) = checked_along(p, t0, ts, u, run, s0, wanted)?;
+    if u.is_empty() {
+        return Err(Error::InvalidArgument(
+            "a run of no sample has no last sensitivity".into(),
+        ));
+    }
+    let mut last = Last([[0.0; WIDTH]; N_STATES]);
+    walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut last)?;
+    Ok(last
+        .0
+        .iter()
+        .flat_map(|r| &r[..wanted.len()])
+        .copied()
+        .collect())
+}
+
+/// The last row handed over.
+struct Last(Row);
+
+impl Sink for Last {
+    #[inline(always)]
+    fn take(&mut self, row: &Row) {
+        self.0 = *row;
+    }
 }
 
 /// The rows written into a given array, row-major `(samples, 3, m)`, in order.

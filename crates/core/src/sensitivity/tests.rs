@@ -581,3 +581,119 @@ fn the_information_sums_the_written_sensitivities_products() {
     let err = drive_information(&PAPER, 0.0, TS, &u, &[0.0; 3], &[THETA, THETA]).unwrap_err();
     assert!(matches!(err, Error::InvalidArgument(_)));
 }
+
+/// Refused weights: the selected samples, the factors, the levels, the output's size.
+type BadWeights<'a> = (&'a [usize], Vec<f64>, [f64; 2], usize);
+
+#[test]
+fn the_jacobian_rows_are_the_weighed_sensitivities_to_the_bit() {
+    // The fit's rows are `(S_c(k) * f) / s_c` for the selected samples, the motor's
+    // speed's block, then the load's: made from the written sensitivities with the
+    // same two operations, they must be equal to the bit. Two windows of a run with
+    // contact changes, and every sample; paper A's drive and both Coulomb torques.
+    let u = step_down(4.0, LEVEL);
+    let cases: [(&[f64; N_PARAMS], Vec<usize>); 2] =
+        [(&PAPER, vec![THETA, 0, 2, 5]), (&COULOMB, ALL.to_vec())];
+    for (p, wanted) in cases {
+        let m = wanted.len();
+        let x0 = [0.3, 0.2, 0.01];
+        let s0: Vec<f64> = (0..N_STATES * m).map(|i| 1e-3 * i as f64).collect();
+        let run = simulate_from(p, &u, &x0);
+        let switches = run.modes.len() / u.len();
+        let along = Along {
+            states: &run.states,
+            first_modes: &run.modes[..switches],
+            events: &run.events,
+        };
+        let sens = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
+        let factor: Vec<f64> = (0..m).map(|j| -0.3 - 0.7 * j as f64).collect();
+        let level = [0.021, 0.0037];
+        let windows: Vec<usize> = (5..300).chain(2000..2300).collect();
+        let every: Vec<usize> = (0..u.len()).collect();
+        for selected in [windows, every] {
+            let weights = RowWeights {
+                selected: &selected,
+                factor: &factor,
+                level,
+            };
+            let n = selected.len();
+            let mut out = vec![f64::NAN; 2 * n * m];
+            drive_jacobian_rows_along(
+                p,
+                0.0,
+                TS,
+                &u,
+                &along,
+                Some(&s0),
+                &wanted,
+                &weights,
+                &mut out,
+            )
+            .unwrap();
+            for (c, s) in level.iter().enumerate() {
+                for (r, &k) in selected.iter().enumerate() {
+                    for j in 0..m {
+                        let want = sens[(k * N_STATES + c) * m + j] * factor[j] / s;
+                        assert!(out[(c * n + r) * m + j].to_bits() == want.to_bits());
+                    }
+                }
+            }
+        }
+        // Refused: samples out of order or off the grid, a factor missing or not
+        // finite, a level of 0, an output of another size.
+        let good = [3, 4];
+        let bad: [BadWeights; 6] = [
+            (&[4, 3], factor.clone(), level, 4 * m),
+            (&[3, u.len()], factor.clone(), level, 4 * m),
+            (&good, factor[1..].to_vec(), level, 4 * m),
+            (&good, vec![f64::NAN; m], level, 4 * m),
+            (&good, factor.clone(), [0.0, 1.0], 4 * m),
+            (&good, factor.clone(), level, 4 * m - 1),
+        ];
+        for (selected, factor, level, size) in bad {
+            let weights = RowWeights {
+                selected,
+                factor: &factor,
+                level,
+            };
+            let mut out = vec![0.0; size];
+            let err = drive_jacobian_rows_along(
+                p, 0.0, TS, &u, &along, None, &wanted, &weights, &mut out,
+            );
+            assert!(
+                matches!(err, Err(Error::InvalidArgument(_))),
+                "{selected:?} {level:?} {size}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_end_alone_is_the_last_row_to_the_bit() {
+    // A held torque's run is wanted for its end alone: the last row of the written
+    // sensitivities, to the bit, with and without a starting sensitivity.
+    let u = step_down(3.0, LEVEL);
+    for (p, wanted) in [(&PAPER, vec![THETA, 2, 0]), (&COULOMB, ALL.to_vec())] {
+        let m = wanted.len();
+        let run = simulate(p, &u);
+        let switches = run.modes.len() / u.len();
+        let along = Along {
+            states: &run.states,
+            first_modes: &run.modes[..switches],
+            events: &run.events,
+        };
+        let s0: Vec<f64> = (0..N_STATES * m).map(|i| 2e-3 * i as f64).collect();
+        for s0 in [None, Some(&s0[..])] {
+            let all = drive_sensitivities_along(p, 0.0, TS, &u, &along, s0, &wanted).unwrap();
+            let end = drive_sensitivity_at_end_along(p, 0.0, TS, &u, &along, s0, &wanted).unwrap();
+            assert!(end == all[all.len() - N_STATES * m..], "{wanted:?}");
+        }
+        let none = Along {
+            states: &[],
+            first_modes: &[],
+            events: &[],
+        };
+        let err = drive_sensitivity_at_end_along(p, 0.0, TS, &[], &none, None, &wanted);
+        assert!(matches!(err, Err(Error::InvalidArgument(_))));
+    }
+}
