@@ -23,6 +23,10 @@
    shape on these records) with the BLAS library's default threads and with one
    (why ``JointIdentifier.fit`` and the worker pools run one, ``backlashkit.parallel``).
 
+``--profile`` prints instead the functions with the most time of their own in one
+default fit under ``cProfile`` (NumPy's ufuncs count in their callers' own time; the
+profiler's overhead inflates the total).
+
 ``--stiffness-grid N`` times ``ThetaGrid(stiffness_points=N)`` in 2. instead.
 
 ``--count`` prints instead what one default fit, one of paper A's model alone (no
@@ -40,7 +44,7 @@ time of the process, all its threads: other jobs' time slices do not count).
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
 Run: ``python benchmarks/bench_identify.py [--repeats 5] [--reproduce]
-[--stiffness-grid N] [--count]``.
+[--stiffness-grid N] [--count] [--profile]``.
 """
 
 from __future__ import annotations
@@ -256,6 +260,32 @@ def count(recs, prior) -> None:
           f"simulations of the records")
 
 
+#: Functions ``--profile`` lists.
+PROFILE_TOP = 12
+
+
+def profile(recs, prior) -> None:
+    """One default fit under ``cProfile``, after one without it (the same work, caches
+    warm): the :data:`PROFILE_TOP` functions with the most time of their own."""
+    import cProfile
+    import pstats
+
+    fit = JointIdentifier(prior, workers=1).fit
+    fit(recs)
+    prof = cProfile.Profile()
+    prof.enable()
+    fit(recs)
+    prof.disable()
+    stats = pstats.Stats(prof)
+    rows = sorted(stats.stats.items(), key=lambda kv: kv[1][2], reverse=True)
+    print(f"one JointIdentifier.fit under cProfile, {stats.total_tt:.2f} s; the "
+          f"{PROFILE_TOP} functions with the most time of their own:")
+    for (file, line, name), (_, calls, own, cumulative, _) in rows[:PROFILE_TOP]:
+        where = name if file == "~" else f"{Path(file).name}:{line}({name})"
+        print(f"  {own:6.3f} s own, {cumulative:6.3f} s with callees, {calls:5d} calls: "
+              f"{where}")
+
+
 #: Pause before each timed call of the bound, in s (see ``crb_cost``).
 SETTLE_S = 0.02
 
@@ -320,10 +350,15 @@ def main() -> None:
     ap.add_argument("--stiffness-grid", type=int, default=1)
     ap.add_argument("--count", action="store_true",
                     help="only the cost of one fit and one bound in simulations")
+    ap.add_argument("--profile", action="store_true",
+                    help="only where one fit's own time goes, by cProfile")
     args = ap.parse_args()
     rec1, rec2, prior = protocol_records(0.3, np.random.SeedSequence(2024))
     if args.count:
         count([rec1, rec2], prior)
+        return
+    if args.profile:
+        profile([rec1, rec2], prior)
         return
     exe = [sys.executable, "-m", "backlashkit.cli"]
     with tempfile.TemporaryDirectory() as tmp:

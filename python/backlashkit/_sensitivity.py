@@ -215,15 +215,8 @@ def sensitivities_along(
     """
     from . import _core
 
-    names = check_scope(drive, params)
-    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
-        initial_sensitivity, float)
-    return _core.drive_sensitivities_along(
-        _param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
-        np.ascontiguousarray(run.states, float),
-        np.ascontiguousarray(run.first_modes, np.int8),
-        np.ascontiguousarray(run.events, float).reshape(-1, 4),
-        [PARAMS.index(n) for n in names], s0, out)
+    args, wanted, s0 = _along(drive, run, params, initial_sensitivity)
+    return _core.drive_sensitivities_along(*args, wanted, s0, out)
 
 
 def sensitivity_at_end_along(
@@ -239,15 +232,8 @@ def sensitivity_at_end_along(
     run of no sample is refused)."""
     from . import _core
 
-    names = check_scope(drive, params)
-    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
-        initial_sensitivity, float)
-    return _core.drive_sensitivity_at_end_along(
-        _param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
-        np.ascontiguousarray(run.states, float),
-        np.ascontiguousarray(run.first_modes, np.int8),
-        np.ascontiguousarray(run.events, float).reshape(-1, 4),
-        [PARAMS.index(n) for n in names], s0)
+    args, wanted, s0 = _along(drive, run, params, initial_sensitivity)
+    return _core.drive_sensitivity_at_end_along(*args, wanted, s0)
 
 
 def jacobian_rows_along(
@@ -282,16 +268,10 @@ def jacobian_rows_along(
     """
     from . import _core
 
-    names = check_scope(drive, params)
-    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
-        initial_sensitivity, float)
-    _core.drive_jacobian_rows_along(
-        _param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
-        np.ascontiguousarray(run.states, float),
-        np.ascontiguousarray(run.first_modes, np.int8),
-        np.ascontiguousarray(run.events, float).reshape(-1, 4),
-        [PARAMS.index(n) for n in names], np.ascontiguousarray(selected, np.int64),
-        np.ascontiguousarray(factor, float), (float(level[0]), float(level[1])), out, s0)
+    args, wanted, s0 = _along(drive, run, params, initial_sensitivity)
+    _core.drive_jacobian_rows_along(*args, wanted, np.ascontiguousarray(selected, np.int64),
+                                    np.ascontiguousarray(factor, float),
+                                    (float(level[0]), float(level[1])), out, s0)
     return out
 
 
@@ -303,6 +283,22 @@ def jacobian_rows(sens: np.ndarray, selected, factor: np.ndarray,
     operations in the same order, so the same values to the bit from the same
     sensitivities."""
     return np.concatenate([sens[selected, c, :] * factor / level[c] for c in (0, 1)])
+
+
+def _along(drive: TwoMassDrive, run: PackedRun, params: Sequence[str] | None,
+           initial_sensitivity: np.ndarray | None) -> tuple[tuple, list[int], np.ndarray | None]:
+    """The kernel's arguments for a walk along ``run``: its first ones (the drive's
+    parameter values, the grid, the torque, the run's states, first modes and
+    changes), the indices of ``params`` (checked, :func:`check_scope`) and the
+    initial sensitivity (None: zero)."""
+    names = check_scope(drive, params)
+    s0 = None if initial_sensitivity is None else np.ascontiguousarray(
+        initial_sensitivity, float)
+    args = (_param_values(drive), run.t0, run.ts, np.ascontiguousarray(run.torque, float),
+            np.ascontiguousarray(run.states, float),
+            np.ascontiguousarray(run.first_modes, np.int8),
+            np.ascontiguousarray(run.events, float).reshape(-1, 4))
+    return args, [PARAMS.index(n) for n in names], s0
 
 
 def check_scope(drive: TwoMassDrive, params: Sequence[str] | None) -> list[str]:

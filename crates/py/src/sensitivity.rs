@@ -130,11 +130,7 @@ fn drive_sensitivities_along<'py>(
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
-    let run = sensitivity::Along {
-        states: states.as_slice()?,
-        first_modes: first_modes.as_slice()?,
-        events: &events,
-    };
+    let run = along(&states, &first_modes, &events)?;
     let u = u.as_slice()?;
     let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
     if let Some(out) = out {
@@ -193,11 +189,7 @@ fn drive_jacobian_rows_along<'py>(
 ) -> PyResult<()> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
-    let run = sensitivity::Along {
-        states: states.as_slice()?,
-        first_modes: first_modes.as_slice()?,
-        events: &events,
-    };
+    let run = along(&states, &first_modes, &events)?;
     let selected = selected
         .as_slice()?
         .iter()
@@ -249,11 +241,7 @@ fn drive_sensitivity_at_end_along<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
-    let run = sensitivity::Along {
-        states: states.as_slice()?,
-        first_modes: first_modes.as_slice()?,
-        events: &events,
-    };
+    let run = along(&states, &first_modes, &events)?;
     let (u, s0) = (
         u.as_slice()?,
         s0.as_ref().map(|s| s.as_slice()).transpose()?,
@@ -265,6 +253,20 @@ fn drive_sensitivity_at_end_along<'py>(
     Ok(Array2::from_shape_vec((N_STATES, m), values)
         .map_err(|e| PyValueError::new_err(e.to_string()))?
         .into_pyarray(py))
+}
+
+/// A run of the simulator as the kernel follows it: its states, first sample's modes
+/// and changes.
+fn along<'a>(
+    states: &'a PyReadonlyArray2<'_, f64>,
+    first_modes: &'a PyReadonlyArray1<'_, i8>,
+    events: &'a [Event],
+) -> PyResult<sensitivity::Along<'a>> {
+    Ok(sensitivity::Along {
+        states: states.as_slice()?,
+        first_modes: first_modes.as_slice()?,
+        events,
+    })
 }
 
 fn param_array(params: &PyReadonlyArray1<'_, f64>) -> PyResult<[f64; N_PARAMS]> {
