@@ -21,8 +21,11 @@ const SPEEDS: usize = 2;
 /// the product is divided by.
 #[derive(Clone, Copy, Debug)]
 pub struct RowWeights<'a> {
+    /// The samples whose rows are written, strictly increasing.
     pub selected: &'a [usize],
+    /// One multiplier per column (the fit's `-dp/dz`).
     pub factor: &'a [f64],
+    /// The motor speed's and the load speed's noise levels, in rad/s.
     pub level: [f64; SPEEDS],
 }
 
@@ -133,4 +136,5 @@ impl Sink for JacobianRows<'_, '_> {
     }
 }
 
-const _: () = assert!(SPEEDS < N_STATES);
+// The speeds are the first rows of a `Row`.
+const _: () = assert!(SPEEDS <= N_STATES);

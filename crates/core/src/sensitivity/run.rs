@@ -229,23 +229,28 @@ pub fn drive_sensitivity_at_end_along(
             "a run of no sample has no last sensitivity".into(),
         ));
     }
-    let mut last = Last([[0.0; WIDTH]; N_STATES]);
+    let mut last = Last {
+        row: [[0.0; WIDTH]; N_STATES],
+        left: u.len(),
+    };
     walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut last)?;
-    Ok(last
-        .0
-        .iter()
-        .flat_map(|r| &r[..wanted.len()])
-        .copied()
-        .collect())
+    let m = wanted.len();
+    Ok(last.row.iter().flat_map(|r| &r[..m]).copied().collect())
 }
 
-/// The last row handed over.
-struct Last(Row);
+/// The last of `left` rows, copied when it comes, and the others not at all.
+struct Last {
+    row: Row,
+    left: usize,
+}
 
 impl Sink for Last {
     #[inline(always)]
     fn take(&mut self, row: &Row) {
-        self.0 = *row;
+        self.left -= 1;
+        if self.left == 0 {
+            self.row = *row;
+        }
     }
 }
 
