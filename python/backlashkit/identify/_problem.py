@@ -253,7 +253,8 @@ class Residual:
         # single points' runs of the spans, by the point's bytes, newest last: the
         # exact Jacobian at one of them follows its runs (:meth:`exact_jacobian`)
         self.kept: dict[bytes, list[SpanRun]] = {}
-        # each span's sensitivities, written again at each exact Jacobian: one array
+        # each span's sensitivities, written again at each exact Jacobian with
+        # autoregressive noise (white noise's rows come from the kernel): one array
         # per span and column count, as a new one each time costs its fresh pages
         # (docs/design/sensitivities.md, "The spans' sensitivities in kept arrays")
         self.sens_out: dict[tuple[int, int], np.ndarray] = {}
@@ -367,8 +368,8 @@ class Residual:
                 else:
                     sens = sensitivities_along(drive, run.span, initial_sensitivity=s0,
                                                params=names, out=self._sens_out(i, run, names))
-                    block[...] = np.concatenate([
-                        self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T for c in (0, 1)])
+                    for c, rows in enumerate(np.split(block, 2)):
+                        rows[...] = self.weigh(sp, c, (sens[s_, c, :] * minus_per_z).T).T
                 pos += 2 * (m - self.lag)
         except ValueError:
             return None
