@@ -198,7 +198,8 @@ def two_step_start(drive: TwoMassDrive, recs: list[Record], workers
     try:
         with warnings.catch_warnings():  # a start only: the joint fit says what matters
             warnings.simplefilter("ignore")
-            est = TwoStepIdentifier(drive, allow_far_from_prior=True, workers=workers).fit(recs)
+            est = TwoStepIdentifier(drive, allow_far_from_prior=True,
+                                    workers=workers)._fit_checked(recs)
     except InputError:
         return None
     return float(est.theta_), float(est.theta_ini_)

@@ -563,7 +563,8 @@ def likelihood_ratio(segments: list[CriterionWindow], viscous_cost: float,
 AT_EDGE = 1e-6
 
 
-def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = ()) -> list[str]:
+def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = (),
+                 stacklevel: int = 3) -> list[str]:
     """The ends of the search interval ``[lo, hi]`` that ``theta`` sits on, each warned.
 
     Parameters
@@ -574,6 +575,9 @@ def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = ()) -> l
         The search interval in rad.
     advice : tuple of str or Option, optional
         What to do, appended to the warning (e.g. widen ``n_theta``).
+    stacklevel : int, optional
+        The warning's ``stacklevel`` (default 3: the caller of the function that
+        calls this one).
 
     Returns
     -------
@@ -593,11 +597,12 @@ def search_edges(theta: float, lo: float, hi: float, *, advice: tuple = ()) -> l
             warnings.warn(SearchEdgeWarning(
                 "theta is 0, the lower end of the search interval: the criterion is "
                 "smallest without backlash on these records (check the prior's linear "
-                "parameters, or use the joint method, which refines them)"), stacklevel=3)
+                "parameters, or use the joint method, which refines them)"),
+                stacklevel=stacklevel)
             continue
         warnings.warn(SearchEdgeWarning(
             f"theta is at the {end} end of the search interval: the cost's minimum may lie "
-            "beyond it", *advice), stacklevel=3)
+            "beyond it", *advice), stacklevel=stacklevel)
     return ends
 
 

@@ -329,7 +329,9 @@ class JointIdentifier:
         prior = self.prior.with_theta(None)
         records = as_records(records, prior=prior)
         check_step_downs(records, prior)
-        records = [encoder_angles(r) for r in records]
+        quanta = [(0.0, 0.0) if r.has_positions  # fitted as the angles they hold
+                  else (speed_quantum(r.w_motor), speed_quantum(r.w_load)) for r in records]
+        records = [encoder_angles(r, quanta=q) for r, q in zip(records, quanta, strict=True)]
         # one BLAS thread: the products J^T J (n_samples x 7) gain nothing from more,
         # and their rounding then does not depend on the machine's core count (the
         # multimodal fits of a rattling load can follow a different path on it);
@@ -351,7 +353,7 @@ class JointIdentifier:
         if parts is not None:
             warnings.warn(CorrelatedResidualsWarning(*parts), stacklevel=2)
         self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
-        _warn_quantised(records)
+        _warn_quantised(records, quanta)
         return self
 
     def _fit_and_restart(self, records, bar) -> tuple[dict[str, Any], bool, bool]:
@@ -517,15 +519,15 @@ _INIT_NAMES = tuple(n for n in inspect.signature(JointIdentifier.__init__).param
                     if n != "self")
 
 
-def _warn_quantised(records) -> None:
+def _warn_quantised(records, quanta: list[tuple[float, float]]) -> None:
     """Warn where one speed of a record is an encoder's differenced counts and the
     other is not (:class:`~backlashkit.errors.QuantisedSpeedsWarning`); records with
-    both are fitted as angles (:func:`~backlashkit.identify.noise.encoder_angles`)."""
-    for rec in records:
+    both are fitted as angles (:func:`~backlashkit.identify.noise.encoder_angles`).
+    ``quanta``: the steps of each record's two speeds (:func:`speed_quantum`)."""
+    for rec, steps in zip(records, quanta, strict=True):
         if rec.has_positions:
             continue
-        for name, w in (("w_motor", rec.w_motor), ("w_load", rec.w_load)):
-            q = speed_quantum(w)
+        for name, q in zip(("w_motor", "w_load"), steps, strict=True):
             if q > 0:
                 counts = 2 * math.pi / (q * rec.ts)
                 warnings.warn(QuantisedSpeedsWarning(

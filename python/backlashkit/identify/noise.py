@@ -311,7 +311,7 @@ def innovation_ratio(a) -> float:
     return float(1.0 / (psi @ psi))
 
 
-def encoder_angles(rec: Record) -> Record:
+def encoder_angles(rec: Record, *, quanta: tuple[float, float] | None = None) -> Record:
     """The record as encoder angles where both its speeds are differenced counts.
 
     Such speeds are the mean speeds over each sample, and their errors are the
@@ -324,6 +324,9 @@ def encoder_angles(rec: Record) -> Record:
     ----------
     rec : Record
         A record.
+    quanta : tuple of float, optional
+        The steps of its speeds ``w_motor``, ``w_load`` in rad/s where already known
+        (:func:`speed_quantum` of each); found here otherwise.
 
     Returns
     -------
@@ -333,7 +336,8 @@ def encoder_angles(rec: Record) -> Record:
     """
     if rec.has_positions:
         return rec
-    q_m, q_l = speed_quantum(rec.w_motor), speed_quantum(rec.w_load)
+    q_m, q_l = (quanta if quanta is not None
+                else (speed_quantum(rec.w_motor), speed_quantum(rec.w_load)))
     if not (q_m > 0 and q_l > 0):
         return rec
     same = math.isclose(q_m, q_l, rel_tol=QUANTUM_RTOL)

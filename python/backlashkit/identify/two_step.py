@@ -123,7 +123,7 @@ from .decay import (
     viscous_fit,
 )
 from .hyper import init_repr
-from .record import as_records, check_prior
+from .record import as_records, check_prior, check_sampling
 from .step import check_held_speeds, check_step_downs, find_step_down
 
 __all__ = [
@@ -164,9 +164,12 @@ class _Prepared:
     n_grid: int
 
 
-def _prepare(est: Any, records: Any, final_records: Any = None) -> _Prepared:
+def _prepare(est: Any, records: Any, final_records: Any = None, *,
+             checked: bool = False) -> _Prepared:
     """The shared preamble of the fits: hyperparameters checked, records read, refused
-    or warned (step-downs, held speeds), and the windows of ``W_1`` cut."""
+    or warned (step-downs, held speeds), and the windows of ``W_1`` cut. ``checked``:
+    ``records`` are Records that :func:`as_records` has checked (the joint estimator's
+    start); only their sampling against this prior is checked again."""
     prior = check_prior(est.prior)
     dt4 = v.positive("dt4", est.dt4)
     level_window = v.positive("level_window", est.level_window)
@@ -174,7 +177,12 @@ def _prepare(est: Any, records: Any, final_records: Any = None) -> _Prepared:
     if est.friction not in FRICTIONS:
         raise InputError(f"friction must be one of {', '.join(map(repr, FRICTIONS))}, got "
                          f"{est.friction!r}")
-    recs = as_records(records, prior=prior)
+    if checked:
+        recs = list(records)
+        for rec in recs:
+            check_sampling(prior, rec)
+    else:
+        recs = as_records(records, prior=prior)
     finals = recs if final_records is None else as_records(final_records, "final_records",
                                                             prior=prior)
     every = recs + [f for f in finals if all(f is not r for r in recs)]
@@ -360,14 +368,27 @@ class TwoStepIdentifier:
         SearchEdgeWarning
             If ``theta_`` sits at an end of the search interval.
         """
+        self._check()
+        return self._fit(_prepare(self, records, final_records))
+
+    def _fit_checked(self, records: list) -> TwoStepIdentifier:
+        """:meth:`fit` of Records that :func:`as_records` has checked (the joint
+        estimator's start, which would check them again for its own ``fit``)."""
+        self._check()
+        return self._fit(_prepare(self, records, checked=True))
+
+    def _check(self) -> None:
+        """The hyperparameters that :meth:`fit` checks before it reads the records."""
         n_theta = v.positive("n_theta", self.n_theta)
         if not n_theta < 1:
             raise InputError(f"n_theta must be < 1, got {self.n_theta!r}")
         # named here: the filter would only say "cutoff", not which one
         v.positive("cutoff_motor", self.cutoff_motor)
         v.positive("cutoff_load", self.cutoff_load)
-        prep = _prepare(self, records, final_records)
-        prior = prep.prior
+
+    def _fit(self, prep: _Prepared) -> TwoStepIdentifier:
+        """:meth:`fit` of the prepared records."""
+        n_theta, prior = self.n_theta, prep.prior
         comms, inis = self._pre_estimates(prep, 0.0)
         lo, hi = _interval(inis, n_theta)
         fc = (0.0, 0.0)  # the viscous model's
@@ -390,7 +411,8 @@ class TwoStepIdentifier:
         self.fc_M_, self.fc_L_ = float(fc[0]), float(fc[1])
         self.friction_lr_ = lr
         self.search_edges_ = search_edges(self.theta_, lo, hi,
-                                          advice=(" (widen ", Option("n_theta", None), ")"))
+                                          advice=(" (widen ", Option("n_theta", None), ")"),
+                                          stacklevel=4)  # fit's caller
         self.theta_ini_ = float(np.mean(inis))
         self.theta_ini_per_record_ = inis
         self.commutations_ = comms
