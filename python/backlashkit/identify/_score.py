@@ -45,7 +45,8 @@ class Linearised:
     r : numpy.ndarray
         The residual at the point.
     jac : numpy.ndarray
-        Its forward-difference Jacobian there (they only scale and qualify a test).
+        Its Jacobian there: exact where the compiled sensitivities cover the model,
+        else by forward differences (they only scale and qualify a test).
     cov : numpy.ndarray or None
         The inverse of ``jac.T @ jac``; None where it is singular.
     std : numpy.ndarray
@@ -59,9 +60,11 @@ class Linearised:
 
 
 def linearise(rows: Residual, z: np.ndarray) -> Linearised:
-    """The residual ``rows`` linearised at ``z`` (``z.size + 1`` simulations)."""
+    """The residual ``rows`` linearised at ``z``: one simulation and a sensitivity run
+    along it, or ``z.size + 1`` simulations outside the sensitivities' scope
+    (:meth:`Residual.jacobian`)."""
     r = rows.at(z)
-    jac = rows.forward_jacobian(z, r)
+    jac = rows.jacobian(z, r)
     try:
         cov = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:

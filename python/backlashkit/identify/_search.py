@@ -618,10 +618,9 @@ def added_term_fit(pb: Problem, res: Residual, z: np.ndarray, cost: float, term:
 
 def linearised(seen: dict, pb: Problem, st: LMState, sig: np.ndarray,
                final_h: float | None) -> Linearised:
-    """The whole-record residual of ``pb`` linearised at ``st`` (:func:`._score.linearise`:
-    forward differences, as they only scale and qualify a test), once per model and
-    point: the model the friction test keeps is the one the loop's test starts from.
-    ``seen`` holds those already made."""
+    """The whole-record residual of ``pb`` linearised at ``st`` (:func:`._score.linearise`),
+    once per model and point: the model the friction test keeps is the one the loop's
+    test starts from. ``seen`` holds those already made."""
     key = (id(pb), st.z.tobytes())
     if key not in seen or seen[key][0] is not pb:
         seen[key] = (pb, linearise(pb.residual(pb.final_spans(final_h), final_h, sig), st.z))
