@@ -96,7 +96,7 @@ def _step(state: LMState, fun, rtol: float, atol: float, max_step: float, bounds
         r_new = fun(z_new)
         c_new = float(r_new @ r_new)
         if math.isfinite(c_new) and c_new < state.cost:
-            z_new, r_new, c_new = _extrapolate(state, fun, step, z_new, r_new, c_new,
+            z_new, r_new, c_new = _extrapolate(state, fun, g, step, z_new, r_new, c_new,
                                                max_step, bounds)
             gain = state.cost - c_new
             state.z, state.r, state.jac = z_new, r_new, None
@@ -109,10 +109,13 @@ def _step(state: LMState, fun, rtol: float, atol: float, max_step: float, bounds
     return False
 
 
-def _extrapolate(state: LMState, fun, step, z_new, r_new, c_new, max_step, bounds):
-    """Double an accepted step while the cost keeps falling (slow valleys, e.g. f_sh)."""
+def _extrapolate(state: LMState, fun, g, step, z_new, r_new, c_new, max_step, bounds):
+    """Double an accepted step while the cost keeps falling (slow valleys, e.g. f_sh),
+    where the parabola along the step predicts that it falls (:func:`_doubling_pays`)."""
     while True:
         if 2.0 * float(np.max(np.abs(step))) > max_step:
+            break
+        if not _doubling_pays(state.cost, float(g @ step), c_new):
             break
         step = 2.0 * step
         z_try = state.z + step
@@ -124,3 +127,15 @@ def _extrapolate(state: LMState, fun, step, z_new, r_new, c_new, max_step, bound
             break
         z_new, r_new, c_new = z_try, r_try, c_try
     return z_new, r_new, c_new
+
+
+def _doubling_pays(cost: float, slope: float, c_new: float) -> bool:
+    """Whether the parabola through the cost along a step, ``cost`` and its slope
+    ``2 slope`` at the start (``slope = g . step``, ``g = J^T r``) and ``c_new`` at
+    the step's end, is lower at twice the step than at its end: ``c(t) = cost + 2 slope
+    t + k t^2`` with ``k = c_new - cost - 2 slope``, and ``c(2) < c(1)`` where
+    ``3 k < -2 slope``. On paper A's protocol most accepted steps end near the
+    minimum along their line, and a doubling tried there costs a simulation and fails;
+    the parabola tells those apart (docs/design/joint-search.md, "Doubling a step")."""
+    curvature = c_new - cost - 2.0 * slope
+    return 3.0 * curvature < -2.0 * slope
