@@ -148,7 +148,7 @@ from .noise import (
 from .quantum import speed_quantum
 from .record import as_records, check_prior
 from .search import JointSearch
-from .step import check_fit_near_prior, check_step_downs, held_speed_gain
+from .step import check_fit_near_prior, check_step_downs, held_speed_gain, too_far
 from .terms import (
     KEEP_LEVEL,
     PRIOR_PARAMS,
@@ -362,8 +362,11 @@ class JointIdentifier:
         restarted = won = False
         # an encoder's angle errors are constant while a shaft stands still, so its
         # residual's correlation says nothing of the basin: no restart on them
+        # a fit the prior refuses is refused as it is: a search from its linear
+        # parameters that far off can take minutes (a viscous model of a drive with
+        # Coulomb friction drives J_M towards 0, where the simulations chatter)
         if (self.search.restarts.misfit and not any(r.has_positions for r in records)
-                and _misfits(fitted)):
+                and _misfits(fitted) and not self._refused_as_far(fitted)):
             restarted = True
             try:  # the whole search again, from the fitted linear parameters
                 again = self._fit(records, anchor=fitted["drive_"],
@@ -380,10 +383,14 @@ class JointIdentifier:
     def _far_from_prior(self, fitted, records, prior):
         """Refuse (beyond REFUSE_FROM_PRIOR) before the estimator holds the answer."""
         return check_fit_near_prior(
-            {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS},
-            self.prior, allow_far_from_prior=self.allow_far_from_prior, stacklevel=3,
+            _linear(fitted), self.prior, allow_far_from_prior=self.allow_far_from_prior,
+            stacklevel=3,
             held_gains=[held_speed_gain(r, prior) for r in records],
             missing=self._missing_terms(), names=[r.name for r in records])
+
+    def _refused_as_far(self, fitted) -> bool:
+        """Whether :meth:`_far_from_prior` refuses ``fitted``."""
+        return not self.allow_far_from_prior and bool(too_far(_linear(fitted), self.prior))
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.
@@ -539,6 +546,11 @@ def _warn_quantised(records, quanta: list[tuple[float, float]]) -> None:
                     "angles (Record.from_positions) to have them fitted as angles"),
                     stacklevel=3)
                 break
+
+
+def _linear(fitted: dict[str, Any]) -> dict[str, float]:
+    """The estimated linear parameters of a fit, by name."""
+    return {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS}
 
 
 def _misfits(fitted: dict[str, Any]) -> bool:

@@ -35,6 +35,7 @@ __all__ = [
     "held_speed_gain",
     "is_far",
     "ratios_to_prior",
+    "too_far",
 ]
 
 #: A record's held speed (:func:`held_speed_gain`) or a fit's linear parameter this
@@ -405,6 +406,25 @@ def ratios_to_prior(params: Mapping[str, float], prior: TwoMassDrive) -> str:
     return ", ".join(f"{n} x{x / getattr(prior, n):.3g}" for n, x in params.items())
 
 
+def too_far(params: Mapping[str, float], prior: TwoMassDrive) -> dict[str, float]:
+    """The fitted linear parameters that :func:`check_fit_near_prior` refuses: more than
+    :data:`REFUSE_FROM_PRIOR` times off the prior's (either way).
+
+    Parameters
+    ----------
+    params : mapping of str to float
+        The estimated linear parameters by name (``J_M``, ``k_sh``, ...).
+    prior : TwoMassDrive
+        The prior drive.
+
+    Returns
+    -------
+    dict of str to float
+        Those of ``params`` that far off, by name.
+    """
+    return {n: x for n, x in params.items() if is_far(x / getattr(prior, n), REFUSE_FROM_PRIOR)}
+
+
 def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
                          allow_far_from_prior: bool = False, stacklevel: int = 2,
                          held_gains: Sequence[float] = (),
@@ -454,7 +474,7 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
         When one is more than :data:`FAR_FROM_PRIOR` times off.
     """
     ratio = {n: x / getattr(prior, n) for n, x in params.items()}
-    very_far = {n: params[n] for n in params if is_far(ratio[n], REFUSE_FROM_PRIOR)}
+    very_far = too_far(params, prior)
     cause = _far_fit_cause(held_gains, missing, names)
     if very_far and not allow_far_from_prior:
         raise InputError(
