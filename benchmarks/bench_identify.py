@@ -39,7 +39,9 @@ theirs: those runs are counted apart, the fit's weighed by their time at its
 simulations' rate on whole spans, and again at a steadier unit, the median of
 ``UNIT_REPEATS`` kernel simulations of the records timed apart; the bound's time is
 also given in times of one simulation of the record (medians of 7, interleaved, in CPU
-time of the process, all its threads: other jobs' time slices do not count).
+time of the process, all its threads: other jobs' time slices do not count). Its
+last line tallies the Levenberg-Marquardt step doublings of one more fit, each
+evaluated whether the parabola along the step tries it or not (``doublings``).
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
@@ -260,6 +262,37 @@ def count(recs, prior) -> None:
     print(f"  by wall time, one fit ({wall:.2f} s) costs {wall / unit:.0f} simulations of the "
           f"records at the steadier unit (issue 24's bar: 250), "
           f"{wall / (len(recs) * sim_s):.0f} at drive.simulate's")
+    doublings(recs, prior)
+
+
+def doublings(recs, prior) -> None:
+    """One more default fit, each accepted step's first doubling within the longest
+    step evaluated aside (not counted above; the fit's path is its own): how many the
+    parabola along the step (``identify._lm._doubling_pays``) tries and turns away,
+    and how many of each would lower the cost. Every one of them was tried before
+    the parabola decided."""
+    import backlashkit.identify._lm as lm_mod
+
+    tally = {(pays, lower): 0 for pays in (True, False) for lower in (True, False)}
+    real = lm_mod._extrapolate
+
+    def extrapolate(state, fun, g, step, z_new, r_new, c_new, max_step, bounds):
+        if 2.0 * float(np.max(np.abs(step))) <= max_step:
+            z_try = state.z + 2.0 * step
+            r_try = fun(z_try if bounds is None else np.clip(z_try, *bounds))
+            lower = bool(float(r_try @ r_try) < c_new)
+            tally[lm_mod._doubling_pays(state.cost, float(g @ step), c_new), lower] += 1
+        return real(state, fun, g, step, z_new, r_new, c_new, max_step, bounds)
+
+    lm_mod._extrapolate = extrapolate
+    try:
+        JointIdentifier(prior, workers=1).fit(recs)
+    finally:
+        lm_mod._extrapolate = real
+    print(f"Levenberg-Marquardt's first doublings of the accepted steps: the parabola "
+          f"tries {tally[True, True] + tally[True, False]} ({tally[True, True]} lower the "
+          f"cost) and turns away {tally[False, True] + tally[False, False]} "
+          f"({tally[False, True]} would lower it)")
 
 
 #: Functions ``--profile`` lists.
