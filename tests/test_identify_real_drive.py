@@ -127,6 +127,26 @@ def test_viscous_model_on_friction_names_friction_not_units(coulomb):
     assert "rpm" not in text
 
 
+def test_a_fit_too_far_from_the_prior_is_refused_before_its_uncertainty(coulomb,
+                                                                          monkeypatch):
+    """The same refusal comes as soon as the search has chosen its model: the profile
+    interval's refits and the second search (``Restarts.misfit``) from linear
+    parameters that far off can take minutes; a bootstrap refit still answers."""
+    from backlashkit.identify import _search
+
+    def no_uncertainty(*args, **kwargs):
+        raise AssertionError("the uncertainty ran at a point the prior refuses")
+
+    monkeypatch.setattr(_search, "uncertainty", no_uncertainty)
+    with pytest.raises(InputError, match="units are likely right"), \
+            warnings.catch_warnings():
+        warnings.simplefilter("ignore", PriorMismatchWarning)
+        _fit(coulomb, P_TRUE, friction="viscous", actuator=None)
+    refit = bk.JointIdentifier(bk.TwoMassDrive(**P_TRUE), friction="viscous",
+                               actuator=None)._refit_params()
+    assert refit["allow_far_from_prior"] is True
+
+
 def _looks_past(monkeypatch) -> list[bool]:
     """Whether each side of the profile intervals fitted from now on looked past its
     end (``IntervalInputs.look_past``)."""

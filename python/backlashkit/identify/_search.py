@@ -194,7 +194,8 @@ def grid_minima(pb: Problem, rows0: Residual, grid: ThetaGrid, z_anchor: np.ndar
 
 def two_step_start(drive: TwoMassDrive, recs: list[Record], workers
                    ) -> tuple[float, float] | None:
-    """Paper A's two-step estimate and its pre-estimate, or None where it fails."""
+    """Paper A's two-step estimate and its pre-estimate, or None where it fails; the
+    records ``recs`` as the joint fit checked them (not checked again)."""
     try:
         with warnings.catch_warnings():  # a start only: the joint fit says what matters
             warnings.simplefilter("ignore")
@@ -680,11 +681,14 @@ _UNSET = object()
 def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record], *,
         start_drive: TwoMassDrive, z_anchor: np.ndarray, fixed_noise: bool, noise_model,
         interval, refit: Callable[[list[Record]], float], terms: Sequence[Term] = (),
+        refuse_far: Callable[[dict[str, float]], None] = lambda linear: None,
         stage: Callable[[int], None] = lambda done: None) -> Outcome:
     """The whole search from ``z_anchor`` (log linear parameters, then the added
     terms'), the noise levels, the choice of the ``"auto"`` terms, the uncertainty and
     the interval. ``refit(records)``: ``theta`` of a bootstrap resample's fit;
-    ``stage(k)``: called as each of the :data:`STAGES` stages ends."""
+    ``refuse_far(linear)``: raises where the estimated linear parameters (by name) are
+    too far from the prior, checked before the uncertainty; ``stage(k)``: called as
+    each of the :data:`STAGES` stages ends."""
     final_h = search.final_horizon
     anchor = dict(zip(pb.free, z_anchor, strict=True))
     located = locate(pb, search, sigma, recs, start_drive, z_anchor, stage=stage)
@@ -708,6 +712,8 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     # before the uncertainty (whose refits at such a point can take minutes)
     checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
     refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1], terms)
+    refuse_far({n: float(x) for n, x in zip(pb.names, pb.values(best.z), strict=True)
+                if n in LINEAR_PARAMS})
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
     # a term added after the search (a loop's lag) trades against the linear parameters
     # along a curved valley, and theta's profile can fall again past a crossing

@@ -105,6 +105,7 @@ import math
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -343,7 +344,7 @@ class JointIdentifier:
             labels = (*_search.STAGE_NAMES, *(f"{n}, again" for n in _search.STAGE_NAMES))
             with reporter(self.progress, "identify", unit="stage", labels=labels) as bar:
                 fitted, restarted, won = self._fit_and_restart(records, bar)
-        far = self._far_from_prior(fitted, records, prior)
+        far = self._far_from_prior(_linear(fitted), records, prior)
         _warn_prior_conflicts(fitted["prior_pull_"],
                               rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
         _warn_fixed_loop(fitted["fixed_tests_"], self._terms()[1])
@@ -362,11 +363,8 @@ class JointIdentifier:
         restarted = won = False
         # an encoder's angle errors are constant while a shaft stands still, so its
         # residual's correlation says nothing of the basin: no restart on them
-        # a fit the prior refuses is refused as it is: a search from its linear
-        # parameters that far off can take minutes (a viscous model of a drive with
-        # Coulomb friction drives J_M towards 0, where the simulations chatter)
         if (self.search.restarts.misfit and not any(r.has_positions for r in records)
-                and _misfits(fitted) and not self._refused_as_far(fitted)):
+                and _misfits(fitted)):
             restarted = True
             try:  # the whole search again, from the fitted linear parameters
                 again = self._fit(records, anchor=fitted["drive_"],
@@ -380,17 +378,24 @@ class JointIdentifier:
             fitted = again if won else fitted
         return fitted, restarted, won
 
-    def _far_from_prior(self, fitted, records, prior):
-        """Refuse (beyond REFUSE_FROM_PRIOR) before the estimator holds the answer."""
+    def _far_from_prior(self, linear: dict[str, float], records, prior):
+        """Refuse the fitted linear parameters ``linear`` beyond REFUSE_FROM_PRIOR before
+        the estimator holds the answer; warn of those beyond FAR_FROM_PRIOR."""
         return check_fit_near_prior(
-            _linear(fitted), self.prior, allow_far_from_prior=self.allow_far_from_prior,
+            linear, self.prior, allow_far_from_prior=self.allow_far_from_prior,
             stacklevel=3,
             held_gains=[held_speed_gain(r, prior) for r in records],
             missing=self._missing_terms(), names=[r.name for r in records])
 
-    def _refused_as_far(self, fitted) -> bool:
-        """Whether :meth:`_far_from_prior` refuses ``fitted``."""
-        return not self.allow_far_from_prior and bool(too_far(_linear(fitted), self.prior))
+    def _refuse_far(self, records, prior, linear: dict[str, float]) -> None:
+        """Refuse the search's point now where :meth:`_far_from_prior` would refuse its
+        answer (``linear``: its linear parameters), before the uncertainty and the
+        second search (``Restarts.misfit``), whose refits from such a point can take
+        minutes (a viscous model of a drive with Coulomb friction drives ``J_M``
+        towards 0, where the simulations chatter); warn of nothing (the answer's check
+        does)."""
+        if not self.allow_far_from_prior and too_far(linear, self.prior):
+            self._far_from_prior(linear, records, prior)
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.
@@ -485,7 +490,7 @@ class JointIdentifier:
             pb, search, sigma, recs, start_drive=start.with_theta(None), z_anchor=z_anchor,
             fixed_noise=self.noise is not None, noise_model=noise_model,
             interval=self.interval, refit=_BootstrapRefit(self._refit_params()), terms=terms,
-            stage=stage)
+            refuse_far=partial(self._refuse_far, recs, prior), stage=stage)
         return {**_published(out, prior, self.law), "held_noise_lag1_": held,
                 "_held_samples": held_samples, "noise_model_": noise_model,
                 "_record_names": [r.name for r in recs]}
@@ -505,9 +510,11 @@ class JointIdentifier:
         return friction_term(self.friction), actuator_term(self.actuator, rel.get("tau_i"))
 
     def _refit_params(self) -> dict[str, Any]:
-        """The hyperparameters of a bootstrap refit: these, with Fisher's interval."""
+        """The hyperparameters of a bootstrap refit: these, with Fisher's interval; a
+        refit answers wherever it ends (the check against the prior is the fit's)."""
         params = {name: getattr(self, name) for name in _INIT_NAMES}
-        return {**params, "interval": FisherInterval(), "progress": False}
+        return {**params, "interval": FisherInterval(), "progress": False,
+                "allow_far_from_prior": True}
 
 
 @dataclass(frozen=True)

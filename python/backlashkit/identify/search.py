@@ -302,7 +302,8 @@ class Restarts(_Config):
     misfit : bool, optional
         Run the whole search again from the fitted linear parameters when a residual
         is correlated beyond noise (a wrong basin) and the noise itself is not
-        coloured; keep the fit of higher likelihood (default True).
+        coloured; keep the fit of higher likelihood (default True). A fit refused as
+        too far from the prior is refused without it.
     prior : bool, optional
         Restart first from the prior's linear parameters, ``theta`` and the added
         terms as found, and refit the profile interval's ends from there too
