@@ -3,10 +3,10 @@
 The identifiers take the torque column as the *exact* input of the model. A measured
 torque (a current times the torque constant) carries noise, and the model driven by
 it rattles in the backlash where the real drive did not: on paper A's drive 0.3 mN m
-of white noise on a 0.157 N m step (0.2 %) shrank the joint fit's standard error 18
-times, 1 mN m some 4000 times, to 8e-8 rad with the truth 7000 of them away. So a
-record whose torque is
-noisy is refused, with two ways out: the torque command (the set-point) instead of
+of white noise on a 0.157 N m step (0.2 %) shrinks the joint fit's standard error by
+up to half, 1 mN m hundreds of times or more, with the truth hundreds of them away
+(``tests/test_torque.py::test_why_the_limit``). So a record whose torque is noisy is
+refused, with two ways out: the torque command (the set-point) instead of
 the measured torque, or :func:`torque_levels`, which replaces a noisy
 piecewise-constant torque (paper A's steps) by its levels.
 
@@ -30,8 +30,10 @@ __all__ = ["TORQUE_NOISE_LIMIT", "check_torque_noise", "torque_levels", "torque_
 
 #: Largest torque noise (std) accepted, relative to the largest torque magnitude:
 #: 0.13 % left the joint fit's estimate and standard error nearly unchanged on paper
-#: A's drive (0.003 standard errors, 9 %), 0.19 % moved ``theta`` by 0.47 standard
-#: errors and shrank them by 38 %, 0.64 % some 3000 times (``tests/test_torque.py``).
+#: A's drive (0.003 standard errors, 9 %), 0.19 % shrank them by 38 to 47 % (the
+#: machine's rounding decides where the search ends among the contact changes the
+#: model makes of the noise), 0.64 % hundreds to thousands of times
+#: (``tests/test_torque.py::test_why_the_limit``).
 TORQUE_NOISE_LIMIT = 5e-4
 #: A sample-to-sample change of more than this many noise std of the first
 #: differences starts a new level in :func:`torque_levels`.
