@@ -625,9 +625,12 @@ def test_a_search_again_from_a_fit_whose_friction_underflowed(coulomb):
     """The misfit restart searches again from the first fit's linear parameters; a
     friction that fit drove to 0 (its logarithm below the floats' range) raised ``math
     domain error`` there, which stopped ``benchmarks/robustness_joint.py --trials 20
-    --seed 5`` at a441c56 and at 51ebc1f. It now starts from the prior's value."""
+    --seed 5`` at a441c56 and at 51ebc1f. It now starts from the prior's value. (The
+    viscous model's search ends too far from the prior on these records, which the
+    search refuses before its uncertainty: allowed here, so that it runs on.)"""
     est = bk.JointIdentifier(bk.TwoMassDrive(**P_TRUE), workers=1, friction="viscous",
-                             actuator=None, interval=bk.FisherInterval())
+                             actuator=None, interval=bk.FisherInterval(),
+                             allow_far_from_prior=True)
     again = est._fit(coulomb, anchor=bk.TwoMassDrive(**{**P_TRUE, "f_sh": 0.0}))
     assert math.isfinite(again["theta_"])
 
