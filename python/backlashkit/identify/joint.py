@@ -390,8 +390,8 @@ class JointIdentifier:
     def _refuse_far(self, records, prior, linear: dict[str, float]) -> None:
         """Refuse the search's point now where :meth:`_far_from_prior` would refuse its
         answer (``linear``: its linear parameters), before the uncertainty and the
-        second search (``Restarts.misfit``), whose refits from such a point can take
-        minutes (a viscous model of a drive with Coulomb friction drives ``J_M``
+        second search (``Restarts.misfit``), whose refits from such a point can take far
+        longer than a fit (a viscous model of a drive with Coulomb friction drives ``J_M``
         towards 0, where the simulations chatter); warn of nothing (the answer's check
         does)."""
         if not self.allow_far_from_prior and too_far(linear, self.prior):
