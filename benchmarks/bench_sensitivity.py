@@ -32,9 +32,16 @@ the output, tens of megabytes, weighs on the compiled run.
 for several sets of columns, with and without Coulomb friction: run at two commits, it
 shows whether a change of the kernel kept its values to the bit.
 
+``--holds`` times instead where a held torque's run costs, on the coarse grid the
+joint fit simulates paper A's 40 s holds on (``identify._model.hold_grid``): each
+hold's simulation and the walk of its sensitivities to its end (what each window's
+Jacobian starts from), whole and from the sample after its last contact change on
+(the same run cut there: the tail that the engine settles, without a contact
+change), medians of ``--repeats`` after a warm-up, in CPU time.
+
 Usage::
 
-    python benchmarks/bench_sensitivity.py [--repeats 5] [--seconds 8] [--digest]
+    python benchmarks/bench_sensitivity.py [--repeats 5] [--seconds 8] [--digest] [--holds]
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ import argparse
 import hashlib
 import statistics
 import time
+from functools import partial
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -89,6 +97,60 @@ def digests(t: np.ndarray, u: np.ndarray) -> None:
               f"{hashlib.sha1(sens.tobytes()).hexdigest()}")
 
 
+def hold_run(p: np.ndarray, span, k: int = 0, x0: np.ndarray | None = None):
+    """The fit's simulation of ``span``'s hold (packed parameter rows ``p``) on its
+    coarse grid, from its sample ``k`` on (from rest, or from ``x0``)."""
+    from backlashkit.identify._model import hold_grid, initial_states
+    from backlashkit.simulate import simulate_packed_runs
+
+    n, step = hold_grid(span)
+    x0 = initial_states(p, None, span.level) if x0 is None else x0
+    return simulate_packed_runs(2, p, k * step, step, np.full((1, n + 1 - k), span.level),
+                                x0, law="paper", workers=1)
+
+
+def hold_costs(drive, span, repeats: int) -> str:
+    """One line of ``--holds``: ``span``'s hold, whole and from the sample after its
+    last contact change on."""
+    from backlashkit._sensitivity import sensitivities_along, sensitivity_at_end_along
+    from backlashkit.identify._model import packed_row
+    from backlashkit.simulate import PackedRun
+
+    p = packed_row(drive)[np.newaxis, :]
+    runs = hold_run(p, span)
+    run = runs.run(0)
+    k = int(np.ceil(run.events[-1, 0] / run.ts - 1e-9)) + 1
+    tail = PackedRun(k * run.ts, run.ts, run.torque[k:], run.states[k:], runs.modes[0, k],
+                     np.empty((0, 4)))
+    s_k = sensitivities_along(drive, run)[k]
+    with threadpool_limits(1):
+        (sim, sim_tail, walk, walk_tail), _ = median_times(
+            [partial(hold_run, p, span), partial(hold_run, p, span, k, run.states[k:k + 1]),
+             partial(sensitivity_at_end_along, drive, run),
+             partial(sensitivity_at_end_along, drive, tail, initial_sensitivity=s_k)],
+            repeats)
+    return (f"  {span.record.name}: {len(run.torque)} samples of {1e3 * run.ts:g} ms, "
+            f"{len(run.events)} changes of mode up to {run.events[-1, 0]:.3g} s (sample "
+            f"{k}); simulation {1e6 * sim:.0f} us, its tail alone {1e6 * sim_tail:.0f} us; "
+            f"sensitivities' walk to the end {1e6 * walk:.0f} us, its tail alone "
+            f"{1e6 * walk_tail:.0f} us")
+
+
+def holds(repeats: int) -> None:
+    """Print the cost of paper A's two holds, whole and from their last contact change
+    on (``--holds``), at the true parameters."""
+    from backlashkit.identify._model import screen_spans, spans
+    from backlashkit.papers.ravanbod2002 import protocol_records
+
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+    records = list(protocol_records(0.3, np.random.SeedSequence(2024))[:2])
+    noise = [(1.0, 1.0)] * len(records)  # the spans' cut does not depend on it
+    print(f"paper A's holds on the fit's coarse grid, median of {repeats}, CPU time")
+    for span in screen_spans(spans(records, "auto", 1.0, noise)):
+        if span.hold is not None:
+            print(hold_costs(drive, span, repeats))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
@@ -96,7 +158,12 @@ def main() -> None:
                     help=f"record length in s (default {DURATION:g})")
     ap.add_argument("--digest", action="store_true",
                     help="print the sensitivities' SHA-1 digests instead of timing")
+    ap.add_argument("--holds", action="store_true",
+                    help="time paper A's holds, whole and from their last change on")
     args = ap.parse_args()
+    if args.holds:
+        holds(args.repeats)
+        return
 
     drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
     t = bk.signals.time_grid(args.seconds, TS)
