@@ -328,6 +328,7 @@ def run(args: argparse.Namespace) -> int:
     else:  # a std the table gave, named where it is
         flags["prior_rel_std"] = partial(_table_entry, args.drive)
     flags["prior_value"] = partial(_drive_entry, args.drive)
+    flags["hold_at_prior"] = partial(_held_entry, args.drive)
     with flag_names(flags):
         return _run(args, flags)
 
@@ -341,6 +342,13 @@ def _table_entry(drive: str, option: Any) -> str:
 def _drive_entry(drive: str, option: Any) -> str:
     """Where the drive file gives a prior value (``Term.check_prior``)."""
     return f"{option.value} in the [drive] table of {drive}"
+
+
+def _held_entry(drive: str, option: Any) -> str:
+    """How the drive file holds a parameter at its value
+    (``joint.check_estimated_nonzero``)."""
+    return (f"an [uncertainty] table in {drive} that lists the others and not "
+            f"{option.value}, without --prior-rel-std")
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -564,9 +572,10 @@ def _terms_json(est: Any) -> dict[str, Any]:
 def _correlation(cov: Any) -> list[list[float | None]]:
     """The estimates' correlation matrix (order ``estimated``; None where a std is 0)."""
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    # a std of 0 (a parameter held) divides to inf or nan, and inf + -inf below too
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
-    corr = (corr + corr.T) / 2  # symmetric and 1 on the diagonal to the last digit
+        corr = (corr + corr.T) / 2  # symmetric and 1 on the diagonal to the last digit
     np.fill_diagonal(corr, np.where(std > 0, 1.0, np.nan))
     return [[_num(x) for x in row] for row in corr]
 

@@ -159,7 +159,7 @@ from .terms import (
     friction_term,
 )
 
-__all__ = ["JointIdentifier", "LINEAR_PARAMS"]
+__all__ = ["JointIdentifier", "LINEAR_PARAMS", "check_estimated_nonzero"]
 
 #: Lag-1 autocorrelation of a residual above which (in magnitude) the fit warns that its
 #: interval is too narrow: white noise filtered to this correlation has an interval too
@@ -297,6 +297,8 @@ class JointIdentifier:
             raise InputError("progress must be True, False or a callable "
                              f"progress(done, total), got {self.progress!r}")
         check_known_loop(self._terms()[1], self.prior)
+        check_estimated_nonzero(self.prior,
+                                rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
         self.noise_model._check_with(self.noise, self.search.final_horizon)
         if self.noise is not None:
             try:
@@ -515,6 +517,39 @@ class JointIdentifier:
         params = {name: getattr(self, name) for name in _INIT_NAMES}
         return {**params, "interval": FisherInterval(), "progress": False,
                 "allow_far_from_prior": True}
+
+
+def check_estimated_nonzero(prior: TwoMassDrive, rel: Mapping[str, float | None]) -> None:
+    """Refuse a linear parameter that the fit would estimate from a prior value of 0.
+
+    The fit estimates each linear parameter on a log scale from the prior's value: from
+    0 it could never move, and the fit would hold it at 0 unsaid (a friction written 0
+    for "unknown" gave theta 4 times too small). A friction that is truly 0 is held
+    there by leaving it out of the relative stds.
+
+    Parameters
+    ----------
+    prior : TwoMassDrive
+        The prior drive.
+    rel : mapping of str to float or None
+        The parameters estimated and their relative prior std (``rel_std``; None: no
+        penalty).
+
+    Raises
+    ------
+    InputError
+        For the first such parameter: its name and both remedies.
+    """
+    for name in LINEAR_PARAMS:
+        if name in rel and getattr(prior, name) == 0.0:
+            raise InputError(
+                f"the prior's {name} is 0, but the fit estimates it, on a log scale from "
+                "the prior's value, so it would stay at 0: give a first guess > 0 (",
+                Option("prior_value", name, python=f"TwoMassDrive({name}=...)"),
+                "; its order of magnitude is enough), or hold it at 0 with a relative "
+                "std for each other linear parameter alone (",
+                Option("hold_at_prior", name,
+                       python=f"prior_rel_std={{...}} without {name!r}"), ")")
 
 
 @dataclass(frozen=True)

@@ -124,7 +124,7 @@ from .decay import (
 )
 from .hyper import init_repr
 from .record import as_records, check_prior, check_sampling
-from .step import check_held_speeds, check_step_downs, find_step_down
+from .step import check_held_speeds, check_held_steady, check_step_downs, find_step_down
 
 __all__ = [
     "DEFAULT_DT4",
@@ -190,6 +190,8 @@ def _prepare(est: Any, records: Any, final_records: Any = None, *,
     gains = check_held_speeds(every, prior, allow_far_from_prior=est.allow_far_from_prior,
                               stacklevel=3)
     segments = [criterion_window(r, dt4, level_window) for r in finals]
+    if not checked:  # the joint fit's start is only a start: it simulates from rest
+        check_held_steady(finals, prior)
     viscous = replace(prior, fc_M=0.0, fc_L=0.0, fs_M=None, fs_L=None)
     return _Prepared(viscous, (prior.fc_M, prior.fc_L), recs, finals, gains, segments,
                      n_grid)
@@ -354,9 +356,11 @@ class TwoStepIdentifier:
             If a parameter is invalid, a record is no step-down experiment
             (:func:`~backlashkit.identify.step.check_step_down`), its held speeds are
             more than :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the
-            prior's (unless ``allow_far_from_prior``), or it has no commutation the
-            method can use, or a pre-estimate that is not positive (each message names
-            the record).
+            prior's (unless ``allow_far_from_prior``), the drive is still speeding up at
+            a final record's step-down
+            (:func:`~backlashkit.identify.step.check_held_steady`), or it has no
+            commutation the method can use, or a pre-estimate that is not positive (each
+            message names the record).
 
         Warns
         -----
@@ -567,9 +571,10 @@ class RegressionIdentifier:
         ------
         InputError
             If a parameter is invalid, a record is no step-down experiment
-            (:func:`~backlashkit.identify.step.check_step_down`) or its held speeds are
+            (:func:`~backlashkit.identify.step.check_step_down`), its held speeds are
             more than :data:`~backlashkit.identify.step.REFUSE_FROM_PRIOR` times the
-            prior's (unless ``allow_far_from_prior``).
+            prior's (unless ``allow_far_from_prior``), or the drive is still speeding up
+            at its step-down (:func:`~backlashkit.identify.step.check_held_steady`).
 
         Warns
         -----
