@@ -416,8 +416,7 @@ def test_a_drive_still_speeding_up_is_refused_by_paper_a_methods(exp_csv, capsys
     """Paper A's methods start their model at a steady state under the held torque. On
     the short record from rest (2 s held, where the prior's time constant is 7.3 s)
     76 % of the held torque still accelerates the drive: they refuse it, naming the
-    record, the share and what to do (they answered theta = 0 and 0.005 rad there,
-    against 0.0349). The joint fit, which simulates it from rest, answers."""
+    record, the share and what to do."""
     err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML,
                                    "--method", method])
     assert ("exp.csv: the drive is still speeding up at the step-down at t = 2 s (76 % of "
@@ -455,9 +454,9 @@ def test_the_unsteady_share_against_its_closed_form_and_paper_a_protocol():
 
 def test_a_zero_friction_the_fit_would_estimate_is_refused(exp, exp_csv, tmp_path, capsys):
     """A prior friction of 0 (often written for "unknown") cannot be estimated on the
-    fit's log scale: it used to stay at 0 unsaid, with theta 4 times too small. The
-    fit refuses it, in the library's and the command line's words, and names both
-    remedies; a drive file that lists the others in [uncertainty] holds it at 0."""
+    fit's log scale: it used to stay at 0 unsaid. The fit refuses it, in the library's
+    and the command line's words, and names both remedies; relative stds of the others
+    alone hold it at 0."""
     from backlashkit.identify.joint import check_estimated_nonzero
 
     text = Path(DRIVE_TOML).read_text()

@@ -523,9 +523,10 @@ def check_estimated_nonzero(prior: TwoMassDrive, rel: Mapping[str, float | None]
     """Refuse a linear parameter that the fit would estimate from a prior value of 0.
 
     The fit estimates each linear parameter on a log scale from the prior's value: from
-    0 it could never move, and the fit would hold it at 0 unsaid (a friction written 0
-    for "unknown" gave theta 4 times too small). A friction that is truly 0 is held
-    there by leaving it out of the relative stds.
+    0 it could never move, and the fit would hold it at 0 unsaid, with theta and the
+    other parameters taking up the friction left out (a friction written 0 for
+    "unknown"). A friction that is truly 0 is held there by leaving it out of the
+    relative stds.
 
     Parameters
     ----------
