@@ -927,3 +927,19 @@ def test_the_correlation_of_a_held_parameter_is_none_without_a_numpy_note():
     with np.errstate(all="raise"):
         corr = _correlation(cov)
     assert corr == [[1.0, None], [None, None]]
+
+
+def test_a_misspelled_option_is_named_with_the_one_meant(exp_csv, capsys):
+    """argparse says only that --drive is missing when it is misspelled, and sends an
+    unknown option of a subcommand to the top level's help, which does not list it:
+    the line names the option meant and the subcommand's help."""
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drvie", DRIVE_TOML])
+    assert err.startswith("backlashkit: error: the following arguments are required: "
+                          "--drive; --drvie: did you mean --drive? "
+                          "(see 'backlashkit identify --help')")
+    err = _one_line_error(capsys, ["identify", str(exp_csv), "--drive", DRIVE_TOML,
+                                   "--metod", "joint"])
+    assert ("unrecognized arguments: --metod joint; --metod: did you mean --method? "
+            "(see 'backlashkit identify --help')") in err
+    err = _one_line_error(capsys, ["simulate", "--out", "x.csv", "--zzz"])
+    assert "did you mean" not in err and "(see 'backlashkit simulate --help')" in err

@@ -14,6 +14,7 @@ callable ``func(args) -> int``. Conventions shared by every subcommand:
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import os
 import sys
@@ -31,8 +32,38 @@ SUBCOMMAND_MODULES = ("simulate", "identify", "control", "reproduce", "delay_mar
 
 
 class _Parser(argparse.ArgumentParser):
+    """One line per error, naming the subcommand's help, and the option meant where a
+    given one is misspelled."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._given = list(sys.argv[1:] if args is None else args)
+        parsed, extra = super().parse_known_args(args, namespace)
+        if extra and getattr(parsed, "command", None) and self._subparsers is not None:
+            # argparse reports what a subcommand does not know from the top level,
+            # whose help does not list that subcommand's options
+            sub = next(a for a in self._subparsers._group_actions
+                       if isinstance(a, argparse._SubParsersAction))
+            sub.choices[parsed.command].error(f"unrecognized arguments: {' '.join(extra)}")
+        return parsed, extra
+
     def error(self, message: str):  # one line, status 2, as argparse does, without usage spam
-        self.exit(2, f"backlashkit: error: {message} (see '{self.prog} --help')\n")
+        self.exit(2, f"backlashkit: error: {message}{self._meant()} "
+                     f"(see '{self.prog} --help')\n")
+
+    def _meant(self) -> str:
+        """``; --drvie: did you mean --drive?`` for each given option this parser does
+        not have and that is close to one it has."""
+        known = list(self._option_string_actions)
+        hints = []
+        for token in getattr(self, "_given", []):
+            flag = token.split("=", 1)[0]
+            if not flag.startswith("--") or flag in known or any(
+                    k.startswith(flag) for k in known):  # argparse takes a unique prefix
+                continue
+            close = difflib.get_close_matches(flag, known, n=1)
+            if close:
+                hints.append(f"{flag}: did you mean {close[0]}?")
+        return "".join(f"; {h}" for h in hints)
 
 
 def build_parser() -> argparse.ArgumentParser:
