@@ -267,7 +267,7 @@ def test_speeds_in_rpm_read_as_rad_per_s_are_refused(exp_csv, tmp_path, capsys):
     assert "pass --allow-far-from-prior" in err
     # the record whose held speeds are off is named, and the flag that reads rpm
     assert "far from the prior's in " in err and "rpm.csv (x9.5" in err
-    assert "pass --speed-unit rpm" in err
+    assert "rpm read as rad/s? then give --speed-unit rpm" in err
     assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
                  "--allow-far-from-prior"]) == 0
     out, _ = capsys.readouterr()
@@ -943,3 +943,32 @@ def test_a_misspelled_option_is_named_with_the_one_meant(exp_csv, capsys):
             "(see 'backlashkit identify --help')") in err
     err = _one_line_error(capsys, ["simulate", "--out", "x.csv", "--zzz"])
     assert "did you mean" not in err and "(see 'backlashkit simulate --help')" in err
+
+
+@pytest.mark.parametrize(("name", "speeds", "torque", "said", "remedy"), [
+    ("degs", 180 / np.pi, 1.0, "deg/s read as rad/s?", "then give --speed-unit deg/s;"),
+    ("mNm", 1.0, 1e3, "a torque in mN m read as N m?", "then give the torque in N m;"),
+    ("radrpm", 2 * np.pi / 60, 1.0, "rad/s read as rpm?", "then give --speed-unit rad/s;"),
+])
+def test_a_unit_mistake_is_named_from_the_held_speeds(steady_csv, tmp_path, capsys, name,
+                                                      speeds, torque, said, remedy):
+    """Both refusals name the unit mistake that the held speeds' ratio to the prior's
+    points to (not rpm for every one); speeds in deg/s are read with --speed-unit
+    deg/s, and answer as in rad/s."""
+    t, u, w_m, w_l = np.loadtxt(steady_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / f"{name}.csv"
+    write_csv(path, {"t": t, "torque": torque * u, "w_motor": speeds * w_m,
+                     "w_load": speeds * w_l})
+    for method in ("regression", "joint"):
+        argv = ["identify", str(path), "--drive", DRIVE_TOML, "--method", method]
+        if method == "joint":
+            argv += ["--interval", "fisher"]
+        err = _one_line_error(capsys, argv)
+        assert f"check the units: {said} {remedy} else the time's units" in err, err
+    if name == "degs":
+        assert main(["identify", str(path), "--drive", DRIVE_TOML, "--method", "regression",
+                     "--speed-unit", "deg/s", "--json"]) == 0
+        deg = json.loads(capsys.readouterr().out)["theta"]
+        assert main(["identify", str(steady_csv), "--drive", DRIVE_TOML, "--method",
+                     "regression", "--json"]) == 0
+        assert deg == pytest.approx(json.loads(capsys.readouterr().out)["theta"], rel=1e-6)

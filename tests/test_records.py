@@ -414,7 +414,7 @@ def test_malformed_binary_files(tmp_path):
         ({"delimiter": "|"}, ["delimiter", "'|'"]),
         ({"decimal": ";"}, ["decimal", "';'"]),
         ({"decimal": ",", "delimiter": ","}, ["decimal ','", "delimiter"]),
-        ({"speed_unit": "deg/s"}, ["speed_unit", "'rpm'", "'deg/s'"]),
+        ({"speed_unit": "rev/s"}, ["speed_unit", "'rpm'", "'deg/s'", "'rev/s'"]),
         ({"resample": "cubic"}, ["resample", "'linear'", "'cubic'"]),
     ],
 )

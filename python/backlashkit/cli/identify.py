@@ -38,7 +38,7 @@ from ..errors import (
 from ..identify.intervals import ParametricBootstrap
 from ..identify.joint import LINEAR_PARAMS
 from ..identify.noise import ARNoise
-from ..identify.readers import read_records
+from ..identify.readers import SPEED_UNITS, read_records
 from ..identify.record import Record
 from ..identify.report import check_report_directory
 from ..identify.step import REFUSE_FROM_PRIOR
@@ -178,9 +178,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_file_options(g, columns_help="the file's names of our columns t, torque, w_motor, "
                      "w_load, e.g. 't=time,w_motor=n_mot,w_load=n_load' (unmapped ones keep "
                      "our names)")
-    g.add_argument("--speed-unit", choices=("rad/s", "rpm"), default=None,
-                   help="unit of the speeds in the files; rpm are converted (default "
-                   f"{_default(read_records, 'speed_unit')})")
+    g.add_argument("--speed-unit", choices=tuple(SPEED_UNITS), default=None,
+                   help="unit of the speeds in the files; rpm and deg/s are converted "
+                   f"(default {_default(read_records, 'speed_unit')})")
     g.add_argument("--angles", action="store_true",
                    help="the files hold the encoders' angles phi_motor, phi_load in rad "
                    "instead of the speeds (fitted as angles)")

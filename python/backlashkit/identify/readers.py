@@ -65,11 +65,11 @@ from ._csv_reader import (
 from ._mat_reader import _from_mat, _from_npz
 from .record import Record
 
-__all__ = ["ANGLE_FIELDS", "FIELDS", "read_records", "read_torque"]
+__all__ = ["ANGLE_FIELDS", "FIELDS", "SPEED_UNITS", "read_records", "read_torque"]
 
 
 #: Accepted speed units and their factor to rad/s.
-SPEED_UNITS = {"rad/s": 1.0, "rpm": 2.0 * math.pi / 60.0}
+SPEED_UNITS = {"rad/s": 1.0, "rpm": 2.0 * math.pi / 60.0, "deg/s": math.pi / 180.0}
 
 #: Longest run of missing samples (a time gap or NaN) that ``resample="linear"``
 #: bridges; a longer one hides the drive's response (an impact lasts a few samples).
@@ -106,8 +106,9 @@ def read_records(
     decimal : {".", ","}, optional
         CSV decimal mark; default ``,`` if the separator is not ``,`` and a data
         cell holds a comma, else ``.``.
-    speed_unit : {"rad/s", "rpm"}, optional
-        Unit of the speeds in the file; rpm are converted to rad/s (default rad/s).
+    speed_unit : {"rad/s", "rpm", "deg/s"}, optional
+        Unit of the speeds in the file; rpm and deg/s are converted to rad/s (default
+        rad/s).
     resample : {None, "linear"}, optional
         ``"linear"`` resamples onto a uniform grid at the median time step (speeds
         linearly, torque as a zero-order hold) and bridges runs of at most
@@ -135,7 +136,8 @@ def read_records(
         If the file does not exist.
     """
     if speed_unit not in SPEED_UNITS:
-        raise InputError(f"speed_unit must be 'rad/s' or 'rpm', got {speed_unit!r}")
+        raise InputError(f"speed_unit must be one of {', '.join(map(repr, SPEED_UNITS))}, "
+                         f"got {speed_unit!r}")
     factor = SPEED_UNITS[speed_unit]
     if counts_per_rev is not None:
         v.positive("counts_per_rev", counts_per_rev)

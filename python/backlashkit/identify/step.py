@@ -38,6 +38,7 @@ __all__ = [
     "is_far",
     "ratios_to_prior",
     "too_far",
+    "unit_mistake",
 ]
 
 #: A record's held speed (:func:`held_speed_gain`) or a fit's linear parameter this
@@ -68,6 +69,22 @@ CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the ti
 
 #: The remedy for speeds logged in rpm (a reader's option; the command line's flag).
 SPEED_IN_RPM = Option("speed_unit", "rpm", python="speed_unit='rpm' to read_records")
+
+#: Units that records are often logged in by mistake, by the held speed gain they give
+#: (:func:`held_speed_gain`: the speeds over the prior's response to the torque), with
+#: their remedy: speeds in rpm or deg/s read as rad/s, speeds in rad/s read as rpm,
+#: a torque in mN m read as N m.
+UNIT_MISTAKES = (
+    (60.0 / (2.0 * math.pi), "rpm read as rad/s", SPEED_IN_RPM),
+    (180.0 / math.pi, "deg/s read as rad/s",
+     Option("speed_unit", "deg/s", python="speed_unit='deg/s' to read_records")),
+    (2.0 * math.pi / 60.0, "rad/s read as rpm",
+     Option("speed_unit", "rad/s", python="speed_unit='rad/s' to read_records")),
+    (1e-3, "a torque in mN m read as N m", "the torque in N m"),
+)
+#: A held speed gain names one of :data:`UNIT_MISTAKES` within this factor of its own
+#: (either way): a prior's frictions 50 % off move the gain as much.
+UNIT_MATCH = 1.5
 
 #: Fewest samples before the step-down that :func:`held_speed_gain` fits (else NaN).
 HELD_MIN_SAMPLES = 10
@@ -431,12 +448,12 @@ def check_held_speeds(records: Sequence[Record], prior: TwoMassDrive, *,
                 f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
         if is_far(gain, REFUSE_FROM_PRIOR) and not allow_far_from_prior:
             raise InputError(
-                f"{what} (this method simulates the prior from them): {CHECK_UNITS}; if the "
-                "prior's frictions are that far off, use ",
+                f"{what} (this method simulates the prior from them): ",
+                *_units_advice(gain), "; if the prior's frictions are that far off, use ",
                 Option("method", "joint", python="JointIdentifier"),
                 " (it estimates them) or pass ", ALLOW_FAR_FROM_PRIOR)
         if is_far(gain):
-            warnings.warn(PriorMismatchWarning(f"{what}: {CHECK_UNITS}"),
+            warnings.warn(PriorMismatchWarning(f"{what}: ", *_units_advice(gain)),
                           stacklevel=stacklevel + 1)
     return gains
 
@@ -577,6 +594,39 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     return far
 
 
+def unit_mistake(gain: float) -> tuple[str | Option, ...] | None:
+    """The unit mistake (:data:`UNIT_MISTAKES`) that a held speed gain points to, as
+    message parts ``"rpm read as rad/s? then give ", option``; None where none is within
+    :data:`UNIT_MATCH` of it.
+
+    Parameters
+    ----------
+    gain : float
+        A record's :func:`held_speed_gain`.
+
+    Returns
+    -------
+    tuple of str or Option, or None
+        The mistake and its remedy, or None.
+    """
+    if not (math.isfinite(gain) and gain > 0):
+        return None
+    factor, said, remedy = min(UNIT_MISTAKES, key=lambda m: abs(math.log(gain / m[0])))
+    if abs(math.log(gain / factor)) > math.log(UNIT_MATCH):
+        return None
+    return (f"{said}? then give ", remedy)
+
+
+def _units_advice(gain: float) -> tuple[str | Option, ...]:
+    """What to check where a record's held speeds are ``gain`` times the prior's: the
+    unit mistake it points to first, else every usual cause."""
+    mistake = unit_mistake(gain)
+    if mistake is None:
+        return (CHECK_UNITS,)
+    return ("check the units: ", *mistake, "; else the time's units, the columns (w_motor "
+            "and w_load swapped?) and the prior")
+
+
 def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option],
                    names: Sequence[str] = ()) -> tuple[str | Option, ...]:
     """The likely cause of a fit far from the prior, as message parts."""
@@ -587,6 +637,10 @@ def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option],
            if math.isfinite(g) and is_far(g)]
     if far:  # the records whose units are suspect, by name
         said = ", ".join(f"{name} (x{g:.3g})" for name, g in far)
+        mistakes = {unit_mistake(g) for _, g in far}
+        if len(mistakes) == 1 and None not in mistakes:
+            return (f"the speeds held before the step-down are far from the prior's in "
+                    f"{said}: ", *_units_advice(far[0][1]))
         return (f"the speeds held before the step-down are far from the prior's in {said}: "
                 "check their units (rpm read as rad/s? then pass ", SPEED_IN_RPM,
                 ") and the time's, the columns (w_motor and w_load swapped?) and the prior")
