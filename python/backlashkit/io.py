@@ -394,7 +394,8 @@ def write_csv(
     target = Path(path)
     parent = target.parent
     if not parent.is_dir():
-        raise InputError(f"cannot write {target}: directory {parent} does not exist")
+        raise InputError(f"cannot write {target}: directory {parent} does not exist (create "
+                         "it, or write elsewhere)")
     if target.is_dir():
         raise InputError(f"cannot write {target}: it is a directory")
     lines = [",".join(columns.keys())]

@@ -179,7 +179,7 @@ def missing_directory(flag: str, out: Path) -> str:
     for parent in (out.parent, *out.parent.parents):
         if parent.exists() and not parent.is_dir():
             return f"{flag} {out}: {parent} is a file, not a directory"
-    return f"{flag} {out}: directory {out.parent} does not exist"
+    return f"{flag} {out}: directory {out.parent} does not exist (create it, or write elsewhere)"
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -62,7 +62,8 @@ def check_report_dir(out_dir: str | Path, *, force: bool = False) -> Path:
     if out.exists() and not out.is_dir():
         raise InputError(f"--report {out} exists and is not a directory")
     if not out.exists() and not out.parent.is_dir():
-        raise InputError(f"--report {out}: directory {out.parent} does not exist")
+        raise InputError(f"--report {out}: directory {out.parent} does not exist (create it, "
+                         "or write elsewhere)")
     index = out / "index.html"
     ours = index.is_file() and MARKER in index.read_text(encoding="utf-8", errors="replace")
     if out.exists() and any(out.iterdir()) and not ours and not force:

@@ -233,7 +233,8 @@ def _parse_cells(name, column, cells, numbers, decimal) -> np.ndarray:
                 hint = ("; a date or clock time is no time in s: convert the column to "
                         "seconds, or remove it and pass ", PASS_SAMPLE_TIME)
             raise InputError(
-                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number", *hint
+                f"{name}: line {numbers[r]}, column {column!r}: {raw!r} is not a number",
+                *(hint or ("; fix or remove that line",))
             ) from None
         if math.isinf(out[r]):
             raise InputError(
