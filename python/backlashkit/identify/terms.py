@@ -441,6 +441,7 @@ def chi2_upper(dof: int, alpha: float) -> float:
     Returns
     -------
     float
+        The point, in chi-square units.
     """
     if dof == 2:
         return -2.0 * math.log(alpha)
