@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from .errors import InputError
 
 if TYPE_CHECKING:
@@ -18,7 +20,7 @@ if TYPE_CHECKING:
 
     from .simulate import DriveResponse
 
-__all__ = ["legend_outside", "plot_drive_response"]
+__all__ = ["axes_of", "legend_outside", "plot_drive_response"]
 
 
 def legend_outside(ax: matplotlib.axes.Axes, **kwargs) -> None:
@@ -39,15 +41,44 @@ def legend_outside(ax: matplotlib.axes.Axes, **kwargs) -> None:
               borderaxespad=0.0, **kwargs)
 
 
-def _axes(ax, n: int):
+def axes_of(ax, n: int, *, figsize: tuple[float, float] | None = None, columns: int = 1):
+    """The figure and the ``n`` axes a plot function draws on.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes, sequence or array of them, or None
+        The caller's axes (what ``plt.subplots`` returns serves as it is), or None for a
+        new figure, not registered with pyplot.
+    n : int
+        Axes the plot needs.
+    figsize : tuple of float, optional
+        Size of a new figure in inches (default 9 wide, 2.4 high per row).
+    columns : int, optional
+        Columns of a new figure's grid (default 1: the axes one above the other,
+        sharing x).
+
+    Returns
+    -------
+    tuple
+        ``(figure, list of Axes)``.
+
+    Raises
+    ------
+    InputError
+        If ``ax`` does not hold ``n`` Axes.
+    """
     if ax is None:
         from matplotlib.figure import Figure
 
-        fig = Figure(figsize=(9, 2.4 * n), layout="constrained")
-        return fig, list(fig.subplots(n, 1, sharex=True))
-    axes = list(ax) if isinstance(ax, Sequence) else [ax]
+        rows = -(-n // columns)
+        fig = Figure(figsize=figsize or (9, 2.4 * rows), layout="constrained")
+        grid = fig.subplots(rows, columns, sharex=columns == 1, squeeze=False)
+        return fig, list(grid.ravel()[:n])
+    axes = (list(np.ravel(np.asarray(ax, dtype=object)))
+            if isinstance(ax, (Sequence, np.ndarray)) else [ax])
     if len(axes) != n:
-        raise InputError(f"ax must be a sequence of {n} Axes, got {len(axes)}")
+        raise InputError(f"ax must be {n} Axes (a sequence or an array of them, as "
+                         f"plt.subplots returns), got {len(axes)}")
     return axes[0].figure, axes
 
 
@@ -75,7 +106,7 @@ def plot_drive_response(
     """
     from matplotlib.lines import Line2D
 
-    fig, (ax_w, ax_t, ax_phi) = _axes(ax, 3)
+    fig, (ax_w, ax_t, ax_phi) = axes_of(ax, 3)
     t = response.t
     n = response.n_inertias
     names = ["motor", "load"] if n == 2 else [f"inertia {i + 1}" for i in range(n)]

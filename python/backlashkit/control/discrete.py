@@ -142,10 +142,19 @@ class DiscreteAdaptiveController:
         -------
         float
             Backlash input ``v`` for this sample.
+
+        Raises
+        ------
+        InputError
+            If ``y``, ``r`` or ``r_dot`` is not a finite real number (a NaN read once
+            would carry into every later sample through the adaptive law); the
+            controller's state is left as it was.
         """
         p = self.design
-        y = float(y)
-        r = float(r)
+        y = v.finite_scalar("y", y)
+        r = v.finite_scalar("r", r)
+        if r_dot is not None:
+            r_dot = v.finite_scalar("r_dot", r_dot)
         if r_dot is None:
             r_dot = 0.0 if self._r_prev is None else (r - self._r_prev) / self.ts
         self._r_prev = r
@@ -166,13 +175,13 @@ class DiscreteAdaptiveController:
         cr, cl = th[0] / th[1], th[2] / th[1]
         target = cr if self._mode else cl
         if isinstance(inv, NoInverse):
-            v = ud
+            out = ud
         elif isinstance(inv, GainOnlyInverse):
-            v = ud / th[1]
+            out = ud / th[1]
         elif isinstance(inv, SmoothFilterInverse):
             if self._wbar is None:
                 self._wbar = target
-            v = ud / th[1] + self._wbar
+            out = ud / th[1] + self._wbar
             decay = np.exp(-inv.alpha * self.ts)
             self._wbar = target + (self._wbar - target) * decay
         elif isinstance(inv, SmoothRampInverse):
@@ -180,17 +189,17 @@ class DiscreteAdaptiveController:
                 w = cr if udd >= 0 else cr + (cr - cl) * max(udd / inv.beta_l, -1.0)
             else:
                 w = cl if udd <= 0 else cl + (cr - cl) * min(udd / inv.beta_r, 1.0)
-            v = ud / th[1] + w
+            out = ud / th[1] + w
             if udd >= inv.beta_r:
                 self._lock = 1
             elif udd <= -inv.beta_l:
                 self._lock = 0
         else:
-            v = ud / th[1] + target
+            out = ud / th[1] + target
         # adaptive law (3.11), forward Euler
         y_m = float(self._cm @ self._xm)
         chi = float(self._mode)
-        wb = np.array([chi, -v, 1.0 - chi])
+        wb = np.array([chi, -out, 1.0 - chi])
         zeta_all = self._ch @ self._z
         if inv.adapts:
             rate = adaptive_rate(
@@ -208,7 +217,7 @@ class DiscreteAdaptiveController:
         self.theta_b = th
         self.u_d = ud
         self.y_m = y_m
-        return float(v)
+        return float(out)
 
 
 def simulate_discrete_loop(

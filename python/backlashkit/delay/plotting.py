@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from ..report import axes_of
 from .chen import SweepData, _grid, _track, frequency_bound, unit_circle_eigenvalues
 from .spectral import default_nodes, spectral_scan
 
@@ -53,13 +54,7 @@ def plot_margin(result, *, ax=None, h_range=(0.0, 1.0), n_h: int = 60):
     matplotlib.figure.Figure
         The figure of the axes.
     """
-    if ax is None:
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(10, 4), layout="constrained")
-        ax = fig.subplots(1, 2)
-    ax1, ax2 = ax
-    fig = ax1.figure
+    fig, (ax1, ax2) = axes_of(ax, 2, figsize=(10, 4), columns=2)
     system = result.system
     sweep = result.sweep
     if sweep is None and system.q:

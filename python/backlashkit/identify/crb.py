@@ -62,8 +62,21 @@ class CramerRaoBound:
 
     @property
     def covariance(self) -> np.ndarray:
-        """Inverse of the Fisher matrix: the bound on the covariance."""
-        return np.linalg.inv(self.fisher)
+        """Inverse of the Fisher matrix: the bound on the covariance.
+
+        Raises
+        ------
+        InputError
+            If the Fisher matrix is singular: the experiment cannot tell the parameters
+            apart (add another experiment's bound, or estimate fewer).
+        """
+        try:
+            return np.linalg.inv(self.fisher)
+        except np.linalg.LinAlgError:
+            raise InputError(
+                f"the Fisher information of {', '.join(self.names)} on this experiment is "
+                "singular: it cannot tell them apart, so no bound exists; add another "
+                "experiment's bound (crb_a + crb_b) or estimate fewer parameters") from None
 
     @property
     def std(self) -> dict[str, float]:
@@ -159,8 +172,9 @@ def cramer_rao_bound(
     ------
     InputError
         If the drive has no ``theta``, no or both noise levels are given, a name is
-        unknown, a parameter to estimate is 0, or ``noise_ar`` is not a stationary
-        autoregression.
+        unknown, a parameter to estimate is 0, ``noise_ar`` is not a stationary
+        autoregression, a speed is 0 throughout where ``snr_db`` sets its noise, or
+        the experiment carries no information on any parameter.
     """
     if not isinstance(drive, TwoMassDrive):
         raise InputError(f"drive must be a TwoMassDrive, got {type(drive).__name__}")
@@ -182,6 +196,11 @@ def cramer_rao_bound(
         fisher_at = partial(_information, sensitivity, noise_ar=noise_ar)
     sig = _noise_levels(noise_std, snr_db, speeds)
     fisher = fisher_at(sig)
+    if not np.any(fisher):
+        raise InputError(
+            f"the experiment carries no information on {', '.join(names)}: the model's "
+            "speeds do not move with the parameters (does the torque move the drive?); "
+            "choose an experiment that excites the drive through its backlash")
     if prior_rel_std is not None:
         rel = rel_std(prior_rel_std, LINEAR_PARAMS)
         for i, name in enumerate(names[1:], start=1):
@@ -346,11 +365,16 @@ def _noise_levels(noise_std, snr_db, nominal) -> tuple[float, float]:
     snr = (snr_db, snr_db) if np.ndim(snr_db) == 0 else tuple(snr_db)
     if len(snr) != 2:
         raise InputError(f"snr_db must be a number or a pair (w_M, w_L), got {snr_db!r}")
-    s_m, s_l = (
-        math.sqrt(float(np.mean(w**2)) / 10.0 ** (v.finite_scalar("snr_db", s) / 10.0))
-        for w, s in zip(nominal, snr, strict=True)
-    )
-    return (s_m, s_l)
+    levels = []
+    for w, s, name in zip(nominal, snr, ("w_M", "w_L"), strict=True):
+        power = float(np.mean(w**2))
+        if not power > 0:
+            raise InputError(
+                f"snr_db: the model's {name} is 0 over the whole experiment, so an SNR gives "
+                "it no noise level; give noise_std=(s_M, s_L) instead, or a torque that "
+                "moves the drive")
+        levels.append(math.sqrt(power / 10.0 ** (v.finite_scalar("snr_db", s) / 10.0)))
+    return (levels[0], levels[1])
 
 
 def _autoregression(noise_ar) -> tuple[np.ndarray | None, list[float]]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-__all__ = ["init_repr"]
+__all__ = ["Learned", "init_repr"]
 
 
 def init_repr(estimator: Any) -> str:
@@ -41,3 +41,15 @@ def _same(value: Any, default: Any) -> bool:
         return bool(value is default or value == default)
     except (TypeError, ValueError):
         return False
+
+
+class Learned:
+    """Mixed into an estimator: reading a learned attribute (a name ending in ``_``)
+    before ``fit`` says to call ``fit`` first, where Python would say only that the
+    attribute does not exist. Fitted is when ``theta_`` is set."""
+
+    def __getattr__(self, name: str) -> Any:
+        if name.endswith("_") and not name.startswith("_") and "theta_" not in vars(self):
+            raise AttributeError(f"{type(self).__name__}.{name} is learned by fit(): call "
+                                 "fit(records) first")
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")

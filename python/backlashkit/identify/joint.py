@@ -133,7 +133,7 @@ from ._model import (
     rel_std,
 )
 from ._problem import Problem, build_problem
-from .hyper import init_repr
+from .hyper import Learned, init_repr
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -186,7 +186,7 @@ _PROFILE = ProfileLikelihood()
 _AUTO = AutoNoise()
 
 
-class JointIdentifier:
+class JointIdentifier(Learned):
     """Joint ML / MAP fit of the backlash half-width ``theta`` (rad) and the drive (SI).
 
     Parameters
@@ -293,6 +293,8 @@ class JointIdentifier:
                              f"got {type(self.search).__name__}")
         check_interval(self.interval)
         check_noise_model(self.noise_model)
+        if self.workers is not None:
+            v.integer("workers", self.workers, 1)
         if not (isinstance(self.progress, bool) or callable(self.progress)):
             raise InputError("progress must be True, False or a callable "
                              f"progress(done, total), got {self.progress!r}")

@@ -1,0 +1,98 @@
+"""Bad input found by a QA pass over the Python API: each case is one InputError that
+names the parameter and what to do, never NumPy's or the compiled core's words, and a
+plot takes the axes that ``plt.subplots`` returns."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+import backlashkit as bk
+from backlashkit.errors import InputError
+from backlashkit.papers.ravanbod2002 import P_TRUE, THETA
+
+DRIVE = bk.TwoMassDrive(**P_TRUE, theta=THETA)
+
+
+def test_the_discrete_controller_refuses_a_reading_that_is_not_finite():
+    """A NaN read once carried into every later sample through the adaptive law (the
+    output and theta_b stayed NaN until reset); it is refused, and the state kept."""
+    ctrl = bk.DiscreteAdaptiveController(([1.0], [1.0, -0.5, -1.5]), ts=1e-3)
+    ctrl.step(0.1, 1.0)
+    before = ctrl.theta_b.copy()
+    for args, said in (((np.nan, 1.0), "y must be finite, got nan"),
+                       ((0.0, np.inf), "r must be finite, got inf"),
+                       ((np.array([1.0, 2.0]), 0.0), "y must be a real number"),
+                       ((0.0, 1.0, np.nan), "r_dot must be finite")):
+        with pytest.raises(InputError, match=said):
+            ctrl.step(*args)
+    np.testing.assert_array_equal(ctrl.theta_b, before)
+    assert np.isfinite(ctrl.step(0.1, 1.0))
+
+
+def test_the_bound_of_an_experiment_that_moves_nothing_is_refused():
+    """A zero torque moves nothing: an SNR gives no noise level (it answered NaN), and
+    given noise levels the information is 0 (NumPy's "Singular matrix")."""
+    t = bk.signals.time_grid(4.0, 1e-3)
+    zero = np.zeros_like(t)
+    with pytest.raises(InputError, match=r"snr_db: the model's w_M is 0 over the whole "
+                                         r"experiment.*give noise_std=\(s_M, s_L\)"):
+        bk.cramer_rao_bound(DRIVE, t, zero, snr_db=30.0)
+    with pytest.raises(InputError, match="the experiment carries no information on theta"):
+        bk.cramer_rao_bound(DRIVE, t, zero, noise_std=(0.1, 0.1))
+    bound = bk.cramer_rao_bound(DRIVE, t, bk.signals.step_down(t, 0.942, t_s=2.0),
+                                snr_db=30.0, estimate="all")
+    singular = bk.identify.CramerRaoBound(bound.names, bound.values,
+                                          np.zeros_like(bound.fisher) + 1.0,
+                                          bound.noise_std, bound.n_samples)
+    with pytest.raises(InputError, match="is singular: it cannot tell them apart"):
+        singular.covariance  # noqa: B018
+
+
+@pytest.mark.parametrize("workers", [-1, 0, 1.5, "2", True])
+def test_the_joint_fits_workers_must_be_a_positive_integer(workers):
+    """-1 reached the compiled core as an unsigned integer (OverflowError), a string
+    or a float Python's range (TypeError), and 0 was taken silently."""
+    with pytest.raises(InputError, match=f"workers must be an integer >= 1, got "
+                                         f"{workers!r}"):
+        bk.JointIdentifier(DRIVE.with_theta(None), workers=workers).fit([])
+
+
+def test_plots_take_the_axes_array_of_subplots():
+    """``fig, axes = plt.subplots(3, 1)`` gives a NumPy array, which the drive
+    response's plot refused as "1 Axes"; the delay margin's took no single Axes."""
+    from backlashkit.delay import delay_margin
+
+    t = bk.signals.time_grid(4.0, 1e-3)
+    resp = DRIVE.simulate(t, bk.signals.step_down(t, 0.942, t_s=2.0))
+    fig, axes = plt.subplots(3, 1)
+    assert resp.plot(ax=axes) is fig
+    with pytest.raises(InputError, match=r"ax must be 3 Axes \(a sequence or an array of "
+                                         r"them, as plt.subplots returns\), got 2"):
+        resp.plot(ax=axes[:2])
+    result = delay_margin([[-2.0, 0.0], [0.0, -0.9]], [[[-1.0, 0.0], [-1.0, -1.0]]])
+    fig2, axes2 = plt.subplots(1, 2)
+    assert result.plot(ax=axes2) is fig2
+    with pytest.raises(InputError, match="ax must be 2 Axes"):
+        result.plot(ax=axes2[0])
+    assert len(result.plot().axes) == 2
+    plt.close("all")
+
+
+@pytest.mark.parametrize("cls", [bk.JointIdentifier, bk.TwoStepIdentifier,
+                                 bk.RegressionIdentifier])
+def test_a_learned_attribute_before_fit_says_to_fit(cls):
+    """Python said only "object has no attribute 'theta_'"; hasattr stays False, any
+    other name keeps Python's words, and the estimator still pickles (the bootstrap's
+    worker processes)."""
+    import pickle
+
+    est = cls(DRIVE.with_theta(None))
+    with pytest.raises(AttributeError, match=rf"^{cls.__name__}\.theta_ is learned by "
+                                             r"fit\(\): call fit\(records\) first$"):
+        est.theta_  # noqa: B018
+    assert not hasattr(est, "std_")
+    with pytest.raises(AttributeError, match="object has no attribute 'thetaa'"):
+        est.thetaa  # noqa: B018
+    assert repr(pickle.loads(pickle.dumps(est))) == repr(est)
