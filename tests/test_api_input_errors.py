@@ -96,3 +96,30 @@ def test_a_learned_attribute_before_fit_says_to_fit(cls):
     with pytest.raises(AttributeError, match="object has no attribute 'thetaa'"):
         est.thetaa  # noqa: B018
     assert repr(pickle.loads(pickle.dumps(est))) == repr(est)
+
+
+def test_arguments_of_the_wrong_kind_are_named():
+    """What Python or pathlib said ("'TwoMassDrive' object is not iterable", "'float'
+    object is not callable", "expected str, bytes or os.PathLike object") is said in the
+    library's words, with the remedy; a flag given as a string is refused, where "no"
+    counted as true."""
+    from backlashkit import Backlash, SumOfSines, simulate_closed_loop
+
+    t = bk.signals.time_grid(1.0, 1e-3)
+    u = np.full_like(t, 0.5)
+    with pytest.raises(InputError, match=r"drives must be a sequence of drives, got one "
+                                         r"TwoMassDrive: pass \[drive\]"):
+        bk.simulate_batch(DRIVE, t, u)
+    with pytest.raises(InputError, match="output_noise must be a function of the time "
+                                         "array t"):
+        simulate_closed_loop(([1.0], [1.0, -0.5, -1.5]), Backlash(0.7, 1.3, -0.5),
+                             reference=SumOfSines([10.0], [1.3]), duration=1.0, ts=0.05,
+                             output_noise=0.01)
+    with pytest.raises(InputError, match="path must be a file name .* got int 3"):
+        bk.read_records(3)
+    with pytest.raises(InputError, match=r"one name is a sequence too: \('theta',\)"):
+        bk.cramer_rao_bound(DRIVE, t, u, snr_db=30.0, estimate="theta")
+    for cls in (bk.JointIdentifier, bk.TwoStepIdentifier, bk.RegressionIdentifier):
+        with pytest.raises(InputError, match="allow_far_from_prior must be True or False, "
+                                             "got 'no'"):
+            cls(DRIVE.with_theta(None), allow_far_from_prior="no").fit([])

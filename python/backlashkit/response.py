@@ -311,9 +311,11 @@ class DriveResponse(StateColumns):
 
         Parameters
         ----------
-        ax : sequence of three matplotlib Axes, optional
-            Axes for the speeds, the torques and the twist. New ones are created when
-            omitted.
+        ax : sequence or array of three matplotlib Axes, optional
+            Axes for the speeds, the torques and the twist (``plt.subplots(3, 1)[1]``
+            serves). New ones are created when omitted, in a figure that pyplot does
+            not manage: save it (``fig.savefig("run.png")``), or pass pyplot's axes to
+            show it with ``plt.show()``.
 
         Returns
         -------

@@ -272,6 +272,9 @@ def simulate_batch(
     """
     from . import _core
 
+    if hasattr(drives, "to_chain"):  # one drive where a sequence is expected
+        raise InputError(f"drives must be a sequence of drives, got one {type(drives).__name__}"
+                         ": pass [drive], or call drive.simulate(t, torque)")
     chains = [_as_chain(d) for d in drives]
     if not chains:
         raise InputError("drives must contain at least one drive")

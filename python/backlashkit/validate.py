@@ -107,6 +107,13 @@ def time_grid(
     return arr, float(ts)
 
 
+def flag(name: str, value: object) -> bool:
+    """``value`` as a bool, refused unless True or False (``"no"`` would count as true)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
 def integer(name: str, value: object, minimum: int) -> int:
     """``value`` as an int, refused unless an integer (not a bool) of at least ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:

@@ -103,6 +103,9 @@ def _sampled(name: str, signal: Callable[[np.ndarray], np.ndarray] | None,
     """``signal`` on the integration grid (empty without one)."""
     if signal is None:
         return np.zeros(0)
+    if not callable(signal):
+        raise InputError(f"{name} must be a function of the time array t (s), e.g. "
+                         f"lambda t: 0.01 * rng.standard_normal(t.shape), got {signal!r}")
     return v.finite_array(f"{name}(t)", np.broadcast_to(signal(t_grid), t_grid.shape))
 
 

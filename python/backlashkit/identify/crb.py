@@ -341,7 +341,8 @@ def _estimated(estimate) -> tuple[str, ...]:
     all_names = ("theta", *LINEAR_PARAMS, *EXTRA_PARAMS)
     if isinstance(estimate, str):
         if estimate != "all":
-            raise InputError(f"estimate must be 'all' or a sequence of names, got {estimate!r}")
+            raise InputError(f"estimate must be 'all' or a sequence of names, got {estimate!r}"
+                             f" (one name is a sequence too: ({estimate!r},))")
         return ("theta", *LINEAR_PARAMS)
     names = tuple(estimate)
     bad = [n for n in names if n not in all_names]

@@ -295,6 +295,7 @@ class JointIdentifier(Learned):
         check_noise_model(self.noise_model)
         if self.workers is not None:
             v.integer("workers", self.workers, 1)
+        v.flag("allow_far_from_prior", self.allow_far_from_prior)
         if not (isinstance(self.progress, bool) or callable(self.progress)):
             raise InputError("progress must be True, False or a callable "
                              f"progress(done, total), got {self.progress!r}")

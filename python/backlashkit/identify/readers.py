@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import errno
 import math
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -208,6 +209,9 @@ def _read(path, fields, columns, sample_time, delimiter, decimal, resample, *,
           keep_time=False):
     """(name, t, {channel: values}) of every record of a file, channels ``fields``
     (``keep_time``: a uniform time column as written, not recomputed from its ends)."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(f"path must be a file name (str or pathlib.Path), got "
+                         f"{type(path).__name__} {path!r}")
     name = str(path)
     mapping = _check_columns(columns, fields)
     if sample_time is not None:

@@ -49,9 +49,7 @@ def _shifts(owner: str, name: str, value) -> tuple[float, ...]:
 
 
 def _flag(owner: str, name: str, value) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise InputError(f"{owner}.{name} must be True or False, got {value!r}")
-    return bool(value)
+    return v.flag(f"{owner}.{name}", value)
 
 
 def _factor(owner: str, name: str, value) -> float:

@@ -171,6 +171,7 @@ def _prepare(est: Any, records: Any, final_records: Any = None, *,
     ``records`` are Records that :func:`as_records` has checked (the joint estimator's
     start); only their sampling against this prior is checked again."""
     prior = check_prior(est.prior)
+    v.flag("allow_far_from_prior", est.allow_far_from_prior)
     dt4 = v.positive("dt4", est.dt4)
     level_window = v.positive("level_window", est.level_window)
     n_grid = v.integer("n_grid", est.n_grid, 2)
