@@ -4,6 +4,8 @@ plot takes the axes that ``plt.subplots`` returns."""
 
 from __future__ import annotations
 
+import warnings
+
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
@@ -123,3 +125,20 @@ def test_arguments_of_the_wrong_kind_are_named():
         with pytest.raises(InputError, match="allow_far_from_prior must be True or False, "
                                              "got 'no'"):
             cls(DRIVE.with_theta(None), allow_far_from_prior="no").fit([])
+
+
+def test_a_noise_level_given_far_from_the_residuals_is_warned_of(short_csv):
+    """A level given 5 times too small made the standard error 5 times too small
+    without a word; a level the residuals agree with says nothing."""
+    from backlashkit import NoiseLevelWarning
+    from backlashkit.identify.intervals import FisherInterval
+
+    rec = bk.read_records(short_csv)
+    prior = DRIVE.with_theta(None)
+    with pytest.warns(NoiseLevelWarning, match=r"^the residual of w_M in .*exp\.csv spreads "
+                                               r"0\.5\d+ \(rms\), 5\.\d+ times the noise level "
+                                               r"given \(0\.1\).*leave noise=None"):
+        bk.JointIdentifier(prior, noise=(0.1, 0.1), interval=FisherInterval()).fit(rec)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NoiseLevelWarning)
+        bk.JointIdentifier(prior, noise=(0.5, 0.5), interval=FisherInterval()).fit(rec)

@@ -20,6 +20,7 @@ from .encoder import Encoder, measure_encoders
 from .errors import (
     CorrelatedResidualsWarning,
     InputError,
+    NoiseLevelWarning,
     PriorMismatchWarning,
     SearchEdgeWarning,
     SensitivityWarning,
@@ -97,6 +98,7 @@ __all__ = [
     "Continuation",
     "NearGrazing",
     "Sensitivity",
+    "NoiseLevelWarning",
     "PriorMismatchWarning",
     "SearchEdgeWarning",
     "SensitivityWarning",

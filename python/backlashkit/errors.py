@@ -18,8 +18,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["CorrelatedResidualsWarning", "Diagnostic", "InputError", "Option",
-           "PriorMismatchWarning", "QuantisedSpeedsWarning", "SearchEdgeWarning",
+__all__ = ["CorrelatedResidualsWarning", "Diagnostic", "InputError", "NoiseLevelWarning",
+           "Option", "PriorMismatchWarning", "QuantisedSpeedsWarning", "SearchEdgeWarning",
            "SensitivityWarning", "StepDownWarning"]
 
 
@@ -197,6 +197,22 @@ class SearchEdgeWarning(Diagnostic, UserWarning):
     The two-step and regression methods search ``theta`` in an interval; an estimate
     on its end says that the criterion's minimum may lie beyond it (for the two-step
     method: widen ``n_theta``).
+
+    Parameters
+    ----------
+    *parts : str or Option
+        The message (see :class:`Diagnostic`).
+    param : str, optional
+        The parameter the message is about, when it starts with its name.
+    """
+
+
+class NoiseLevelWarning(Diagnostic, UserWarning):
+    """The noise levels given to a fit are far from its residuals' spread.
+
+    The joint estimator weighs the residuals by the levels given (``noise=``) and
+    takes its standard error and interval from them: a level off by a factor scales
+    both by that factor.
 
     Parameters
     ----------

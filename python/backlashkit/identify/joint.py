@@ -116,6 +116,7 @@ from ..actuator import CurrentLoop
 from ..errors import (
     CorrelatedResidualsWarning,
     InputError,
+    NoiseLevelWarning,
     Option,
     PriorMismatchWarning,
     QuantisedSpeedsWarning,
@@ -161,6 +162,11 @@ from .terms import (
 
 __all__ = ["JointIdentifier", "LINEAR_PARAMS", "check_estimated_nonzero"]
 
+#: A residual spread this many times the noise level given (``noise=``), or a fraction
+#: as small, warns: the standard error scales with the level given, so a level off by
+#: 2 gives an interval that holds the truth about 67 % or over 99.99 % of the time
+#: where it says 95 %.
+NOISE_GIVEN_FACTOR = 2.0
 #: Lag-1 autocorrelation of a residual above which (in magnitude) the fit warns that its
 #: interval is too narrow: white noise filtered to this correlation has an interval too
 #: narrow by up to ``sqrt((1 + 0.2) / (1 - 0.2)) = 1.22`` (its spectrum at 0 against its
@@ -360,6 +366,8 @@ class JointIdentifier(Learned):
             warnings.warn(CorrelatedResidualsWarning(*parts), stacklevel=2)
         self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
         _warn_quantised(records, quanta)
+        if self.noise is not None:
+            _warn_noise_given(self.noise, self.residuals_, records)
         return self
 
     def _fit_and_restart(self, records, bar) -> tuple[dict[str, Any], bool, bool]:
@@ -520,6 +528,23 @@ class JointIdentifier(Learned):
         params = {name: getattr(self, name) for name in _INIT_NAMES}
         return {**params, "interval": FisherInterval(), "progress": False,
                 "allow_far_from_prior": True}
+
+
+def _warn_noise_given(noise: tuple[float, float], residuals, records) -> None:
+    """Warn where a speed's residual spread is over :data:`NOISE_GIVEN_FACTOR` times
+    the noise level given, either way (the first such record and speed)."""
+    for rec, pair in zip(records, residuals, strict=True):
+        for name, res, given in zip(("w_M", "w_L"), pair, noise, strict=True):
+            spread = float(np.sqrt(np.mean(np.square(res))))
+            ratio = spread / float(given)
+            if not 1.0 / NOISE_GIVEN_FACTOR <= ratio <= NOISE_GIVEN_FACTOR:
+                warnings.warn(NoiseLevelWarning(
+                    f"the residual of {name} in {rec.name} spreads {spread:.3g} (rms), "
+                    f"{ratio:.3g} times the noise level given ({given:.3g}): the standard "
+                    "error and interval of theta scale with that level; check it, or leave ",
+                    Option("noise", None, python="noise=None"), " to estimate it"),
+                    stacklevel=3)
+                return
 
 
 def check_estimated_nonzero(prior: TwoMassDrive, rel: Mapping[str, float | None]) -> None:
