@@ -4,6 +4,7 @@ plot takes the axes that ``plt.subplots`` returns."""
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import matplotlib.pyplot as plt
@@ -142,3 +143,28 @@ def test_a_noise_level_given_far_from_the_residuals_is_warned_of(short_csv):
     with warnings.catch_warnings():
         warnings.simplefilter("error", NoiseLevelWarning)
         bk.JointIdentifier(prior, noise=(0.5, 0.5), interval=FisherInterval()).fit(rec)
+
+
+def test_results_print_short():
+    """The dataclasses' reprs printed every array (a 5 s closed loop's ran to tens of
+    thousands of characters); each now fits a line and says what it holds."""
+    from backlashkit import Backlash, SumOfSines, simulate_closed_loop
+
+    t = bk.signals.time_grid(4.0, 1e-3)
+    u = bk.signals.step_down(t, 0.942, t_s=2.0)
+    resp = DRIVE.simulate(t, u)
+    loop = simulate_closed_loop(([1.0], [1.0, -0.5, -1.5]), Backlash(0.7, 1.3, -0.5),
+                                reference=SumOfSines([10.0], [1.3]), duration=5.0, ts=0.01)
+    texts = {
+        repr(resp): (r"^DriveResponse\(4001 samples, t = 0 to 4 s, \d+ contact changes, "
+                     r"law 'paper'\)$"),
+        repr(bk.cramer_rao_bound(DRIVE, t, u, snr_db=30.0)):
+            r"^CramerRaoBound\(theta_std=\S+ rad, names=\('theta',\), noise_std=\(\S+, \S+\) "
+            r"rad/s, n_samples=4001\)$",
+        repr(bk.Record(t, u, resp.w_motor, resp.w_load, name="x.csv")):
+            r"^Record\('x\.csv', 4001 samples at 0\.001 s from t = 0 s, speeds\)$",
+        repr(loop): r"^ClosedLoopResponse\(\d+ samples, t = 0 to 5 s, inverse .*, RMS "
+                    r"tracking error over the last third \S+\)$",
+    }
+    for text, pattern in texts.items():
+        assert len(text) < 200 and re.match(pattern, text), text

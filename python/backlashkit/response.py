@@ -305,6 +305,12 @@ class DriveResponse(StateColumns):
         """Torque carried by the first shaft in N m."""
         return self.shaft_torques[:, 0]
 
+    def __repr__(self) -> str:
+        # the dataclass's would print every array: thousands of characters a run
+        law = getattr(self.law, "value", self.law)
+        return (f"DriveResponse({self.t.size} samples, t = {self.t[0]:g} to {self.t[-1]:g} s, "
+                f"{len(self.contact_events)} contact changes, law {law!r})")
+
     def plot(self, ax: Sequence[matplotlib.axes.Axes] | None = None) -> matplotlib.figure.Figure:
         """Plot speeds, torques (applied and shaft) and twist against time, with the
         contact changes (:func:`backlashkit.report.plot_drive_response`).

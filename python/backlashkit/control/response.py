@@ -67,6 +67,12 @@ class ClosedLoopResponse:
         t0 = self.t[0] + (1.0 - fraction) * (self.t[-1] - self.t[0])
         return self.e[self.t >= t0 - _WINDOW_SLACK]
 
+    def __repr__(self) -> str:
+        # the dataclass's would print every array: tens of thousands of characters
+        return (f"ClosedLoopResponse({self.t.size} samples, t = {self.t[0]:g} to "
+                f"{self.t[-1]:g} s, inverse {self.inverse!r}, RMS tracking error over the "
+                f"last third {self.rms_error_last():.3g})")
+
     def rms_error_last(self, fraction: float = 1.0 / 3.0) -> float:
         """RMS of ``e`` over the last ``fraction`` of the run.
 

@@ -89,6 +89,16 @@ class CramerRaoBound:
         """Bound on the standard deviation of ``theta`` in rad."""
         return self.std["theta"]
 
+    def __repr__(self) -> str:
+        # the dataclass's would print the Fisher matrix
+        try:
+            theta = f"theta_std={self.theta_std:.3g} rad"
+        except InputError:  # singular: no bound
+            theta = "singular"
+        return (f"CramerRaoBound({theta}, names={self.names}, noise_std=("
+                f"{self.noise_std[0]:.3g}, {self.noise_std[1]:.3g}) rad/s, "
+                f"n_samples={self.n_samples})")
+
     def __add__(self, other: CramerRaoBound) -> CramerRaoBound:
         if not isinstance(other, CramerRaoBound) or other.names != self.names:
             raise InputError("only bounds over the same parameter names can be combined")

@@ -95,6 +95,12 @@ class Record:
         """Sample time in s."""
         return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
 
+    def __repr__(self) -> str:
+        # the dataclass's would print its arrays
+        what = "encoder angles" if self.has_positions else "speeds"
+        return (f"Record({self.name!r}, {self.t.size} samples at {self.ts:g} s from "
+                f"t = {self.t[0]:g} s, {what})")
+
     @property
     def has_positions(self) -> bool:
         """Whether the record holds measured angles (fitted instead of the speeds)."""
