@@ -168,3 +168,18 @@ def test_results_print_short():
     }
     for text, pattern in texts.items():
         assert len(text) < 200 and re.match(pattern, text), text
+
+
+def test_a_step_down_off_the_grid_is_refused():
+    """A step-down past the grid's end (or at its start) gave one level throughout,
+    which identify then refused as "no step-down" far from the cause."""
+    t = bk.signals.time_grid(4.0, 1e-3)
+    for t_s in (10.0, 0.0, -1.0):
+        with pytest.raises(InputError, match=rf"t_s must lie within the grid, after its "
+                                             rf"first sample: in \(0, 4\] s, got {t_s!r}"):
+            bk.signals.step_down(t, 0.5, t_s=t_s)
+    u = bk.signals.step_down(t, 0.5, t_s=4.0)  # the last sample steps down
+    assert u[-2] == 0.5 and u[-1] == 0.0
+    ctrl = bk.DiscreteAdaptiveController(([1.0], [1.0, -0.5, -1.5]), ts=1e-3)
+    assert repr(ctrl) == ("DiscreteAdaptiveController(ts=0.001, inverse=ExactInverse(), "
+                          "theta_b=[1.51, 0.2, -0.55])")

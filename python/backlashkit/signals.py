@@ -197,12 +197,22 @@ def step_down(t: ArrayLike, a: float, *, t_s: float, b: float = 0.0) -> np.ndarr
     -------
     numpy.ndarray
         The signal, one value per sample of ``t``.
+
+    Raises
+    ------
+    InputError
+        If a level is not finite, or ``t_s`` lies outside ``(t[0], t[-1]]``: the
+        signal would hold one level throughout, no step-down.
     """
     arr, ts = _grid(t)
     a_ = v.finite_scalar("a", a)
     b_ = v.finite_scalar("b", b)
     ti = v.finite_scalar("t_s", t_s)
-    return np.where(_at_or_after(arr, ts, ti), b_, a_)
+    step = _at_or_after(arr, ts, ti)
+    if step[0] or not step[-1]:
+        raise InputError(f"t_s must lie within the grid, after its first sample: in "
+                         f"({arr[0]:g}, {arr[-1]:g}] s, got {t_s!r} (no step-down otherwise)")
+    return np.where(step, b_, a_)
 
 
 def sine(t: ArrayLike, amplitude: float, frequency: float, *, phase: float = 0.0) -> np.ndarray:

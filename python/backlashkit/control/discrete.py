@@ -105,6 +105,11 @@ class DiscreteAdaptiveController:
         self._th0 = th0
         self.reset()
 
+    def __repr__(self) -> str:
+        th = ", ".join(f"{x:.4g}" for x in self.theta_b)
+        return (f"DiscreteAdaptiveController(ts={self.ts:g}, inverse={self.inverse!r}, "
+                f"theta_b=[{th}])")
+
     def reset(self) -> None:
         """Return to the initial state (filters at rest, ``theta_b = theta_b0``)."""
         n, q, nh = self._al.shape[0], self._amd.shape[0], self._ahd.shape[0]
