@@ -152,6 +152,25 @@ def test_missing_and_unreadable_records_are_refused_rows(fleet, tmp_path):
     assert all("\n" not in r["reason"] and r["theta"] is None for r in rows)
 
 
+def test_a_refused_rows_advice_says_the_manifest_cannot_set_it(fleet, serial, tmp_path):
+    """A reader's or fit's advice names a library option (resample='linear' for a
+    missing sample), which no manifest column sets: the row says so. The rows' noise
+    model is a word, as identify's JSON gives it, not a Python repr."""
+    data = fleet.manifest.parent
+    prior = data / "drive-001" / "PRIOR.toml"
+    rec = data / read_manifest(fleet.manifest).tests[0].records[0]
+    cols = np.loadtxt(rec, delimiter=",", skiprows=1)
+    cols[100, 2] = np.nan
+    gap = tmp_path / "gap.csv"
+    np.savetxt(gap, cols, delimiter=",", header="t,torque,w_motor,w_load", comments="")
+    path = _manifest(tmp_path, [f"d1,2026-01-05,{gap},{prior}"])
+    (row,) = identify_fleet(path, out=tmp_path / "R.csv")
+    assert row["status"] == "refused"
+    assert ("pass resample='linear' (a library option, which a manifest cannot set)"
+            in row["reason"])
+    assert {r["noise_model"] for r in serial[1]} <= {"white", "ar(1)", "ar(2)"}
+
+
 def test_duplicated_drive_and_date_is_one_line_before_any_fit(tmp_path, capsys):
     path = _manifest(tmp_path, ["d1,2026-01-05,a.csv,p.toml", "d1,2026-01-12,a.csv,p.toml",
                                 "d1,2026-01-05,b.csv,p.toml"])

@@ -37,7 +37,7 @@ from ..errors import (
 )
 from ..identify.intervals import ParametricBootstrap
 from ..identify.joint import LINEAR_PARAMS
-from ..identify.noise import ARNoise
+from ..identify.noise import ARNoise, noise_label
 from ..identify.readers import SPEED_UNITS, read_records
 from ..identify.record import Record
 from ..identify.report import check_report_directory
@@ -537,8 +537,7 @@ def _fit_joint(args: argparse.Namespace, prior: Any, records: list[Record],
         "rival_basins": est.rival_basins_,
         "misfit_restarted": est.misfit_restarted_,
         "misfit_restart_won": est.misfit_restart_won_,
-        "noise_model": ("white" if est.noise_ar_ is None
-                        else f"ar({est.noise_ar_.shape[-1]})"),
+        "noise_model": noise_label(est.noise_ar_),
         "residuals_correlated": est.correlation_message() is not None,
         "final_horizon": est.search.final_horizon,
         "std_fisher": est.param_std_["theta"],

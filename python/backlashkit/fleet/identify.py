@@ -37,6 +37,7 @@ def _refused(drive: str, date: str, reason: str) -> dict[str, Any]:
 
 def _fit(records: list[str], prior_path: str) -> dict[str, Any]:
     from .. import JointIdentifier, read_records
+    from ..identify.noise import noise_label
     from ..io import read_drive_toml
 
     prior = read_drive_toml(prior_path, require_theta=False)
@@ -52,7 +53,7 @@ def _fit(records: list[str], prior_path: str) -> dict[str, Any]:
     return {"status": "ok", "theta": est.theta_, "std": est.std_, "ci95_low": low,
             "ci95_high": high,
             "fit_percent": None if fits is None else float(np.min(fits)),
-            "noise_model": repr(getattr(est, "noise_model_", "")), "notes": "; ".join(notes),
+            "noise_model": noise_label(est.noise_ar_), "notes": "; ".join(notes),
             "reason": ""}
 
 
@@ -76,7 +77,9 @@ def identify_test(task: tuple[str, str, list[str], str]) -> dict[str, Any]:
     try:
         row = _fit(records, prior)
     except InputError as exc:
-        return _refused(drive, date, str(exc))
+        # an option the message advises is the library's: a manifest sets none
+        return _refused(drive, date, exc.worded(
+            lambda option: f"{option} (a library option, which a manifest cannot set)"))
     except (ValueError, ArithmeticError) as exc:  # the model cannot follow these data
         return _refused(drive, date, f"cannot compute with this input: {exc}")
     except OSError as exc:

@@ -47,6 +47,7 @@ __all__ = [
     "fit_ar",
     "held_noise_lag1",
     "innovation_ratio",
+    "noise_label",
     "whiten",
 ]
 
@@ -438,6 +439,23 @@ def sample_noise(rng: np.random.Generator, std: float, a: np.ndarray | None, n: 
     burn = _impulse_length(a, 1e-6)
     eps = rng.normal(0.0, std, n + burn)
     return lfilter([1.0], np.r_[1.0, a], eps)[burn:]
+
+
+def noise_label(noise_ar: np.ndarray | None) -> str:
+    """A fit's noise model in words: ``"white"``, or ``"ar(p)"`` for the order of its
+    autoregressive coefficients.
+
+    Parameters
+    ----------
+    noise_ar : numpy.ndarray or None
+        ``JointIdentifier.noise_ar_``: ``(n_records, 2, p)``, or None for white noise.
+
+    Returns
+    -------
+    str
+        The model's name.
+    """
+    return "white" if noise_ar is None else f"ar({np.shape(noise_ar)[-1]})"
 
 
 def check_noise_model(noise_model) -> None:
