@@ -155,7 +155,11 @@ def test_noise_on_one_channel_only_and_fresh_seed_is_reported(tmp_path, capsys):
         [DRIVE, *PAPER_EXPERIMENT, "--duration", "45", "--snr-load", "30", "--out", str(out),
          "--json"], capsys)
     assert code == 0 and "no --seed given; using --seed" in err
-    seed = json.loads(stdout)["noise"]["seed"]
+    noise = json.loads(stdout)["noise"]
+    seed = noise["seed"]
+    # the motor's keys are there, null: every document has the same keys
+    assert noise["snr_motor_db"] is None and noise["measured_snr_motor_db"] is None
+    assert noise["snr_load_db"] == 30.0
     cols = read(out)
     clean = read_drive_toml(DRIVE).simulate(cols["t"], cols["torque"])
     assert np.array_equal(cols["w_motor"], clean.w_motor)

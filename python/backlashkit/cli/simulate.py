@@ -519,7 +519,10 @@ def _columns(args: argparse.Namespace, response, seed: _Seed,
 def _noisy_speeds(args: argparse.Namespace, w_motor: np.ndarray, w_load: np.ndarray,
                   seed: _Seed) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """The speeds with the noise of --snr-motor / --snr-load, and its account."""
-    noise: dict[str, Any] = {"seed": seed.value}
+    # every key in every document, null for a speed left clean
+    noise: dict[str, Any] = {"seed": seed.value, "snr_motor_db": None,
+                             "measured_snr_motor_db": None, "snr_load_db": None,
+                             "measured_snr_load_db": None}
     if args.snr_motor is not None:
         w_motor, measured = _add_noise(w_motor, args.snr_motor, seed.children[1], "--snr-motor",
                                        "w_motor")
