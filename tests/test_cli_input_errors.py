@@ -972,3 +972,13 @@ def test_a_unit_mistake_is_named_from_the_held_speeds(steady_csv, tmp_path, caps
         assert main(["identify", str(steady_csv), "--drive", DRIVE_TOML, "--method",
                      "regression", "--json"]) == 0
         assert deg == pytest.approx(json.loads(capsys.readouterr().out)["theta"], rel=1e-6)
+
+
+def test_swapped_speeds_are_suspected_by_the_two_step_method(steady_csv, capsys):
+    """With the load's speed read as the motor's, no motor speed rises after the
+    step-down (the impact on the other flank): the refusal asks whether the columns are
+    swapped, as the joint fit's does."""
+    err = _one_line_error(capsys, ["identify", str(steady_csv), "--drive", DRIVE_TOML,
+                                   "--method", "two-step", "--columns",
+                                   "w_motor=w_load,w_load=w_motor"])
+    assert "no impact on the negative flank found (are w_motor and w_load swapped?" in err

@@ -162,7 +162,9 @@ def _impact_time(record: Record, i_s: int, search: float) -> float:
         raise InputError(
             f"{record.name}: no rise of the motor speed above its noise ({floor:.3g} rad/s) "
             f"within {search:g} s after the step-down at t = {record.t[i_s]:.6g} s: no impact "
-            "on the negative flank found"
+            "on the negative flank found (are w_motor and w_load swapped? the motor's speed "
+            "rises again when its side meets the other flank; else the step may be too "
+            "small to cross the backlash)"
         )
     above = rise >= 0.5 * top
     k = int(np.argmax(above))
