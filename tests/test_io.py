@@ -54,6 +54,21 @@ def test_integers_are_accepted(tmp_path):
     assert drive.k_sh == 78.0 and isinstance(drive.k_sh, float) and drive.theta == 0.0
 
 
+def test_a_theta_in_degrees_is_noted(tmp_path):
+    """theta = 2 (paper A's 2 degrees, written as rad) is 115 degrees of half-width: read,
+    with a note that names the likely mistake; paper A's own file reads without one."""
+    import warnings
+
+    path = write(tmp_path, toml_text({**PAPER, "theta": 2.0}))
+    with pytest.warns(UserWarning, match=r"theta = 2 rad is a half-width of 115 deg: "
+                                         r"theta is in rad \(degrees written as rad\? "
+                                         r"2 deg is 0\.03491 rad\)"):
+        assert read_drive_toml(path).theta == 2.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_drive_toml(EXAMPLES / "paper_drive.toml")
+
+
 def test_theta_may_be_left_out_for_identification(tmp_path):
     path = write(tmp_path, toml_text(drop=("theta",)))
     assert read_drive_toml(path, require_theta=False).theta is None

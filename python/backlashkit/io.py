@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -179,6 +180,12 @@ def _number(path: PathLike, table: str, key: str, value: Any) -> float:
     return float(value)
 
 
+#: A drive file's ``theta`` (rad) above this is noted as likely degrees: a gear's
+#: backlash half-width is a few degrees at most, and 0.5 rad is 29 deg (paper A's is 2,
+#: its search goes to 15).
+THETA_DEGREES_LIKELY = 0.5
+
+
 def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDrive:
     """Read a two-mass drive from the ``[drive]`` table of a TOML file.
 
@@ -232,9 +239,16 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
     keys = DRIVE_KEYS + FRICTION_KEYS
     values = {k: _number(path, "drive", k, table[k]) for k in keys if k in table}
     try:
-        return TwoMassDrive(**values)
+        drive = TwoMassDrive(**values)
     except InputError as exc:
         raise InputError(f"{path}: [drive] {exc}") from None
+    theta = values.get("theta")
+    if theta is not None and theta > THETA_DEGREES_LIKELY:
+        warnings.warn(
+            f"{path}: [drive] theta = {theta:g} rad is a half-width of "
+            f"{math.degrees(theta):.3g} deg: theta is in rad (degrees written as rad? "
+            f"{theta:g} deg is {math.radians(theta):.4g} rad)", UserWarning, stacklevel=2)
+    return drive
 
 
 def read_actuator_toml(path: PathLike) -> CurrentLoop | None:
