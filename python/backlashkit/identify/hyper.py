@@ -9,7 +9,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-__all__ = ["Learned", "init_repr"]
+__all__ = ["init_repr"]
 
 
 def init_repr(estimator: Any) -> str:
@@ -43,13 +43,12 @@ def _same(value: Any, default: Any) -> bool:
         return False
 
 
-class Learned:
-    """Mixed into an estimator: reading a learned attribute (a name ending in ``_``)
-    before ``fit`` says to call ``fit`` first, where Python would say only that the
-    attribute does not exist. Fitted is when ``theta_`` is set."""
 
-    def __getattr__(self, name: str) -> Any:
-        if name.endswith("_") and not name.startswith("_") and "theta_" not in vars(self):
-            raise AttributeError(f"{type(self).__name__}.{name} is learned by fit(): call "
-                                 "fit(records) first")
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+def _learned_attribute(self: Any, name: str) -> Any:
+    # An estimator's __getattr__, assigned in its class (a base class would lengthen
+    # help()): a learned name (ending in "_") read before fit says to call fit, where
+    # Python says only that it does not exist; fitted is when theta_ is set.
+    if name.endswith("_") and not name.startswith("_") and "theta_" not in vars(self):
+        raise AttributeError(f"{type(self).__name__}.{name} is learned by fit(): call "
+                             "fit(records) first")
+    raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")

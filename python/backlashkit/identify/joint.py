@@ -134,7 +134,7 @@ from ._model import (
     rel_std,
 )
 from ._problem import Problem, build_problem
-from .hyper import Learned, init_repr
+from .hyper import _learned_attribute, init_repr
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -192,7 +192,7 @@ _PROFILE = ProfileLikelihood()
 _AUTO = AutoNoise()
 
 
-class JointIdentifier(Learned):
+class JointIdentifier:
     """Joint ML / MAP fit of the backlash half-width ``theta`` (rad) and the drive (SI).
 
     Parameters
@@ -247,11 +247,11 @@ class JointIdentifier(Learned):
     >>> fit = bk.JointIdentifier(truth.with_theta(None), workers=1).fit(rec)
     >>> print(f"{fit.theta_:.4f} rad, 95 % in [{fit.ci95_[0]:.4f}, {fit.ci95_[1]:.4f}]")
     0.0348 rad, 95 % in [0.0341, 0.0353]
-    >>> expert = bk.JointIdentifier(truth.with_theta(None), search=bk.JointSearch(
-    ...     restarts=bk.Restarts(misfit=False), final_horizon=1.0))
     """
 
     method = "joint"
+
+    __getattr__ = _learned_attribute
 
     def __init__(
         self,

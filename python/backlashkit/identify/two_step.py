@@ -122,7 +122,7 @@ from .decay import (
     search_edges,
     viscous_fit,
 )
-from .hyper import Learned, init_repr
+from .hyper import _learned_attribute, init_repr
 from .record import as_records, check_prior, check_sampling
 from .step import check_held_speeds, check_held_steady, check_step_downs, find_step_down
 
@@ -217,7 +217,7 @@ def _likelihood_ratio(prep: _Prepared, viscous_cost: float, coulomb_cost: float)
 
 
 
-class TwoStepIdentifier(Learned):
+class TwoStepIdentifier:
     """Paper A's two-step backlash identification (Section 4.3, steps 4-8).
 
     Parameters
@@ -292,6 +292,8 @@ class TwoStepIdentifier(Learned):
     """
 
     method = "two-step"
+
+    __getattr__ = _learned_attribute
 
     def __init__(
         self,
@@ -469,7 +471,7 @@ def _interval(inis: list[float], n_theta: float) -> tuple[float, float]:
     return theta_ini * (1 - n_theta), theta_ini * (1 + n_theta)
 
 
-class RegressionIdentifier(Learned):
+class RegressionIdentifier:
     """Paper A's baseline (Table 2): least squares on ``w_M`` over ``[0, theta_max]``.
 
     The criterion is ``W_1`` of :class:`TwoStepIdentifier` (model started at the
@@ -527,6 +529,8 @@ class RegressionIdentifier(Learned):
     """
 
     method = "regression"
+
+    __getattr__ = _learned_attribute
 
     def __init__(
         self,
