@@ -424,6 +424,16 @@ class JointSearch(_Config):
     fd_step : float, optional
         Relative finite-difference step of the Jacobians, in (0, 0.1) (default 1e-6:
         the cost is only piecewise smooth in ``theta``).
+
+    Examples
+    --------
+    A fit whose final stages take 1 s after each torque jump, without the second
+    search that a misfitting residual sets off:
+
+    >>> import backlashkit as bk
+    >>> search = bk.JointSearch(restarts=bk.Restarts(misfit=False), final_horizon=1.0)
+    >>> search.final_horizon
+    1.0
     """
 
     grid: ThetaGrid = field(default_factory=ThetaGrid)
