@@ -43,7 +43,6 @@ def _same(value: Any, default: Any) -> bool:
         return False
 
 
-
 def _learned_attribute(self: Any, name: str) -> Any:
     # An estimator's __getattr__, assigned in its class (a base class would lengthen
     # help()): a learned name (ending in "_") read before fit says to call fit, where
