@@ -146,8 +146,8 @@ def test_a_noise_level_given_far_from_the_residuals_is_warned_of(short_csv):
 
 
 def test_results_print_short():
-    """The dataclasses' reprs printed every array (a 5 s closed loop's ran to tens of
-    thousands of characters); each now fits a line and says what it holds."""
+    """The dataclasses' reprs printed every array; each now fits a line and says what
+    it holds."""
     from backlashkit import Backlash, SumOfSines, simulate_closed_loop
 
     t = bk.signals.time_grid(4.0, 1e-3)

@@ -306,7 +306,7 @@ class DriveResponse(StateColumns):
         return self.shaft_torques[:, 0]
 
     def __repr__(self) -> str:
-        # the dataclass's would print every array: thousands of characters a run
+        # the dataclass's would print every array
         law = getattr(self.law, "value", self.law)
         return (f"DriveResponse({self.t.size} samples, t = {self.t[0]:g} to {self.t[-1]:g} s, "
                 f"{len(self.contact_events)} contact changes, law {law!r})")

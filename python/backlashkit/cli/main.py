@@ -35,15 +35,17 @@ class _Parser(argparse.ArgumentParser):
     """One line per error, naming the subcommand's help, and the option meant where a
     given one is misspelled."""
 
+    #: The subcommands' parsers by name (the top level's, set by :func:`build_parser`).
+    commands: Mapping[str, argparse.ArgumentParser] = {}
+
     def parse_known_args(self, args=None, namespace=None):
         self._given = list(sys.argv[1:] if args is None else args)
         parsed, extra = super().parse_known_args(args, namespace)
-        if extra and getattr(parsed, "command", None) and self._subparsers is not None:
+        command = self.commands.get(getattr(parsed, "command", None) or "")
+        if extra and command is not None:
             # argparse reports what a subcommand does not know from the top level,
             # whose help does not list that subcommand's options
-            sub = next(a for a in self._subparsers._group_actions
-                       if isinstance(a, argparse._SubParsersAction))
-            sub.choices[parsed.command].error(f"unrecognized arguments: {' '.join(extra)}")
+            command.error(f"unrecognized arguments: {' '.join(extra)}")
         return parsed, extra
 
     def error(self, message: str):  # one line, status 2, as argparse does, without usage spam
@@ -85,6 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue
         module.add_parser(sub)
+    parser.commands = sub.choices
     return parser
 
 

@@ -68,7 +68,7 @@ class ClosedLoopResponse:
         return self.e[self.t >= t0 - _WINDOW_SLACK]
 
     def __repr__(self) -> str:
-        # the dataclass's would print every array: tens of thousands of characters
+        # the dataclass's would print every array
         return (f"ClosedLoopResponse({self.t.size} samples, t = {self.t[0]:g} to "
                 f"{self.t[-1]:g} s, inverse {self.inverse!r}, RMS tracking error over the "
                 f"last third {self.rms_error_last():.3g})")

@@ -185,9 +185,8 @@ def held_speed_gain(record: Record, prior: TwoMassDrive) -> float:
 
 
 def _held_body(record: Record, prior: TwoMassDrive, caller: str) -> tuple[float, float]:
-    """The gain of :func:`held_speed_gain` and the rigid body's fitted speed at the
-    last held sample, rad/s (NaN, NaN with too few samples); the arguments checked
-    (``caller`` named)."""
+    """The gain of :func:`held_speed_gain` and the share of :func:`held_unsteady_share`
+    (NaN, NaN with too few samples); the arguments checked (``caller`` named)."""
     if not isinstance(record, Record):
         raise InputError(f"record must be a Record, got {type(record).__name__}")
     check_prior(prior)
@@ -209,7 +208,10 @@ def _held_body(record: Record, prior: TwoMassDrive, caller: str) -> tuple[float,
     col = float(np.max(np.abs(rest))) or 1.0
     coef, *_ = np.linalg.lstsq(basis / [col, 1.0], v / scale, rcond=None)
     gain = float(coef[0]) * scale / col
-    return gain, float(basis[-1] @ (coef / [col, 1.0])) * scale
+    if not gain > 0:
+        return gain, math.nan
+    speed = float(basis[-1] @ (coef / [col, 1.0])) * scale  # at the last held sample
+    return gain, 1.0 - friction * speed / (gain * float(record.torque[i_s - 1]))
 
 
 def held_unsteady_share(record: Record, prior: TwoMassDrive) -> float:
@@ -239,12 +241,7 @@ def held_unsteady_share(record: Record, prior: TwoMassDrive) -> float:
     InputError
         As :func:`held_speed_gain`.
     """
-    gain, speed = _held_body(record, prior, "held_unsteady_share")
-    if not gain > 0:
-        return math.nan
-    i_s = find_step_down(record)[0]
-    held = gain * float(record.torque[i_s - 1])
-    return 1.0 - (prior.f_M + prior.f_L) * speed / held
+    return _held_body(record, prior, "held_unsteady_share")[1]
 
 
 #: :func:`first_order` sums its input in blocks over which the decay spans at most
@@ -637,13 +634,10 @@ def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option],
            if math.isfinite(g) and is_far(g)]
     if far:  # the records whose units are suspect, by name
         said = ", ".join(f"{name} (x{g:.3g})" for name, g in far)
-        mistakes = {unit_mistake(g) for _, g in far}
-        if len(mistakes) == 1 and None not in mistakes:
-            return (f"the speeds held before the step-down are far from the prior's in "
-                    f"{said}: ", *_units_advice(far[0][1]))
-        return (f"the speeds held before the step-down are far from the prior's in {said}: "
-                "check their units (rpm read as rad/s? then pass ", SPEED_IN_RPM,
-                ") and the time's, the columns (w_motor and w_load swapped?) and the prior")
+        # one mistake named where every far record points to the same; else them all
+        one = len({unit_mistake(g) for _, g in far}) == 1
+        return (f"the speeds held before the step-down are far from the prior's in {said}: ",
+                *(_units_advice(far[0][1]) if one else (CHECK_UNITS,)))
     if any(is_far(g) for g in known):
         return (CHECK_UNITS,)
     spread = max(max(g, 1.0 / g) for g in known)
