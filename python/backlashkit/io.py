@@ -44,6 +44,7 @@ import numpy as np
 
 from .errors import InputError
 from .plants import TwoMassDrive
+from .validate import degrees_note
 
 if TYPE_CHECKING:
     from .actuator import CurrentLoop
@@ -180,10 +181,6 @@ def _number(path: PathLike, table: str, key: str, value: Any) -> float:
     return float(value)
 
 
-#: A drive file's ``theta`` (rad) above this is noted as likely degrees: a gear's
-#: backlash half-width is a few degrees at most, and 0.5 rad is 29 deg (paper A's is 2,
-#: its search goes to 15).
-THETA_DEGREES_LIKELY = 0.5
 
 
 def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDrive:
@@ -243,11 +240,9 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
     except InputError as exc:
         raise InputError(f"{path}: [drive] {exc}") from None
     theta = values.get("theta")
-    if theta is not None and theta > THETA_DEGREES_LIKELY:
-        warnings.warn(
-            f"{path}: [drive] theta = {theta:g} rad is a half-width of "
-            f"{math.degrees(theta):.3g} deg: theta is in rad (degrees written as rad? "
-            f"{theta:g} deg is {math.radians(theta):.4g} rad)", UserWarning, stacklevel=2)
+    note = None if theta is None else degrees_note("theta", theta)
+    if note is not None:
+        warnings.warn(f"{path}: [drive] {note}", UserWarning, stacklevel=2)
     return drive
 
 

@@ -15,6 +15,10 @@ from .errors import InputError
 
 #: Relative tolerance on the spacing of a time vector for it to count as uniform.
 UNIFORM_RTOL = 1e-6
+#: A backlash half-width (rad) above this is noted as likely degrees: a gear's backlash
+#: half-width is a few degrees at most, and 0.5 rad is 29 deg (paper A's is 2, its
+#: search goes to 15).
+THETA_DEGREES_LIKELY = 0.5
 
 
 def positive(name: str, value: float) -> float:
@@ -31,6 +35,16 @@ def nonnegative(name: str, value: float) -> float:
     if not v >= 0:
         raise InputError(f"{name} must be >= 0, got {value!r}")
     return v
+
+
+def degrees_note(name: str, theta: float) -> str | None:
+    """The note that ``name = theta`` (a half-width in rad) looks like degrees written as
+    rad, where it exceeds :data:`THETA_DEGREES_LIKELY`; else None."""
+    if not theta > THETA_DEGREES_LIKELY:
+        return None
+    return (f"{name} = {theta:g} rad is a half-width of {math.degrees(theta):.3g} deg: "
+            f"{name.rsplit('.', 1)[-1]} is in rad (degrees written as rad? {theta:g} deg is "
+            f"{math.radians(theta):.4g} rad)")
 
 
 def finite_scalar(name: str, value: float) -> float:

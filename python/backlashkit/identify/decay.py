@@ -250,6 +250,12 @@ def criterion_window(record: Record, dt4: float, level_window: float) -> Criteri
     ------
     InputError
         If the record ends before ``t_s + dt4``.
+
+    Warns
+    -----
+    UserWarning
+        If ``level_window`` is longer than the record before ``t_s`` (the speed level
+        is then the mean of what there is).
     """
     i_s, t_s, held, _ = find_step_down(record)
     ts = record.ts
@@ -261,7 +267,14 @@ def criterion_window(record: Record, dt4: float, level_window: float) -> Criteri
             f"t = {record.t[-1]:.6g} s (record at least {dt4:.6g} s after the step-down, or "
             "shorten that span with ", Option("dt4", None), ")"
         )
-    nl = max(1, min(i_s, int(round(level_window / ts))))
+    nl = max(1, int(round(level_window / ts)))
+    if nl > i_s:
+        warnings.warn(
+            f"{record.name}: level_window = {level_window:g} s is longer than the "
+            f"{i_s * ts:.6g} s recorded before the step-down at t = {t_s:.6g} s; the "
+            f"speed level is their mean (give at most that span)", UserWarning,
+            stacklevel=2)
+        nl = max(1, i_s)
     w0 = float(np.mean(record.w_motor[i_s - nl : i_s]))
     sl = slice(i_s, i_s + n4 + 1)
     return CriterionWindow(record.t[sl], record.torque[sl], record.w_motor[sl], w0,

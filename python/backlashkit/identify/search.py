@@ -26,6 +26,7 @@ constraint and the value.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 
@@ -108,6 +109,9 @@ class ThetaGrid(_Config):
 
     def __post_init__(self) -> None:
         self._set("theta_max", v.positive("ThetaGrid.theta_max", self.theta_max))
+        note = v.degrees_note("ThetaGrid.theta_max", self.theta_max)
+        if note is not None:
+            warnings.warn(note, UserWarning, stacklevel=3)
         v.integer("ThetaGrid.points", self.points, 2)
         v.integer("ThetaGrid.starts", self.starts, 1)
         self._set("two_step_start", _flag("ThetaGrid", "two_step_start", self.two_step_start))

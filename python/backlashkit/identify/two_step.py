@@ -102,6 +102,7 @@ friction"): the default stays ``"viscous"``, paper A's model.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -590,8 +591,14 @@ class RegressionIdentifier:
             If a record steps down more than once (the largest step-down is used).
         SearchEdgeWarning
             If ``theta_`` sits at an end of the search interval.
+        UserWarning
+            If ``theta_max`` is over :data:`~backlashkit.validate.THETA_DEGREES_LIKELY`
+            rad (degrees written as rad?).
         """
         theta_max = v.positive("theta_max", self.theta_max)
+        note = v.degrees_note("theta_max", theta_max)
+        if note is not None:
+            warnings.warn(note, UserWarning, stacklevel=2)
         prep = _prepare(self, records)
         fc = (0.0, 0.0)  # the viscous model's
         lr = math.nan
