@@ -45,7 +45,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["ProgressBar", "dask_client", "iter_tasks", "map_tasks", "process_pool",
-           "reporter", "task_seeds"]
+           "reporter", "root_seed", "task_seeds"]
 
 #: Seconds to wait for a Dask scheduler before calling it unreachable: a scheduler on
 #: the network answers in well under a second; the default of distributed (30 s) makes
@@ -173,14 +173,45 @@ class ProgressBar:
         self.close()
 
 
-def task_seeds(seed: int | np.random.SeedSequence | None,
+def root_seed(seed: int | np.random.SeedSequence | np.random.Generator
+              ) -> np.random.SeedSequence:
+    """The root of a batch's random streams: ``seed`` as a SeedSequence.
+
+    Parameters
+    ----------
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator
+        An int >= 0, a SeedSequence (returned as it is), or a generator, whose own
+        SeedSequence is the root (spawning from it advances its count of children, so
+        two batches from one generator differ, as two draws from it do).
+
+    Returns
+    -------
+    numpy.random.SeedSequence
+        The root.
+
+    Raises
+    ------
+    InputError
+        If ``seed`` is none of these.
+    """
+    if isinstance(seed, np.random.Generator):
+        seed = getattr(seed.bit_generator, "seed_seq", None)
+    if isinstance(seed, np.random.SeedSequence):
+        return seed
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be an integer >= 0, a numpy.random.SeedSequence or a "
+                         f"numpy.random.Generator, got {seed!r}")
+    return np.random.SeedSequence(int(seed))
+
+
+def task_seeds(seed: int | np.random.SeedSequence | np.random.Generator | None,
                n: int) -> list[np.random.SeedSequence | None]:
     """The random stream of each of ``n`` tasks: ``SeedSequence(seed).spawn(n)``.
 
     Parameters
     ----------
-    seed : int, numpy.random.SeedSequence or None
-        Root seed (an int >= 0 or a SeedSequence); None: the tasks take no seed.
+    seed : int, numpy.random.SeedSequence, numpy.random.Generator or None
+        Root seed (:func:`root_seed`); None: the tasks take no seed.
     n : int
         Number of tasks.
 
@@ -192,16 +223,11 @@ def task_seeds(seed: int | np.random.SeedSequence | None,
     Raises
     ------
     InputError
-        If ``seed`` is neither None, a non-negative integer nor a SeedSequence.
+        If ``seed`` is neither None nor a seed :func:`root_seed` takes.
     """
     if seed is None:
         return [None] * n
-    if isinstance(seed, np.random.SeedSequence):
-        return seed.spawn(n)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"seed must be an integer >= 0 or a numpy.random.SeedSequence, "
-                         f"got {seed!r}")
-    return np.random.SeedSequence(int(seed)).spawn(n)
+    return root_seed(seed).spawn(n)
 
 
 def _call(fn: Callable, task: Any, seed: np.random.SeedSequence | None,
@@ -282,7 +308,7 @@ def iter_tasks(
     jobs : int, optional
         Worker processes of a local pool made for this batch (1 or None: serial in
         this process). Not with ``executor``.
-    seed : int or numpy.random.SeedSequence, optional
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator, optional
         Root seed: task ``i`` gets child ``i`` of ``SeedSequence(seed).spawn(len(tasks))``
         whether or not other tasks are skipped.
     skip : iterable of int, optional
@@ -343,7 +369,7 @@ def map_tasks(
         Where to run (module docstring).
     jobs : int, optional
         Worker processes of a local pool (1 or None: serial). Not with ``executor``.
-    seed : int or numpy.random.SeedSequence, optional
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator, optional
         Root seed of the tasks' random streams (:func:`task_seeds`).
     progress : callable, optional
         ``progress(done, total)`` once before the first task (``done`` 0: a

@@ -35,7 +35,7 @@ import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
-from ..parallel import map_tasks, reporter
+from ..parallel import map_tasks, reporter, root_seed
 from ._lm import LMState, lm
 
 __all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
@@ -399,9 +399,10 @@ class ParametricBootstrap:
     ----------
     n_resamples : int, optional
         Refits (default 30; the standard error is then known to about 13 %).
-    seed : int or numpy.random.SeedSequence, optional
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator, optional
         Root of the resamples' noise (default 0): resample ``i`` uses
-        ``SeedSequence(seed).spawn(n_resamples)[i]``.
+        ``SeedSequence(seed).spawn(n_resamples)[i]`` (a generator's own SeedSequence:
+        :func:`~backlashkit.parallel.root_seed`).
     progress : bool or callable, optional
         Progress of the refits (each takes about as long as the fit itself): True draws
         a :class:`~backlashkit.parallel.ProgressBar` on stderr, which shows nothing
@@ -419,19 +420,14 @@ class ParametricBootstrap:
     """
 
     n_resamples: int = 30
-    seed: int | np.random.SeedSequence = 0
+    seed: int | np.random.SeedSequence | np.random.Generator = 0
     progress: bool | Progress = field(default=False, compare=False, kw_only=True)
     executor: Any = field(default=None, compare=False, kw_only=True, repr=False)
     jobs: int | None = field(default=None, compare=False, kw_only=True)
 
     def __post_init__(self) -> None:
         v.integer("n_resamples", self.n_resamples, 2)
-        seed = self.seed
-        if not isinstance(seed, np.random.SeedSequence) and (
-                isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
-            raise InputError(
-                f"seed must be an integer >= 0 or a numpy.random.SeedSequence, got {seed!r}"
-            )
+        root_seed(self.seed)
         if not (isinstance(self.progress, bool) or callable(self.progress)):
             raise InputError("progress must be True, False or a callable "
                              f"progress(done, total), got {self.progress!r}")
@@ -441,9 +437,7 @@ class ParametricBootstrap:
                 raise InputError("give executor or jobs, not both")
 
     def _interval(self, fit: IntervalInputs) -> ThetaInterval:
-        root = self.seed if isinstance(self.seed, np.random.SeedSequence) else (
-            np.random.SeedSequence(self.seed))
-        children = root.spawn(self.n_resamples)
+        children = root_seed(self.seed).spawn(self.n_resamples)
         with reporter(self.progress, "bootstrap", unit="refit") as bar:
             if self.executor is None and self.jobs in (None, 1):  # one resample at a time
                 bar(0, self.n_resamples)
