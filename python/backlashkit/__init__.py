@@ -7,6 +7,8 @@ the dead zone (the total gap is ``2 * theta``).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from .actuator import CurrentLoop
 from .control import (
     AdaptiveLaw,
@@ -57,7 +59,27 @@ from .simulate import (
     simulate_drive,
 )
 
+if TYPE_CHECKING:
+    from .delay import DelayMarginResult, DelaySystem, delay_margin, read_delay_system
+
 __version__ = "0.1.0"
+
+#: Names of :mod:`backlashkit.delay` read from it on first use: it imports scipy, which
+#: ``import backlashkit`` leaves out (about 0.9 s of a command's start).
+_DELAY_NAMES = ("DelayMarginResult", "DelaySystem", "delay_margin", "read_delay_system")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _DELAY_NAMES:
+        from . import delay
+
+        return getattr(delay, name)
+    raise AttributeError(f"module 'backlashkit' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_DELAY_NAMES))
+
 
 __all__ = [
     "ARNoise",
@@ -86,6 +108,8 @@ __all__ = [
     "measure_encoders",
     "CorrelatedResidualsWarning",
     "CramerRaoBound",
+    "DelayMarginResult",
+    "DelaySystem",
     "DriveChain",
     "DriveResponse",
     "FisherInterval",
@@ -110,6 +134,8 @@ __all__ = [
     "__version__",
     "assess_sensitivity",
     "cramer_rao_bound",
+    "delay_margin",
+    "read_delay_system",
     "read_records",
     "read_torque",
     "simulate_batch",
