@@ -33,6 +33,7 @@ __all__ = [
     "ExactInverse",
     "GainOnlyInverse",
     "InverseKind",
+    "InverseMemory",
     "NoInverse",
     "SmoothFilterInverse",
     "SmoothRampInverse",
@@ -201,6 +202,40 @@ def backlash_inverse(
     return arr / b.m + omega
 
 
+@dataclass
+class InverseMemory:
+    """What an inverse keeps between a discrete controller's samples.
+
+    Parameters
+    ----------
+    rising : bool
+        Whether ``u_d`` last rose (the ``c_r`` side) rather than fell.
+    locked_right : bool
+        The smooth ramp's side: locked on ``c_r`` (else on ``c_l``).
+    omega_bar : float or None
+        The smooth filter's output (None before the first sample).
+    """
+
+    rising: bool
+    locked_right: bool
+    omega_bar: float | None = None
+
+    def side(self, theta_b: np.ndarray) -> float:
+        """The estimated side of the gap that ``u_d`` moves towards.
+
+        Parameters
+        ----------
+        theta_b : numpy.ndarray
+            The estimates ``(m c_r, m, m c_l)``.
+
+        Returns
+        -------
+        float
+            ``c_hat_r`` while ``u_d`` rises, ``c_hat_l`` while it falls.
+        """
+        return float(theta_b[0] / theta_b[1] if self.rising else theta_b[2] / theta_b[1])
+
+
 class InverseKind:
     """Base class of the inverse choices of the adaptive controller.
 
@@ -211,6 +246,38 @@ class InverseKind:
     code: ClassVar[int] = -1
     name: ClassVar[str] = ""
     adapts: ClassVar[bool] = True
+    #: Which of the adaptive law's ``(c_r, m, c_l)`` adapt (1) or stay at 0 (0).
+    adapted: ClassVar[tuple[float, float, float]] = (1.0, 1.0, 1.0)
+
+    def sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray, memory: InverseMemory,
+               ts: float) -> float:
+        """The inverse's output for one sample of a discrete controller.
+
+        Parameters
+        ----------
+        u_d : float
+            The fixed controller's output at this sample.
+        u_d_dot : float
+            Its time derivative (units of ``u_d`` per s).
+        theta_b : numpy.ndarray
+            The estimates ``(m c_r, m, m c_l)``.
+        memory : InverseMemory
+            What the inverse keeps between samples (updated in place).
+        ts : float
+            Sample time in s.
+
+        Returns
+        -------
+        float
+            The backlash input ``v``.
+        """
+        return self._sample(u_d, u_d_dot, theta_b, memory, ts)
+
+    def _sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray,
+                memory: InverseMemory, ts: float) -> float:
+        """The exact inverse (2.7): ``u_d / m_hat + c_hat_r`` while ``u_d`` rises,
+        ``+ c_hat_l`` while it falls."""
+        return u_d / theta_b[1] + memory.side(theta_b)
 
     def params(self) -> tuple[float, float]:
         """Two numeric parameters passed to the kernel (meaning depends on the kind).
@@ -231,6 +298,11 @@ class NoInverse(InverseKind):
     code: ClassVar[int] = 0
     name: ClassVar[str] = "none"
     adapts: ClassVar[bool] = False
+
+    def _sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray,
+                memory: InverseMemory, ts: float) -> float:
+        """``v = u_d``."""
+        return u_d
 
 
 @dataclass(frozen=True)
@@ -258,6 +330,18 @@ class SmoothFilterInverse(InverseKind):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "alpha", _v.positive("alpha", self.alpha))
+
+    def _sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray,
+                memory: InverseMemory, ts: float) -> float:
+        """``v = u_d / m_hat + omega_bar``, ``omega_bar`` the side's estimate filtered
+        at ``alpha`` over the sample."""
+        target = memory.side(theta_b)
+        if memory.omega_bar is None:
+            memory.omega_bar = target
+        out = u_d / theta_b[1] + memory.omega_bar
+        decay = np.exp(-self.alpha * ts)
+        memory.omega_bar = target + (memory.omega_bar - target) * decay
+        return out
 
     def params(self) -> tuple[float, float]:
         """Kernel parameters of the filter.
@@ -299,6 +383,21 @@ class SmoothRampInverse(InverseKind):
         object.__setattr__(self, "beta_r", _v.positive("beta_r", self.beta_r))
         object.__setattr__(self, "beta_l", _v.positive("beta_l", self.beta_l))
 
+    def _sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray,
+                memory: InverseMemory, ts: float) -> float:
+        """``v = u_d / m_hat + omega_bar``, ``omega_bar`` on the ramp of ``du_d/dt``
+        from the locked side."""
+        cr, cl = theta_b[0] / theta_b[1], theta_b[2] / theta_b[1]
+        if memory.locked_right:
+            w = cr if u_d_dot >= 0 else cr + (cr - cl) * max(u_d_dot / self.beta_l, -1.0)
+        else:
+            w = cl if u_d_dot <= 0 else cl + (cr - cl) * min(u_d_dot / self.beta_r, 1.0)
+        if u_d_dot >= self.beta_r:
+            memory.locked_right = True
+        elif u_d_dot <= -self.beta_l:
+            memory.locked_right = False
+        return u_d / theta_b[1] + w
+
     def params(self) -> tuple[float, float]:
         """Kernel parameters of the ramps.
 
@@ -319,6 +418,12 @@ class GainOnlyInverse(InverseKind):
 
     code: ClassVar[int] = 4
     name: ClassVar[str] = "gain-only"
+    adapted: ClassVar[tuple[float, float, float]] = (0.0, 1.0, 0.0)
+
+    def _sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray,
+                memory: InverseMemory, ts: float) -> float:
+        """``v = u_d / m_hat``."""
+        return u_d / theta_b[1]
 
 
 _BY_NAME: dict[str, type[InverseKind]] = {

@@ -26,15 +26,7 @@ import numpy as np
 from .. import validate as v
 from ..errors import InputError
 from ..lti import as_state_space, zoh_discretize
-from ..nonlinearities import (
-    Backlash,
-    ExactInverse,
-    GainOnlyInverse,
-    InverseKind,
-    NoInverse,
-    SmoothFilterInverse,
-    SmoothRampInverse,
-)
+from ..nonlinearities import Backlash, ExactInverse, InverseKind, InverseMemory
 from .adaptive import AdaptiveLaw, adaptive_rate
 from .design import MRCDesign, companion, design_mrc
 from .problem import ROUND_SLACK
@@ -97,12 +89,9 @@ class DiscreteAdaptiveController:
         self._amd, self._bmd = zoh_discretize(am, bm, self.ts)
         ah, bh, self._ch = companion(d.h_num, d.h_den)
         self._ahd, self._bhd = zoh_discretize(ah, bh, self.ts)
-        self._gamma = self.adaptation.gamma_diag
-        th0 = self.adaptation.theta_b0_array
-        if isinstance(self.inverse, GainOnlyInverse):
-            self._gamma = self._gamma * np.array([0.0, 1.0, 0.0])
-            th0 = np.array([0.0, th0[1], 0.0])
-        self._th0 = th0
+        adapted = np.array(self.inverse.adapted)
+        self._gamma = self.adaptation.gamma_diag * adapted
+        self._th0 = np.where(adapted > 0, self.adaptation.theta_b0_array, 0.0)
         self.reset()
 
     def __repr__(self) -> str:
@@ -118,9 +107,7 @@ class DiscreteAdaptiveController:
         self._xm = np.zeros(q)
         self._z = np.zeros((nh, 4))
         self.theta_b = self._th0.copy()
-        self._mode: int | None = None
-        self._lock = 1
-        self._wbar: float | None = None
+        self._memory: InverseMemory | None = None  # set by the first sample's u_d slope
         self._r_prev: float | None = None
         self.u_d = 0.0
         self.y_m = 0.0
@@ -170,40 +157,17 @@ class DiscreteAdaptiveController:
             + p.theta_2 @ (self._al @ x2 + self._bl * y)
             + p.theta_3 * r_dot
         )
-        if self._mode is None:
-            self._mode = 1 if udd >= 0 else 0
-            self._lock = self._mode
-        elif (self._mode == 1 and udd < 0) or (self._mode == 0 and udd > 0):
-            self._mode = 1 - self._mode
+        mem = self._memory
+        if mem is None:
+            mem = self._memory = InverseMemory(rising=udd >= 0, locked_right=udd >= 0)
+        elif (mem.rising and udd < 0) or (not mem.rising and udd > 0):
+            mem.rising = not mem.rising
         th = self.theta_b
         inv = self.inverse
-        cr, cl = th[0] / th[1], th[2] / th[1]
-        target = cr if self._mode else cl
-        if isinstance(inv, NoInverse):
-            out = ud
-        elif isinstance(inv, GainOnlyInverse):
-            out = ud / th[1]
-        elif isinstance(inv, SmoothFilterInverse):
-            if self._wbar is None:
-                self._wbar = target
-            out = ud / th[1] + self._wbar
-            decay = np.exp(-inv.alpha * self.ts)
-            self._wbar = target + (self._wbar - target) * decay
-        elif isinstance(inv, SmoothRampInverse):
-            if self._lock:
-                w = cr if udd >= 0 else cr + (cr - cl) * max(udd / inv.beta_l, -1.0)
-            else:
-                w = cl if udd <= 0 else cl + (cr - cl) * min(udd / inv.beta_r, 1.0)
-            out = ud / th[1] + w
-            if udd >= inv.beta_r:
-                self._lock = 1
-            elif udd <= -inv.beta_l:
-                self._lock = 0
-        else:
-            out = ud / th[1] + target
+        out = inv.sample(ud, udd, th, mem, self.ts)
         # adaptive law (3.11), forward Euler
         y_m = float(self._cm @ self._xm)
-        chi = float(self._mode)
+        chi = float(mem.rising)
         wb = np.array([chi, -out, 1.0 - chi])
         zeta_all = self._ch @ self._z
         if inv.adapts:
@@ -255,7 +219,20 @@ def simulate_discrete_loop(
     -------
     ClosedLoopResponse
         One row per sample.
+
+    Raises
+    ------
+    InputError
+        If an argument is not of its kind, or the plant has a direct feedthrough.
     """
+    if not isinstance(controller, DiscreteAdaptiveController):
+        raise InputError(f"controller must be a DiscreteAdaptiveController, got "
+                         f"{type(controller).__name__}")
+    if not isinstance(backlash, Backlash):
+        raise InputError(f"backlash must be a Backlash, got {type(backlash).__name__}")
+    if not callable(getattr(reference, "derivative", None)):  # dr/dt is passed on
+        raise InputError(f"reference must be a SumOfSines or a TableReference, got "
+                         f"{type(reference).__name__}")
     controller.reset()
     ts = controller.ts
     n = _n_samples(duration, ts)

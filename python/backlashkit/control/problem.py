@@ -16,7 +16,7 @@ import numpy as np
 from .. import validate as v
 from ..errors import InputError
 from ..lti import as_state_space
-from ..nonlinearities import Backlash, GainOnlyInverse, InverseKind
+from ..nonlinearities import Backlash, InverseKind
 from .adaptive import AdaptiveLaw
 from .design import MRCDesign, companion
 
@@ -84,17 +84,13 @@ def _controller(design: MRCDesign) -> dict[str, Any]:
 def _adaptation(adaptation: AdaptiveLaw, inverse: InverseKind) -> dict[str, Any]:
     """Gains and initial estimate of the adaptive law (only ``m`` adapts under a
     gain-only inverse)."""
-    gamma = adaptation.gamma_diag
-    thb0 = adaptation.theta_b0_array
-    if isinstance(inverse, GainOnlyInverse):
-        gamma = gamma * np.array([0.0, 1.0, 0.0])
-        thb0 = np.array([0.0, thb0[1], 0.0])
+    adapted = np.array(inverse.adapted)
     return {
-        "gamma": gamma,
+        "gamma": adaptation.gamma_diag * adapted,
         "sigma": adaptation.sigma,
         "sigma_bound": adaptation.sigma_bound,
         "m0": adaptation.m0,
-        "thb0": thb0,
+        "thb0": np.where(adapted > 0, adaptation.theta_b0_array, 0.0),
     }
 
 
