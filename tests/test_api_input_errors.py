@@ -5,6 +5,8 @@ plot takes the axes that ``plt.subplots`` returns."""
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 import warnings
 
 import matplotlib.pyplot as plt
@@ -183,3 +185,95 @@ def test_a_step_down_off_the_grid_is_refused():
     ctrl = bk.DiscreteAdaptiveController(([1.0], [1.0, -0.5, -1.5]), ts=1e-3)
     assert repr(ctrl) == ("DiscreteAdaptiveController(ts=0.001, inverse=ExactInverse(), "
                           "theta_b=[1.51, 0.2, -0.55])")
+
+
+def _steady_record(hold: float = 2.0, torque: float = 0.942) -> bk.identify.Record:
+    """Paper A's drive held at ``torque`` (N m) from its steady state, then 0 at
+    ``hold`` s; ``hold`` + 2 s at 1 ms, 40 dB on both speeds."""
+    t = bk.signals.time_grid(hold + 2.0, 1e-3)
+    u = bk.signals.step_down(t, torque, t_s=hold)
+    res = DRIVE.simulate(t, u, initial_state=DRIVE.steady_state(torque))
+    rng = np.random.default_rng(3)
+    return bk.identify.Record(t, u, bk.signals.add_noise(res.w_motor, 40.0, rng=rng),
+                              bk.signals.add_noise(res.w_load, 40.0, rng=rng))
+
+
+def test_a_search_range_in_degrees_is_noted():
+    """``theta_max=15`` meant 15 degrees: the search ran over 0 to 859 deg, its grid 60
+    times coarser than meant, and said nothing."""
+    said = (r"theta_max = 15 rad is a half-width of 859 deg: theta_max is in rad "
+            r"\(degrees written as rad\? 15 deg is 0.2618 rad\)")
+    with pytest.warns(UserWarning, match="ThetaGrid." + said):
+        bk.identify.ThetaGrid(theta_max=15)
+    with pytest.warns(UserWarning, match="^" + said):
+        bk.RegressionIdentifier(DRIVE, theta_max=15, n_grid=4).fit([_steady_record()])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bk.identify.ThetaGrid(theta_max=0.5)  # 29 deg: wide, but a half-width in rad
+
+
+def test_a_level_window_longer_than_the_hold_is_noted():
+    """The starting speed's level was averaged over what there is before the step-down,
+    whatever ``level_window`` asked for, without a word."""
+    recs = [_steady_record(torque=0.157), _steady_record(torque=0.942)]
+    with pytest.warns(UserWarning, match=r"record: level_window = 100 s is longer than "
+                                         r"the 2 s recorded before the step-down at "
+                                         r"t = 2 s; the speed level is their mean"):
+        est = bk.TwoStepIdentifier(DRIVE, level_window=100.0).fit(recs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        same = bk.TwoStepIdentifier(DRIVE, level_window=2.0).fit(recs)
+    assert est.theta_ == same.theta_
+
+
+def test_a_generator_seeds_a_batch_as_it_seeds_add_noise():
+    """``add_noise(rng=)`` takes a generator, ``ParametricBootstrap(seed=)`` refused one.
+    A generator's own SeedSequence is now the root: the same generator state gives the
+    same streams, and a second batch from it other streams, as a second draw would."""
+    def states(seeds):
+        return [tuple(s.generate_state(2)) for s in seeds]
+
+    a, b = np.random.default_rng(5), np.random.default_rng(5)
+    assert bk.ParametricBootstrap(seed=a).seed is a
+    first = states(bk.parallel.task_seeds(a, 3))
+    assert first == states(bk.parallel.task_seeds(b, 3))
+    assert set(first).isdisjoint(states(bk.parallel.task_seeds(a, 3)))
+    assert first == states(bk.parallel.task_seeds(np.random.default_rng(5), 3))
+    with pytest.raises(InputError, match=r"seed must be an integer >= 0, a numpy.random."
+                                         r"SeedSequence or a numpy.random.Generator, got "
+                                         r"'7'"):
+        bk.ParametricBootstrap(seed="7")
+
+
+def test_the_delay_margin_is_at_the_top_level_without_scipy_at_import():
+    """``delay_margin`` was only in ``backlashkit.delay``; it is read from there on first
+    use, so that ``import backlashkit`` still leaves scipy out."""
+    code = ("import sys, backlashkit as bk; assert 'scipy' not in sys.modules; "
+            "from backlashkit import delay_margin; import backlashkit.delay as d; "
+            "assert delay_margin is d.delay_margin and bk.DelaySystem is d.DelaySystem; "
+            "assert set(d.__all__) >= {n for n in bk.__all__ if n in dir(d)}; print('ok')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=False)
+    assert out.stdout.strip() == "ok", out.stderr
+    with pytest.raises(AttributeError, match="module 'backlashkit' has no attribute 'nope'"):
+        bk.nope  # noqa: B018
+
+
+def test_the_discrete_loop_names_an_argument_of_the_wrong_kind():
+    """A plain function as the reference ended in ``AttributeError: 'function' object
+    has no attribute 'derivative'``; the other arguments likewise."""
+    plant = ([1.0], [1.0, -0.5, -1.5])
+    ctrl = bk.DiscreteAdaptiveController(plant, ts=1e-3)
+    gap = bk.Backlash(m=1.0, c_r=0.2, c_l=-0.3)
+    ref = bk.SumOfSines([1.0], [3.0])
+    loop = bk.control.simulate_discrete_loop
+    for kwargs, said in (
+            ({"reference": lambda t: np.sin(t)}, "reference must be a SumOfSines or a "
+                                                 "TableReference, got function"),
+            ({"backlash": (1.0, 0.2, -0.3)}, "backlash must be a Backlash, got tuple"),
+            ({"controller": "pi"}, "controller must be a DiscreteAdaptiveController, got "
+                                   "str")):
+        args = {"backlash": gap, "controller": ctrl, "reference": ref, **kwargs}
+        with pytest.raises(InputError, match=said):
+            loop(plant, args.pop("backlash"), args.pop("controller"), duration=0.1, **args)
+    assert loop(plant, gap, ctrl, reference=ref, duration=0.1).t.size == 101  # both ends
