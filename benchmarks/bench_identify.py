@@ -39,8 +39,9 @@ theirs: those runs are counted apart, the fit's weighed by their time at its
 simulations' rate on whole spans, and again at a steadier unit, the median of
 ``UNIT_REPEATS`` kernel simulations of the records timed apart; the bound's time is
 also given in times of one simulation of the record (medians of 7, interleaved, in CPU
-time of the process, all its threads: other jobs' time slices do not count). Its
-last line tallies the Levenberg-Marquardt step doublings of one more fit, each
+time of the process, all its threads: other jobs' time slices do not count). It
+times the normal equations' products of one more fit's Levenberg-Marquardt steps
+apart (``normal_equations``), and its last line tallies the Levenberg-Marquardt step doublings of one more fit, each
 evaluated whether the parabola along the step tries it or not (``doublings``).
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
@@ -65,6 +66,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+import backlashkit.identify._lm as lm_mod
 from backlashkit import TwoMassDrive, signals
 from backlashkit.errors import CorrelatedResidualsWarning
 from backlashkit.identify import (
@@ -194,6 +196,33 @@ def part_of(ts: float, n: int) -> str:
     return "windows" if n < WINDOW_SAMPLES else "whole"
 
 
+def normal_equations(recs, prior) -> None:
+    """What the products ``J^T r`` and ``J^T J`` of Levenberg-Marquardt's steps cost in
+    one more default fit: each step's, timed again apart from it (the fit's own are
+    part of ``_step``), on the whole records' Jacobians (rows of both records) and on
+    the shorter ones."""
+    parts = {"whole": [0, 0.0], "shorter": [0, 0.0]}
+    real = lm_mod._step
+
+    def step(state, *args):
+        start = time.perf_counter()
+        jz = state.jac
+        _ = (jz.T @ state.r, jz.T @ jz)
+        part = "whole" if jz.shape[0] >= sum(r.t.size for r in recs) else "shorter"
+        parts[part][0] += 1
+        parts[part][1] += time.perf_counter() - start
+        return real(state, *args)
+
+    lm_mod._step = step
+    try:
+        JointIdentifier(prior, workers=1).fit(recs)
+    finally:
+        lm_mod._step = real
+    print("  the normal equations' products (J^T r, J^T J) of Levenberg-Marquardt's "
+          "steps, timed again apart: " + ", ".join(
+              f"{n} steps on the {part} spans {sec:.3f} s" for part, (n, sec) in parts.items()))
+
+
 def count(recs, prior) -> None:
     """Issue 24's measure: one fit and one bound in simulations of the records, and
     where the fit's wall time goes."""
@@ -229,6 +258,7 @@ def count(recs, prior) -> None:
               "per sample")
     print(f"  one fit's wall time: {wall:.2f} s, the kernel "
           f"{sum(sec for sec, _ in kernel.values()) + sens[2]:.2f} s of it")
+    normal_equations(recs, prior)
     truth = TwoMassDrive(**P_TRUE, theta=THETA)
     n_sens = sens[2] / per_sim if whole_sec else 0.0
     print(f"paper A's two 80 s records, prior error 30 %: one JointIdentifier.fit (the "
@@ -271,7 +301,6 @@ def doublings(recs, prior) -> None:
     parabola along the step (``identify._lm._doubling_pays``) tries and turns away,
     and how many of each would lower the cost. Every one of them was tried before
     the parabola decided."""
-    import backlashkit.identify._lm as lm_mod
 
     tally = {(pays, lower): 0 for pays in (True, False) for lower in (True, False)}
     real = lm_mod._extrapolate
