@@ -187,6 +187,25 @@ def test_fir_is_zero_phase_and_validated():
         fir_lowpass(x, 20.0, TS, numtaps=10)
 
 
+@pytest.mark.parametrize("cutoff", [30.0, 200.0])
+def test_a_span_of_the_fir_output_is_the_whole_outputs_to_the_bit(cutoff):
+    """``span=`` filters only the samples its outputs read: the same sums, so the same
+    values, near both ends of the signal (their edge padding) and inside it."""
+    x = np.cumsum(np.random.default_rng(4).standard_normal(20_001))
+    whole = fir_lowpass(x, cutoff, TS)
+    for span in [(0, 50), (3, 400), (10_000, 10_300), (10_001, 10_777), (19_900, 20_001),
+                 (5, 20_000), (0, 20_001)]:
+        np.testing.assert_array_equal(fir_lowpass(x, cutoff, TS, span=span),
+                                      whole[span[0] : span[1]])
+    for span, said in (((5, 5), r"span must satisfy 0 <= start < stop <= len\(x\) = 20001"),
+                       ((0, 20_002), "span must satisfy"),
+                       ((-1, 4), "span's start must be an integer >= 0, got -1"),
+                       ((0.5, 4), "span's start must be an integer"),
+                       (7, "span must be two sample indices")):
+        with pytest.raises(InputError, match=said):
+            fir_lowpass(x, cutoff, TS, span=span)
+
+
 @pytest.mark.parametrize("numtaps", [3, 11, 661, 1651])
 @pytest.mark.parametrize("cutoff", [0.003, 0.05, 0.5, 0.97])
 def test_fir_taps_match_scipy_firwin(numtaps, cutoff):

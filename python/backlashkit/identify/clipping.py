@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .quantum import speed_quantum
 
 #: Fewest samples at a channel's extreme counted as clipping.
 MIN_COUNT = 5
@@ -126,10 +125,10 @@ def check_not_clipped(record) -> None:
     InputError
         Naming the record, the channel, where the plateau lies and what to do.
     """
-    for col in ("w_motor", "w_load"):
+    for col, quantum in zip(("w_motor", "w_load"), record.speed_quanta, strict=True):
         w = getattr(record, col)
         # an encoder's speed sits on a few levels by nature: no plateau is a limit there
-        clip = None if speed_quantum(w) > 0 else find_clipping(w)
+        clip = None if quantum > 0 else find_clipping(w)
         if clip is None:
             continue
         t = record.t

@@ -60,7 +60,8 @@ def firwin_hamming(numtaps: int, cutoff: float) -> np.ndarray:
 
 
 def fir_lowpass(
-    x: ArrayLike, cutoff: float, ts: float, *, numtaps: int | None = None
+    x: ArrayLike, cutoff: float, ts: float, *, numtaps: int | None = None,
+    span: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """Zero-phase FIR low-pass filter (linear-phase taps applied centred).
 
@@ -75,11 +76,16 @@ def fir_lowpass(
     numtaps : int, optional
         Odd filter length; default the odd integer nearest ``3.3 f_s / f_c``
         (Hamming window, transition band about as wide as the cut-off), at least 3.
+    span : tuple of int, optional
+        ``(start, stop)``, ``0 <= start < stop <= len(x)``: only ``y[start:stop]`` of
+        the filtered signal ``y``, from the samples it needs (the same values, each
+        output the same sum; eq. 6 integrates a fraction of a second of a record).
 
     Returns
     -------
     numpy.ndarray
-        Filtered signal, same length; the ends are padded with the end values.
+        Filtered signal, same length (or ``span``'s); the ends are padded with the end
+        values.
     """
     arr = v.finite_array("x", x)
     wc = v.positive("cutoff", cutoff)
@@ -99,8 +105,24 @@ def fir_lowpass(
         raise InputError(f"numtaps must be odd (a centred linear-phase filter), got {numtaps}")
     taps = firwin_hamming(numtaps, wc / nyq)
     half = numtaps // 2
-    padded = np.pad(arr, half, mode="edge")
-    return np.convolve(padded, taps, mode="valid")
+    start, stop = (0, arr.size) if span is None else _span(span, arr.size)
+    # the outputs start..stop-1 read the inputs half a filter either side; where that
+    # passes an end of x, the edge padding of the whole signal is the segment's own
+    lo, hi = max(0, start - half), min(arr.size, stop + half)
+    padded = np.pad(arr[lo:hi], half, mode="edge")
+    return np.convolve(padded, taps, mode="valid")[start - lo : stop - lo]
+
+
+def _span(span: tuple[int, int], n: int) -> tuple[int, int]:
+    """``span`` checked against a signal of ``n`` samples."""
+    try:
+        start, stop = span
+    except (TypeError, ValueError):
+        raise InputError(f"span must be two sample indices (start, stop), got {span!r}") from None
+    start, stop = v.integer("span's start", start, 0), v.integer("span's stop", stop, 1)
+    if not start < stop <= n:
+        raise InputError(f"span must satisfy 0 <= start < stop <= len(x) = {n}, got {span!r}")
+    return start, stop
 
 
 @dataclass(frozen=True)

@@ -147,7 +147,6 @@ from .noise import (
     lag1,
     noise_coloured,
 )
-from .quantum import speed_quantum
 from .record import as_records, check_prior
 from .search import JointSearch
 from .step import check_fit_near_prior, check_step_downs, held_speed_gain, too_far
@@ -342,7 +341,7 @@ class JointIdentifier:
         records = as_records(records, prior=prior)
         check_step_downs(records, prior)
         quanta = [(0.0, 0.0) if r.has_positions  # fitted as the angles they hold
-                  else (speed_quantum(r.w_motor), speed_quantum(r.w_load)) for r in records]
+                  else r.speed_quanta for r in records]
         records = [encoder_angles(r, quanta=q) for r, q in zip(records, quanta, strict=True)]
         # one BLAS thread: the products J^T J (n_samples x 7) gain nothing from more,
         # and their rounding then does not depend on the machine's core count (the

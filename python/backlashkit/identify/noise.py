@@ -35,7 +35,7 @@ import numpy as np
 from .. import validate as v
 from ..errors import InputError
 from ..plants import TwoMassDrive
-from .quantum import QUANTUM_RTOL, speed_quantum
+from .quantum import QUANTUM_RTOL
 from .record import Record
 from .step import find_step_down
 
@@ -337,8 +337,7 @@ def encoder_angles(rec: Record, *, quanta: tuple[float, float] | None = None) ->
     """
     if rec.has_positions:
         return rec
-    q_m, q_l = (quanta if quanta is not None
-                else (speed_quantum(rec.w_motor), speed_quantum(rec.w_load)))
+    q_m, q_l = quanta if quanta is not None else rec.speed_quanta
     if not (q_m > 0 and q_l > 0):
         return rec
     same = math.isclose(q_m, q_l, rel_tol=QUANTUM_RTOL)

@@ -15,6 +15,7 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -22,6 +23,7 @@ from .. import validate as v
 from ..errors import InputError
 from ..plants import TwoMassDrive
 from .clipping import check_not_clipped
+from .quantum import speed_quantum
 from .torque import check_torque_noise
 
 __all__ = [
@@ -100,6 +102,14 @@ class Record:
         what = "encoder angles" if self.has_positions else "speeds"
         return (f"Record({self.name!r}, {self.t.size} samples at {self.ts:g} s from "
                 f"t = {self.t[0]:g} s, {what})")
+
+    @cached_property
+    def speed_quanta(self) -> tuple[float, float]:
+        """The steps of the motor and load speeds where an encoder's differenced counts
+        quantise them, in rad/s (:func:`~backlashkit.identify.quantum.speed_quantum`;
+        0 for a speed that is not quantised). Found once per record: it sorts each
+        speed, and the record's checks and the fit each ask."""
+        return speed_quantum(self.w_motor), speed_quantum(self.w_load)
 
     @property
     def has_positions(self) -> bool:

@@ -449,9 +449,12 @@ class TwoStepIdentifier:
                         f"{name} must be below the Nyquist frequency pi/ts = "
                         f"{math.pi / rec.ts:.6g} rad/s of {rec.name}, got {cut!r}"
                     )
-            wmf = fir_lowpass(rec.w_motor, self.cutoff_motor, rec.ts, numtaps=self.numtaps)
-            wlf = fir_lowpass(rec.w_load, self.cutoff_load, rec.ts, numtaps=self.numtaps)
-            ini = pre_estimate(wmf, wlf, rec.ts, com.i_c, com.i_b)
+            span = (com.i_c, com.i_b + 1)  # eq. 6's integral alone
+            wmf = fir_lowpass(rec.w_motor, self.cutoff_motor, rec.ts, numtaps=self.numtaps,
+                              span=span)
+            wlf = fir_lowpass(rec.w_load, self.cutoff_load, rec.ts, numtaps=self.numtaps,
+                              span=span)
+            ini = pre_estimate(wmf, wlf, rec.ts, 0, wmf.size - 1)
             if not ini > 0:
                 raise InputError(
                     f"{rec.name}: the backlash pre-estimate, half the integral of the "
