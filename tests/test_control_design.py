@@ -83,3 +83,38 @@ def test_diophantine_on_random_plants_by_expanding_both_sides(seed):
 def test_assumption_violations_refused(kwargs, msg):
     with pytest.raises(InputError, match=msg):
         design_mrc(**kwargs)
+
+
+@pytest.mark.parametrize("plant", [([1.0], np.poly([-300.0, -600.0])),
+                                   ([1e12], [1.0, -0.5, -1.5]), ([1e-12], [1.0, -0.5, -1.5])])
+def test_a_badly_scaled_plant_is_designed_not_called_a_cancellation(plant):
+    """Poles at hundreds of rad/s, or a gain of 1e12, scale (3.3)'s Sylvester matrix
+    apart: its condition number passed 1e12 and the plant was refused as a pole-zero
+    cancellation it does not have. Solved with its rows and columns equilibrated, the
+    matched closed loop is the reference model."""
+    d = design_mrc(plant)
+    assert d.diophantine_residual() < 1e-8
+    s = control.tf("s")
+    n = len(plant[1]) - 1
+    lam = control.tf(d.filter, [1])
+    P = sum(d.theta_1[i] * s**i for i in range(n)) / lam
+    Q = sum(d.theta_2[i] * s**i for i in range(n)) / lam
+    G = control.tf(*plant)
+    w = np.array([0.3, 1.0, 3.0])
+    np.testing.assert_allclose((d.theta_3 * G / (1 - P - Q * G))(1j * w),
+                               1 / np.polyval(d.reference_model, 1j * w), rtol=1e-6)
+
+
+def test_a_design_that_cannot_match_is_refused():
+    """Poles from 10 to 6000 rad/s with a zero at 2: (3.3) solves to its residual
+    check, but the gains (1e16) leave the matched loop 3 % off the reference model."""
+    with pytest.raises(InputError, match=r"too ill-conditioned for this plant: its matched "
+                                         r"closed loop departs from the reference model "
+                                         r"by 0.0\d+ \(relative"):
+        design_mrc(([1.0, 2.0], np.poly([-3000.0, -6000.0, -10.0])))
+
+
+def test_a_cancellation_names_the_common_root():
+    with pytest.raises(InputError, match=r"common root of numerator and denominator near "
+                                         r"s = -2 \(pole-zero cancellation\)"):
+        design_mrc(([1.0, 2.0 + 1e-12], [1.0, 3.0, 2.0]))

@@ -42,7 +42,12 @@ _TRIM_RTOL = 1e-10
 
 
 def _poly(name: str, coeffs: Any) -> np.ndarray:
-    arr = _v.finite_array(name, np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel())
+    _v.real_numbers(name, coeffs)
+    arr = np.atleast_1d(np.asarray(coeffs, dtype=float))
+    if arr.ndim > 1 and arr.size != arr.shape[-1]:  # a row, as scipy's to_tf gives, is fine
+        raise InputError(f"{name} must be one list of coefficients (highest power first), "
+                         f"got shape {arr.shape}")
+    arr = _v.finite_array(name, arr.ravel())
     if arr.size == 0:
         raise InputError(f"{name} must have at least one coefficient, got none")
     nz = np.flatnonzero(arr)

@@ -79,6 +79,9 @@ def axes_of(ax, n: int, *, figsize: tuple[float, float] | None = None, columns: 
     if len(axes) != n:
         raise InputError(f"ax must be {n} Axes (a sequence or an array of them, as "
                          f"plt.subplots returns), got {len(axes)}")
+    for a in axes:  # duck-typed: matplotlib is imported only to draw
+        if not (hasattr(a, "plot") and hasattr(a, "figure")):
+            raise InputError(f"ax must be matplotlib Axes, got {type(a).__name__}")
     return axes[0].figure, axes
 
 

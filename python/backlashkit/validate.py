@@ -47,6 +47,21 @@ def degrees_note(name: str, theta: float) -> str | None:
             f"{math.radians(theta):.4g} rad)")
 
 
+def real_numbers(name: str, value: object, what: str = "real numbers") -> None:
+    """Refuse a string, a bool, None or a complex number anywhere in ``value`` (a number,
+    or nested lists, tuples or arrays of them): NumPy would read ``"-2.0"`` as -2 and
+    True as 1, and drop an imaginary part with a warning); ``what`` words the kind."""
+    if isinstance(value, (list, tuple)):
+        for item in value:
+            real_numbers(name, item, what)
+    elif isinstance(value, np.ndarray):
+        if value.dtype.kind not in "iuf":
+            raise InputError(f"{name} must be {what}, got an array of {value.dtype}")
+    elif (isinstance(value, (str, bytes, bool, np.bool_, complex, np.complexfloating))
+          or value is None):
+        raise InputError(f"{name} must be {what}, got {value!r:.80}")
+
+
 def finite_scalar(name: str, value: float) -> float:
     """Return ``value`` as a float, or raise if it is not a finite real number."""
     if isinstance(value, (bool, str, bytes)):  # float("1") works, but "1" is no number

@@ -51,7 +51,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return p
 
 
-def _check_out(path: str | None, force: bool, flag: str) -> Path | None:
+def _check_out(path: str | None, force: bool, flag: str, scenario: str) -> Path | None:
     if path is None:
         return None
     out = Path(path)
@@ -59,6 +59,8 @@ def _check_out(path: str | None, force: bool, flag: str) -> Path | None:
         raise InputError(f"{flag} {out} is a directory; give a file name")
     if out.exists() and not force:
         raise InputError(f"{flag} {out} already exists; pass --force to overwrite it")
+    if out.exists() and out.resolve() == Path(scenario).resolve():
+        raise InputError(f"{flag} {out} is the scenario file; choose another name")
     if not out.parent.is_dir():
         raise InputError(missing_directory(flag, out))
     check_writable(out, flag)
@@ -81,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
     from ..control.closed_loop import write_trace
     from ..control.scenario import load_scenario
 
-    trace = _check_out(args.trace, args.force, "--trace")
-    plot = _check_out(args.plot, args.force, "--plot")
+    trace = _check_out(args.trace, args.force, "--trace", args.scenario)
+    plot = _check_out(args.plot, args.force, "--plot", args.scenario)
     if plot is not None:
         check_plot_suffix("--plot", plot)
     if trace is not None and plot is not None and trace.resolve() == plot.resolve():

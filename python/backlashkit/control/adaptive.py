@@ -60,6 +60,8 @@ class AdaptiveLaw:
     _theta_b0: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        for name in ("gamma", "theta_b0"):
+            v.real_numbers(name, getattr(self, name))
         g = np.atleast_1d(v.finite_array("gamma", np.atleast_1d(np.asarray(self.gamma, float))))
         if g.size == 1:
             g = np.repeat(g, 3)
@@ -68,20 +70,20 @@ class AdaptiveLaw:
                 f"gamma must be a scalar or 3 values (a diagonal), got {g.size} values"
             )
         if not (g >= 0).all() or not (g > 0).any():
-            raise InputError(f"gamma must be > 0, got {list(g)!r}")
+            raise InputError(f"gamma must be > 0, got {[float(x) for x in g]!r}")
         th = v.finite_array("theta_b0", self.theta_b0)
         if th.size != 3:
             raise InputError(f"theta_b0 must have 3 values (mc_r, m, mc_l), got {th.size}")
         if not th[1] > 0:
-            raise InputError(f"theta_b0[1] (initial m_hat) must be > 0, got {th[1]!r}")
+            raise InputError(f"theta_b0[1] (initial m_hat) must be > 0, got {float(th[1])!r}")
         if th[0] < 0 or th[2] > 0:
             raise InputError(
                 "theta_b0 must satisfy A3: mc_r >= 0 and mc_l <= 0, got "
-                f"mc_r={th[0]!r}, mc_l={th[2]!r}"
+                f"mc_r={float(th[0])!r}, mc_l={float(th[2])!r}"
             )
         m0 = 0.1 * th[1] if self.m0 is None else v.positive("m0", self.m0)
         if m0 > th[1]:
-            raise InputError(f"m0 must be <= theta_b0[1] = {th[1]!r} (A3), got {m0!r}")
+            raise InputError(f"m0 must be <= theta_b0[1] = {float(th[1])!r} (A3), got {m0!r}")
         sb = (
             10.0 * max(1.0, float(np.linalg.norm(th)))
             if self.sigma_bound is None

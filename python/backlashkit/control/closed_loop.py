@@ -105,6 +105,8 @@ def simulate_closed_loop(
     if not isinstance(inverse, InverseKind):
         raise InputError(f"inverse must be an InverseKind object, got {type(inverse).__name__}")
     adaptation = AdaptiveLaw() if adaptation is None else adaptation
+    if not isinstance(adaptation, AdaptiveLaw):
+        raise InputError(f"adaptation must be an AdaptiveLaw, got {type(adaptation).__name__}")
     design = design_mrc(plant, reference_model=reference_model, filter=filter)
     prob = build_problem(
         plant,

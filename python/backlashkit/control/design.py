@@ -22,6 +22,7 @@ degree ``n``; ``Z`` and ``R`` coprime (otherwise (3.3) has no unique solution).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -191,6 +192,30 @@ class MRCDesign:
             "Lambda": [float(x) for x in self.filter],
         }
 
+    def matching_error(self) -> float:
+        """Largest relative departure of the matched closed loop (``u = u_d``, no
+        backlash) ``theta_3 G / (1 - theta_1' a / Lambda - theta_2' a G / Lambda)``
+        from the reference model ``1 / R_m``, at 0.3, 1 and 3 times the geometric mean
+        of the reference model's pole magnitudes.
+
+        Returns
+        -------
+        float
+            Zero up to rounding for a design that matches.
+        """
+        poles = np.abs(np.roots(self.reference_model))
+        w0 = float(np.exp(np.mean(np.log(poles[poles > 0])))) if np.any(poles > 0) else 1.0
+        s = 1j * w0 * np.array([0.3, 1.0, 3.0])
+        num, den = self.k_p * np.polyval(self.zeros_poly, s), np.polyval(self.poles_poly, s)
+        lam = np.polyval(self.filter, s)
+        p = np.polyval(self.theta_1[::-1], s) / lam
+        q = np.polyval(self.theta_2[::-1], s) / lam
+        with np.errstate(all="ignore"):
+            closed = self.theta_3 * num / (den - p * den - q * num)
+            want = 1.0 / np.polyval(self.reference_model, s)
+            err = np.max(np.abs(closed - want) / np.abs(want))
+        return float(err) if np.isfinite(err) else math.inf
+
     def diophantine_residual(self) -> float:
         """Largest coefficient of ``LHS - RHS`` of (3.3), relative to the RHS scale.
 
@@ -233,6 +258,65 @@ def _hurwitz_poly(name: str, coeffs: Any) -> np.ndarray:
             f"{_roots_fmt(bad)}"
         )
     return arr
+
+
+#: Roots of the plant's numerator and denominator this close, relative to their size,
+#: count as a pole-zero cancellation: (3.3) then has no unique solution, or gains of
+#: order the inverse of their distance.
+CANCEL_RTOL = 1e-8
+#: (3.3)'s Sylvester matrix solved as it is up to this condition number; beyond (fast
+#: poles or an extreme gain scale its columns apart) with its rows and columns
+#: equilibrated first.
+PLAIN_SOLVE_COND = 1e12
+#: Largest relative residual of (3.3)'s solution that is accepted.
+DIOPHANTINE_RTOL = 1e-9
+#: Largest departure of the matched closed loop from the reference model
+#: (:meth:`MRCDesign.matching_error`) of a design that is returned: far above rounding
+#: for paper B's plant and random well-scaled ones, far below what a user would notice.
+MATCH_RTOL = 1e-6
+
+
+def _check_coprime(z: np.ndarray, den: np.ndarray) -> None:
+    """Refuse a numerator ``z`` and denominator ``den`` with a common root (to
+    :data:`CANCEL_RTOL`)."""
+    zeros, poles = np.roots(z), np.roots(den)
+    for zero in zeros:
+        gap = np.abs(poles - zero)
+        size = np.maximum(np.abs(poles), abs(zero))
+        near = gap <= CANCEL_RTOL * np.where(size > 0, size, 1.0)
+        if np.any(near):
+            pole = poles[np.argmax(near)]
+            raise InputError(
+                f"plant has a common root of numerator and denominator near s = "
+                f"{_root_text(pole)} (pole-zero cancellation); the Diophantine equation "
+                "(3.3) has no unique solution - cancel it first")
+
+
+def _root_text(root: complex) -> str:
+    return f"{root.real:.6g}" if root.imag == 0 else f"{root.real:.6g}{root.imag:+.6g}j"
+
+
+def _diophantine(mat: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """(3.3)'s solution; with rows and columns equilibrated where ``mat`` is badly
+    scaled (:data:`PLAIN_SOLVE_COND`), checked by its residual."""
+    with np.errstate(all="ignore"):
+        if np.linalg.cond(mat) <= PLAIN_SOLVE_COND:
+            return np.linalg.solve(mat, rhs)
+        rows = 1.0 / np.max(np.abs(mat), axis=1)
+        scaled = mat * rows[:, np.newaxis]
+        cols = 1.0 / np.max(np.abs(scaled), axis=0)
+        try:
+            sol = np.linalg.solve(scaled * cols, rhs * rows) * cols
+        except np.linalg.LinAlgError:
+            sol = np.full(rhs.shape, np.nan)
+        resid = np.max(np.abs(mat @ sol - rhs))
+        scale = np.max(np.abs(mat) @ np.abs(sol)) + np.max(np.abs(rhs))
+    if not (np.all(np.isfinite(sol)) and resid <= DIOPHANTINE_RTOL * scale):
+        raise InputError(
+            "the Diophantine equation (3.3) is too ill-conditioned to solve for this "
+            "plant (poles or gains many orders of magnitude apart): rescale time or the "
+            "plant's units")
+    return sol
 
 
 def design_mrc(
@@ -318,18 +402,12 @@ def design_mrc(
     for i in range(n):
         mat[i : i + r_asc.size, i] = r_asc
         mat[i : i + zk_asc.size, n + i] = zk_asc
-    cond = np.linalg.cond(mat)
-    if not np.isfinite(cond) or cond > 1e12:
-        raise InputError(
-            "plant has a common root of numerator and denominator (pole-zero "
-            "cancellation); the Diophantine equation (3.3) has no unique solution - "
-            "cancel it first"
-        )
-    sol = np.linalg.solve(mat, rhs_asc)
+    _check_coprime(z, den)
+    sol = _diophantine(mat, rhs_asc)
     theta_1, theta_2 = sol[:n], sol[n:]
     h_num = np.polysub(lam, theta_1[::-1]) / theta_3
     h_den = np.polymul(lam, r_m)
-    return MRCDesign(
+    design = MRCDesign(
         k_p=k_p,
         zeros_poly=z,
         poles_poly=den,
@@ -341,3 +419,10 @@ def design_mrc(
         h_num=h_num,
         h_den=h_den,
     )
+    error = design.matching_error()
+    if not error <= MATCH_RTOL:
+        raise InputError(
+            f"the design is too ill-conditioned for this plant: its matched closed loop "
+            f"departs from the reference model by {error:.2g} (relative; poles or gains "
+            "many orders of magnitude apart): rescale time or the plant's units")
+    return design

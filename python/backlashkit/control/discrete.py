@@ -19,6 +19,7 @@ small matrix-vector products (no allocation in the hot path beyond NumPy tempora
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,7 @@ from ..lti import as_state_space, zoh_discretize
 from ..nonlinearities import Backlash, ExactInverse, InverseKind, InverseMemory
 from .adaptive import AdaptiveLaw, adaptive_rate
 from .design import MRCDesign, companion, design_mrc
-from .problem import ROUND_SLACK
+from .problem import check_rows
 from .response import ClosedLoopResponse
 
 __all__ = ["DiscreteAdaptiveController", "simulate_discrete_loop"]
@@ -76,6 +77,12 @@ class DiscreteAdaptiveController:
         if not isinstance(self.inverse, InverseKind):
             raise InputError(f"inverse must be an InverseKind, got {type(self.inverse).__name__}")
         self.adaptation = AdaptiveLaw() if adaptation is None else adaptation
+        if not isinstance(self.adaptation, AdaptiveLaw):
+            raise InputError(f"adaptation must be an AdaptiveLaw, got "
+                             f"{type(self.adaptation).__name__}")
+        if design is not None and not isinstance(design, MRCDesign):
+            raise InputError(f"design must be an MRCDesign (from design_mrc), got "
+                             f"{type(design).__name__}")
         self.design = (
             design
             if design is not None
@@ -225,6 +232,7 @@ def simulate_discrete_loop(
     InputError
         If an argument is not of its kind, or the plant has a direct feedthrough.
     """
+    use_r_dot = v.flag("use_r_dot", use_r_dot)
     if not isinstance(controller, DiscreteAdaptiveController):
         raise InputError(f"controller must be a DiscreteAdaptiveController, got "
                          f"{type(controller).__name__}")
@@ -248,14 +256,23 @@ def simulate_discrete_loop(
     x = np.zeros(a.shape[0])
     u = 0.0
     m, c_r, c_l = backlash.m, backlash.c_r, backlash.c_l
-    for k in range(n):
-        y = float(c @ x)
-        thb[k] = controller.theta_b
-        v = controller.step(y, r[k], rd[k] if use_r_dot else None)
-        u = min(max(u, m * (v - c_r)), m * (v - c_l))
-        out["y"][k], out["ym"][k], out["ud"][k] = y, controller.y_m, controller.u_d
-        out["v"][k], out["u"][k] = v, u
-        x = ad @ x + bd * u
+    # an overflow ends in a non-finite output or input, refused where it appears
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in range(n):
+            y = float(c @ x)
+            if math.isfinite(y):
+                thb[k] = controller.theta_b
+                vk = controller.step(y, r[k], rd[k] if use_r_dot else None)
+            if not (math.isfinite(y) and math.isfinite(vk)):
+                which = "controller output v" if math.isfinite(y) else "plant output y"
+                raise InputError(
+                    f"the simulation diverged (non-finite {which}) at t = {t[k]:.6g} s; the "
+                    f"controller's sample time ts = {ts:g} s may be too long for the plant, "
+                    "or check the parameters' units and magnitudes")
+            u = min(max(u, m * (vk - c_r)), m * (vk - c_l))
+            out["y"][k], out["ym"][k], out["ud"][k] = y, controller.y_m, controller.u_d
+            out["v"][k], out["u"][k] = vk, u
+            x = ad @ x + bd * u
     return ClosedLoopResponse(
         t=t,
         r=r,
@@ -274,4 +291,8 @@ def simulate_discrete_loop(
 
 def _n_samples(duration: float, ts: float) -> int:
     """Samples of a run of ``duration`` s at ``ts`` s, both ends included."""
-    return int(np.floor(v.positive("duration", duration) / ts + ROUND_SLACK)) + 1
+    duration = v.positive("duration", duration)
+    if ts > duration:
+        raise InputError(f"duration must be >= the controller's ts = {ts!r} s, got "
+                         f"{duration!r}")
+    return check_rows(duration, ts) + 1

@@ -20,7 +20,8 @@ from ..nonlinearities import Backlash, InverseKind
 from .adaptive import AdaptiveLaw
 from .design import MRCDesign, companion
 
-__all__ = ["DEFAULT_MAX_STEP", "ROUND_SLACK", "build_problem", "run_problem"]
+__all__ = ["DEFAULT_MAX_STEP", "MAX_ROWS", "MAX_STEPS", "ROUND_SLACK", "build_problem",
+           "check_rows", "run_problem"]
 
 #: Largest integration step in s when none is given: fine enough for paper B's
 #: references and plants, whatever the output sample time.
@@ -28,6 +29,13 @@ DEFAULT_MAX_STEP = 1e-3
 #: A ratio of times within this of a whole number counts as that number (``ts`` a
 #: multiple of the step, ``duration`` a multiple of ``ts``, up to rounding).
 ROUND_SLACK = 1e-9
+#: Most output rows (``duration / ts``) a run may keep: 5e6 rows of the trace's 11
+#: float64 columns take 440 MB.
+MAX_ROWS = 5e6
+#: Most integration steps (``duration / step``) a run may take: about 1 us each on
+#: paper B's example (20 s), and a signal given as a function is sampled on them (8
+#: bytes a step: 160 MB).
+MAX_STEPS = 2e7
 #: Parameters of the kernels' compiled entry point that are integers, and matrices.
 _KERNEL_INTS = {"kind", "n_steps", "n_sub"}
 _KERNEL_MATRICES = {"ap", "al", "am", "ah"}
@@ -40,10 +48,50 @@ def _steps(duration: float, ts: float, step: float | None) -> tuple[float, int, 
     if ts > duration:
         raise InputError(f"ts must be <= duration ({duration!r} s), got {ts!r}")
     h_max = min(ts, DEFAULT_MAX_STEP) if step is None else v.positive("step", step)
+    n_out = check_rows(duration, ts)
+    if duration / h_max > MAX_STEPS * (1 + ROUND_SLACK):  # before any allocation
+        which = "the default, min(ts, 1 ms)" if step is None else "given"
+        raise InputError(
+            f"duration / step gives {duration / h_max:.3g} integration steps (step "
+            f"{h_max:.3g} s, {which}), more than {MAX_STEPS:,.0f}: give a larger step (at "
+            "most ts) or a shorter duration")
     n_sub = max(1, int(np.ceil(ts / h_max - ROUND_SLACK)))
     h = ts / n_sub
-    n_out = int(np.floor(duration / ts + ROUND_SLACK))
     return h, n_sub, n_out * n_sub
+
+
+def check_rows(duration: float, ts: float) -> int:
+    """The output samples after the first of a run of ``duration`` s at ``ts`` s.
+
+    Parameters
+    ----------
+    duration : float
+        Length of the run in s, a whole number of ``ts`` (to :data:`ROUND_SLACK`).
+    ts : float
+        Sample time in s.
+
+    Returns
+    -------
+    int
+        ``duration / ts``.
+
+    Raises
+    ------
+    InputError
+        If ``duration`` is not a whole number of ``ts`` (the run would stop short of
+        it), or gives more than :data:`MAX_ROWS` samples.
+    """
+    ratio = duration / ts
+    if ratio > MAX_ROWS:
+        raise InputError(f"duration / ts gives {ratio:.3g} output samples, more than "
+                         f"{MAX_ROWS:,.0f}: give a longer ts or a shorter duration")
+    n_out = int(np.floor(ratio + ROUND_SLACK))
+    if abs(ratio - round(ratio)) > ROUND_SLACK * max(ratio, 1.0):
+        raise InputError(
+            f"duration must be a whole number of ts = {ts!r} s (the run would stop at "
+            f"{n_out * ts:.6g} s), got {duration!r}: give duration = {n_out * ts:.6g} or "
+            f"{(n_out + 1) * ts:.6g}")
+    return n_out
 
 
 def _plant(plant: Any, initial_state: np.ndarray | None) -> dict[str, Any]:
@@ -95,14 +143,22 @@ def _adaptation(adaptation: AdaptiveLaw, inverse: InverseKind) -> dict[str, Any]
 
 
 def _sampled(name: str, signal: Callable[[np.ndarray], np.ndarray] | None,
-             t_grid: np.ndarray) -> np.ndarray:
-    """``signal`` on the integration grid (empty without one)."""
+             h: float, n_steps: int) -> np.ndarray:
+    """``signal`` on the integration grid of ``n_steps`` steps of ``h`` (empty without
+    one)."""
     if signal is None:
         return np.zeros(0)
     if not callable(signal):
         raise InputError(f"{name} must be a function of the time array t (s), e.g. "
                          f"lambda t: 0.01 * rng.standard_normal(t.shape), got {signal!r}")
-    return v.finite_array(f"{name}(t)", np.broadcast_to(signal(t_grid), t_grid.shape))
+    t_grid = np.arange(n_steps + 1) * h
+    values = signal(t_grid)
+    try:
+        values = np.broadcast_to(values, t_grid.shape)
+    except ValueError:
+        raise InputError(f"{name}(t) must give one value per time of t (shape "
+                         f"{t_grid.shape}) or one for all, got shape {np.shape(values)}") from None
+    return v.finite_array(f"{name}(t)", values)
 
 
 def _reference(reference: Any) -> dict[str, np.ndarray]:
@@ -169,9 +225,8 @@ def build_problem(
     plant_arrays = _plant(plant, initial_state)
     controller = _controller(design)
     adaptive = _adaptation(adaptation, inverse)
-    t_grid = np.arange(n_steps + 1) * h
-    noise = _sampled("output_noise", output_noise, t_grid)
-    dist = _sampled("input_disturbance", input_disturbance, t_grid)
+    noise = _sampled("output_noise", output_noise, h, n_steps)
+    dist = _sampled("input_disturbance", input_disturbance, h, n_steps)
     p1, p2 = inverse.params()
     prob = {
         **plant_arrays,
@@ -195,6 +250,16 @@ def build_problem(
         k: (np.ascontiguousarray(val, dtype=float) if isinstance(val, np.ndarray) else val)
         for k, val in prob.items()
     }
+
+
+def _diverged_advice(message: str, h: float) -> str:
+    """The kernel's ``message``, with the integration step's part where it diverged: an
+    explicit step far above a fast time constant diverges as wrong units would."""
+    if not message.startswith("the simulation diverged"):
+        return message
+    return (f"{message}, or give a smaller step (now {h:.3g} s): a fast part (a plant "
+            "pole, the filter, a smooth inverse's alpha) needs a step well under its time "
+            "constant")
 
 
 def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.ndarray]:
@@ -233,7 +298,7 @@ def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.
     try:
         raw = _core.simulate_adaptive(args)
     except ValueError as exc:
-        raise InputError(str(exc)) from None
+        raise InputError(_diverged_advice(str(exc), prob["h"])) from None
     out = {k: np.asarray(val) for k, val in raw.items()}
     out["thb"] = out["thb"].reshape(-1, 3)
     out["xp"] = out["xp"].reshape(out["thb"].shape[0], -1)

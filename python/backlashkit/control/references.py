@@ -36,6 +36,9 @@ class SumOfSines:
     phase: Sequence[float] | None = None
 
     def __post_init__(self) -> None:
+        for name in ("amplitude", "frequency", "phase"):
+            if name != "phase" or self.phase is not None:
+                v.real_numbers(name, getattr(self, name))
         a = v.finite_array("amplitude", np.atleast_1d(np.asarray(self.amplitude, dtype=float)))
         w = v.finite_array("frequency", np.atleast_1d(np.asarray(self.frequency, dtype=float)))
         if a.size != w.size or a.size == 0:

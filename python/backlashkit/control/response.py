@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .. import validate as v
+from ..errors import InputError
 from .design import MRCDesign
 
 if TYPE_CHECKING:
@@ -64,6 +66,10 @@ class ClosedLoopResponse:
     plant_state: np.ndarray | None = None
 
     def _last(self, fraction: float) -> np.ndarray:
+        fraction = v.finite_scalar("fraction", fraction)
+        if not 0.0 < fraction <= 1.0:
+            raise InputError(f"fraction must be in (0, 1] (a part of the run, from its end), "
+                             f"got {fraction!r}")
         t0 = self.t[0] + (1.0 - fraction) * (self.t[-1] - self.t[0])
         return self.e[self.t >= t0 - _WINDOW_SLACK]
 
@@ -151,9 +157,10 @@ class ClosedLoopResponse:
         """
         from matplotlib.figure import Figure
 
-        from ..report import legend_outside
+        from ..report import axes_of, legend_outside
 
         if ax is not None:
+            _, (ax,) = axes_of(ax, 1)
             ax.plot(self.t, self.y, label="y")
             ax.plot(self.t, self.y_m, "--", label="y_m")
             ax.set_xlabel("t [s]")

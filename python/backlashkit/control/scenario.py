@@ -33,7 +33,7 @@ from ..nonlinearities import Backlash, InverseKind, inverse_from_name
 from .adaptive import AdaptiveLaw
 from .closed_loop import simulate_closed_loop
 from .design import design_mrc
-from .problem import DEFAULT_MAX_STEP
+from .problem import DEFAULT_MAX_STEP, MAX_ROWS
 from .references import SumOfSines, TableReference
 from .response import ClosedLoopResponse
 
@@ -55,9 +55,6 @@ _ALLOWED: dict[str, set[str]] = {
     "simulation": {"duration", "ts", "step"},
 }
 _REQUIRED_TABLES = ("plant", "backlash", "reference", "simulation")
-#: Most output rows (duration / ts) a scenario may ask for: 5e6 rows of the trace's
-#: 11 float64 columns take 440 MB, the bound on what a run may allocate.
-_MAX_ROWS = 5e6
 
 
 @dataclass
@@ -392,10 +389,10 @@ def _simulation(doc: dict, src: str,
     ts = _num(src, "simulation", "ts", _need(doc, src, "simulation", "ts"), cond=">0")
     if ts > duration:
         raise InputError(f"{src}: [simulation] ts must be <= duration ({duration!r}), got {ts!r}")
-    if duration / ts > _MAX_ROWS:
+    if duration / ts > MAX_ROWS:
         raise InputError(
-            f"{src}: [simulation] duration/ts must be <= 5e6 rows, got {duration / ts:.3g}"
-        )
+            f"{src}: [simulation] duration/ts must be <= {MAX_ROWS:,.0f} rows, got "
+            f"{duration / ts:.3g}")
     step = sim.get("step")
     step = None if step is None else _num(src, "simulation", "step", step, cond=">0")
     if isinstance(reference, SumOfSines):  # the integrator would alias it silently
