@@ -85,6 +85,7 @@ def test_plot(run_cli, tmp_path):
     out = tmp_path / "m.png"
     status, _, err = run_cli(EXAMPLE, "--plot", out, "--h-range", "0,8")
     assert status == 0 and out.stat().st_size > 1000
+    assert err == f"backlashkit: wrote {out}\n"  # as control and simulate say it
     status, _, err = run_cli(EXAMPLE, "--plot", out)
     assert status == 2 and "already exists; pass --force" in err
 

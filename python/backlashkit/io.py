@@ -126,11 +126,13 @@ def load_toml(path: PathLike) -> dict[str, Any]:
     Raises
     ------
     InputError
-        If the file is not valid UTF-8 TOML; the message names the file and carries
-        the parser's line and column.
+        If the file is a directory or not valid UTF-8 TOML; the message names the file
+        and carries the parser's line and column.
     FileNotFoundError
         If the file does not exist.
     """
+    if Path(path).is_dir():
+        raise InputError(f"{path}: is a directory; give a TOML file")
     with open(path, "rb") as fh:
         data = fh.read()
     try:

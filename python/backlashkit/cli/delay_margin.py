@@ -123,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     if plot is not None:
         span = h_range or result.default_range()
         result.plot(h_range=span).savefig(plot)
+        print(f"backlashkit: wrote {plot}", file=sys.stderr)
     if args.json:
         json.dump(summary, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")

@@ -7,6 +7,7 @@ import numbers
 import warnings
 from typing import Any
 
+from .. import validate as v
 from ..errors import InputError
 from .chen import N_OMEGA, sweep_candidates
 from .crossings import TOUCH_TOL, crossing_from_candidate, direction, merge_candidates
@@ -24,6 +25,10 @@ METHODS = ("sweep", "kronecker")
 RESIDUAL_TOL = 1e-8
 #: Relative distance below and above ``h_max`` at which the rightmost root is checked.
 VERIFY_STEP = 1e-3
+#: Most grid frequencies of the sweep: its time and memory grow with them (1e9 asked
+#: for more memory than a machine has), and a grid finer than this resolves nothing
+#: that the default's 40 points and Newton's polish miss.
+MAX_N_OMEGA = 1_000_000
 
 
 def delay_margin(A0: Any, A: Any, B: Any = None, *, method: str = "sweep",
@@ -111,8 +116,11 @@ def margin_of_system(system: DelaySystem, *, method: str = "sweep", polish: bool
     """
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
-    if not (isinstance(n_omega, numbers.Integral) and n_omega >= 10):
-        raise InputError(f"n_omega must be an integer >= 10; got {n_omega!r}")
+    if not (isinstance(n_omega, numbers.Integral) and not isinstance(n_omega, bool)
+            and 10 <= n_omega <= MAX_N_OMEGA):
+        raise InputError(f"n_omega must be an integer from 10 to {MAX_N_OMEGA:,}; got "
+                         f"{n_omega!r}")
+    polish, verify = v.flag("polish", polish), v.flag("verify", verify)
     rho = system.check_difference_operator()
     unstable0 = system.unstable_at_zero()
     sweep = None

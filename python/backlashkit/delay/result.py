@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from .. import validate as v
 from ..errors import InputError
 from .crossings import Crossing, unstable_count_changes
 from .system import DelaySystem
@@ -15,6 +16,9 @@ __all__ = ["DelayMarginResult"]
 #: ``h_max``, or :data:`DEFAULT_RANGE_NO_MARGIN` s when ``h_max`` is 0 or infinite.
 DEFAULT_RANGE_FACTOR = 10.0
 DEFAULT_RANGE_NO_MARGIN = 100.0
+#: Most crossing delays a range may hold: each costs a root-direction computation, and
+#: a range past this many periods of the crossing frequencies only repeats them.
+MAX_CROSSING_DELAYS = 100_000
 
 
 class DelayMarginResult:
@@ -116,9 +120,7 @@ class DelayMarginResult:
         list of (float, float)
             Open intervals ``(a, b)`` (``a = lo`` may be included), sorted.
         """
-        lo, hi = self.default_range() if h_range is None else map(float, h_range)
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
-            raise InputError(f"h_range must be finite with 0 <= lo < hi; got ({lo}, {hi})")
+        lo, hi = self.default_range() if h_range is None else self.checked_range(h_range)
         if self.difference_radius > 1.0:
             return []
         count, start, out = self.unstable_at_zero, 0.0, []
@@ -156,6 +158,42 @@ class DelayMarginResult:
             "windows": [[float(a), float(b)] for a, b in self.stability_windows(h_range)],
         }
 
+    def checked_range(self, h_range: Any) -> tuple[float, float]:
+        """``h_range`` as ``(lo, hi)`` in s, checked.
+
+        Parameters
+        ----------
+        h_range : (float, float)
+            Delays in s, ``0 <= lo < hi``.
+
+        Returns
+        -------
+        tuple of float
+            ``(lo, hi)``.
+
+        Raises
+        ------
+        InputError
+            If ``h_range`` is not two finite numbers with ``0 <= lo < hi``, or holds
+            more than :data:`MAX_CROSSING_DELAYS` delays at which a root crosses the
+            imaginary axis (each one's direction is computed).
+        """
+        try:
+            lo, hi = (v.finite_scalar("h_range", x) for x in h_range)
+        except (TypeError, ValueError):
+            raise InputError(f"h_range must be two delays (lo, hi) in s, got {h_range!r}"
+                             ) from None
+        if not 0.0 <= lo < hi:
+            raise InputError(f"h_range must be finite with 0 <= lo < hi; got ({lo:g}, {hi:g})")
+        count = sum(max(0.0, (hi * c.omega - c.phase) / (2 * math.pi) + 1)
+                    for c in self.crossings)
+        if count > MAX_CROSSING_DELAYS:
+            raise InputError(
+                f"h_range up to {hi:g} s holds about {count:.3g} delays at which roots "
+                f"cross the imaginary axis, more than {MAX_CROSSING_DELAYS:,}: give a "
+                "shorter range")
+        return lo, hi
+
     def plot(self, *, ax=None, h_range: tuple[float, float] | None = None, n_h: int = 60):
         """Moduli of the generalized eigenvalues against frequency, and the rightmost
         root against the delay.
@@ -176,4 +214,5 @@ class DelayMarginResult:
         """
         from .plotting import plot_margin
 
-        return plot_margin(self, ax=ax, h_range=h_range or self.default_range(), n_h=n_h)
+        span = self.default_range() if h_range is None else self.checked_range(h_range)
+        return plot_margin(self, ax=ax, h_range=span, n_h=v.integer("n_h", n_h, 2))

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import validate as v
 from ..errors import InputError
 
 __all__ = ["DelaySystem", "read_delay_system"]
@@ -31,6 +32,7 @@ HURWITZ_TOL = 1e-12
 
 
 def _as_matrix(value: Any, name: str) -> np.ndarray:
+    v.real_numbers(name, value, "a real matrix of numbers")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -54,6 +56,7 @@ def _as_matrix_list(value: Any, name: str, n: int) -> list[np.ndarray]:
             value = [value]
         else:
             raise InputError(f"{name} must be a list of {n}x{n} matrices; got {value!r:.80}")
+    v.real_numbers(name, value, "a real matrix of numbers")
     try:
         whole = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -294,8 +297,10 @@ def read_delay_system(path: str | Path) -> DelaySystem:
     Raises
     ------
     InputError
-        When the file is not TOML, the table or a key is missing or unknown, or a
-        matrix is invalid (the message names the file and the key).
+        When the file is a directory or not TOML, the table or a key is missing or
+        unknown, or a matrix is invalid (the message names the file and the key).
+    FileNotFoundError
+        If the file does not exist.
     """
     from ..io import load_toml
 
@@ -305,6 +310,10 @@ def read_delay_system(path: str | Path) -> DelaySystem:
     if not isinstance(table, dict):
         raise InputError(f"{path}: no [delay_system] table; add one with A0 = [[...]] and "
                          f"A = [[[...]], ...]")
+    others = sorted(set(doc) - {"delay_system"})
+    if others:
+        raise InputError(f"{path}: unknown top-level key(s) or table(s) {', '.join(others)}; "
+                         "a delay system file holds only [delay_system]")
     unknown = sorted(set(table) - {"A0", "A", "B"})
     if unknown:
         raise InputError(f"{path}: [delay_system] has unknown key(s) {', '.join(unknown)}; "
