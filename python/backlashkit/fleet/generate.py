@@ -32,7 +32,7 @@ from ..errors import InputError, SensitivityWarning
 from ..identify.record import Record
 from ..io import write_csv
 from ..papers.ravanbod2002 import A1, A2, P_TRUE, SNR1, SNR2, THETA, TS
-from ..parallel import map_tasks
+from ..parallel import map_tasks, root_seed
 from ..plants import TwoMassDrive
 from .manifest import MANIFEST_COLUMNS
 
@@ -53,6 +53,9 @@ DEFAULT_THETA_SPREAD = 0.2
 #: joint fit reads the step-down and needs only the level to have settled (the ringing
 #: decays in about 1.5 s on paper A's drive), so 10 s keeps the files and the fits small.
 DEFAULT_HOLD = 10.0
+#: Most samples a generated record may have (``2 hold / TS``): 2e7 samples make a CSV
+#: of about 1 GB, and the fleet writes two a drive and week.
+MAX_HOLD_SAMPLES = 2e7
 #: The prior's header: where the values come from.
 _PRIOR_HEADER = ("# Catalogue values of the drive (paper A, Section 5), SI units; the\n"
                  "# backlash half-width theta is what the tests identify.\n")
@@ -145,6 +148,28 @@ def _write_table(path: Path, header: list[str], rows: list[list[Any]], force: bo
         fh.write(text)
 
 
+def _snr_pair(snr1: Any) -> tuple[float, float]:
+    """``snr1`` as two SNRs in dB."""
+    pair = v.finite_array("snr1", snr1)
+    if pair.size != 2 or np.any(np.abs(pair) > signals.SNR_LIMIT_DB):
+        raise InputError(f"snr1 must be two SNRs in dB, (w_M, w_L), each within "
+                         f"+-{signals.SNR_LIMIT_DB:g}, got {snr1!r}")
+    return float(pair[0]), float(pair[1])
+
+
+def _start_date(start: Any) -> dt.date:
+    """``start`` as a date (a ``datetime.date`` or an ISO string such as 2026-01-05)."""
+    if isinstance(start, str):
+        try:
+            return dt.date.fromisoformat(start)
+        except ValueError:
+            pass
+    elif isinstance(start, dt.date) and not isinstance(start, dt.datetime):
+        return start
+    raise InputError(f"start must be a date, datetime.date(2026, 1, 5) or '2026-01-05', got "
+                     f"{start!r}")
+
+
 def generate_fleet(
     n_drives: int,
     n_weeks: int,
@@ -156,7 +181,7 @@ def generate_fleet(
     max_rate: float = DEFAULT_MAX_RATE,
     hold: float = DEFAULT_HOLD,
     snr1: tuple[float, float] = SNR1,
-    start: dt.date = dt.date(2026, 1, 5),
+    start: dt.date | str = dt.date(2026, 1, 5),
     force: bool = False,
     executor: Any = None,
     jobs: int | None = None,
@@ -169,8 +194,8 @@ def generate_fleet(
         Drives (>= 1), named ``drive-001``, ``drive-002``, ...
     n_weeks : int
         Weekly tests per drive (>= 1).
-    seed : int
-        Root seed (module docstring).
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator
+        Root seed (module docstring; :func:`~backlashkit.parallel.root_seed`).
     out : str or pathlib.Path
         Folder to write into (made if missing; its parent must exist).
     spread : float, optional
@@ -188,8 +213,9 @@ def generate_fleet(
     snr1 : tuple of float, optional
         SNR in dB of ``(w_M, w_L)`` on the 0.157 N m record (default paper A's 17.4 and
         6.43); the 0.942 N m record has paper A's 35.7 and 35.6 dB.
-    start : datetime.date, optional
-        Date of the first test (default 2026-01-05); one test every 7 days.
+    start : datetime.date or str, optional
+        Date of the first test (default 2026-01-05; an ISO string such as
+        ``"2026-01-05"`` too); one test every 7 days.
     force : bool, optional
         Overwrite existing files (default False: refuse).
     executor : concurrent.futures.Executor or dask.distributed.Client, optional
@@ -206,7 +232,8 @@ def generate_fleet(
     Raises
     ------
     InputError
-        If a count, spread, rate or hold is out of range, or a file exists and
+        If a count, spread, rate, hold, SNR, date or seed is out of range or of the
+        wrong kind (checked before any file is written), or a file exists and
         ``force`` is False.
     """
     v.integer("n_drives", n_drives, 1)
@@ -215,7 +242,12 @@ def generate_fleet(
         if not 0.0 <= v.nonnegative(name, value) < 1.0:
             raise InputError(f"{name} must be in [0, 1) (a relative spread), got {value!r}")
     v.nonnegative("max_rate", max_rate)
-    v.positive("hold", hold)
+    if v.positive("hold", hold) * 2 / TS > MAX_HOLD_SAMPLES:
+        raise InputError(f"hold must be at most {MAX_HOLD_SAMPLES * TS / 2:g} s (each record "
+                         f"is 2 hold at {TS:g} s a sample), got {hold!r}")
+    snr1 = _snr_pair(snr1)
+    start = _start_date(start)
+    root_seed(seed)  # refused before any file is written
     root = Path(out)
     if not root.parent.is_dir():
         raise InputError(f"out {root}: directory {root.parent} does not exist")
@@ -226,7 +258,7 @@ def generate_fleet(
     dates = [start + dt.timedelta(days=7 * k) for k in range(n_weeks)]
     drives = [f"drive-{d + 1:03d}" for d in range(n_drives)]
     cfg = {"spread": spread, "theta_spread": theta_spread, "max_rate": max_rate,
-           "hold": float(hold), "snr1": tuple(map(float, snr1)), "force": force}
+           "hold": float(hold), "snr1": snr1, "force": force}
     try:
         done = map_tasks(_one_drive, [(str(root), name, dates, cfg) for name in drives],
                          executor=executor, jobs=jobs, seed=seed)

@@ -103,6 +103,9 @@ def _date(path: Path, line: int, text: str) -> dt.date:
 
 
 def _row(path: Path, line: int, row: dict[str, str]) -> FleetTest:
+    if None in row:  # csv.DictReader's key for the fields past the header's
+        raise InputError(f"{path}, line {line}: more fields than the header has columns "
+                         "(a comma inside a file name? separate records with |)")
     values = {k: (row.get(k) or "").strip() for k in MANIFEST_COLUMNS}
     empty = [k for k, val in values.items() if not val]
     if empty:
@@ -139,6 +142,8 @@ def read_manifest(path: str | Path) -> Manifest:
         If the file does not exist.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory; give the manifest's CSV file")
     with open(path, encoding="utf-8-sig", newline="") as fh:
         try:
             reader = csv.DictReader(fh)

@@ -266,14 +266,25 @@ def write_wear_report(
     -------
     pathlib.Path
         The ``index.html`` written.
+
+    Raises
+    ------
+    InputError
+        If ``out_dir`` is a file or its parent does not exist, or a row or threshold is
+        refused by :func:`backlashkit.fleet.wear_trends`.
     """
     rows = [r for r in results if r is not None]
+    trends = wear_trends(rows, growth_threshold=growth_threshold,
+                         rate_threshold=rate_threshold)  # refused before any file changes
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"out_dir {out} exists and is not a directory")
+    if not out.exists() and not out.parent.is_dir():
+        raise InputError(f"out_dir {out}: directory {out.parent} does not exist (create it, "
+                         "or write elsewhere)")
     out.mkdir(exist_ok=True)
     for old in (*out.glob("drives_*.png"), *out.glob("drives_*.svg")):
         old.unlink()  # an earlier report's panels: the fleet may have shrunk
-    trends = wear_trends(rows, growth_threshold=growth_threshold,
-                         rate_threshold=rate_threshold)
     flagged = sorted((t for t in trends if t.flagged), key=lambda t: -np.nan_to_num(t.slope))
     refused = [r for r in rows if r["status"] != "ok"]
     header = ("drive", "tests", "dates", "rate (mrad/yr)", "95 % interval", "first (mrad)",

@@ -73,10 +73,12 @@ def read_results(path: str | Path) -> tuple[str, list[dict[str, Any]]]:
     Raises
     ------
     InputError
-        If the file is not a fleet results file.
+        If the file is a directory or not a fleet results file.
     FileNotFoundError
         If it does not exist.
     """
+    if Path(path).is_dir():
+        raise InputError(f"{path}: is a directory; give a fleet results file")
     text = Path(path).read_text(encoding="utf-8")
     first, _, rest = text.partition("\n")
     if not first.startswith(_MAGIC) or "sha256 " not in first:

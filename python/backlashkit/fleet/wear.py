@@ -28,9 +28,10 @@ from typing import Any
 import numpy as np
 
 from .. import validate as v
+from ..errors import InputError
 from .generate import DAYS_PER_YEAR
 
-__all__ = ["DriveTrend", "GROWTH_THRESHOLD", "MIN_TREND_TESTS", "wear_trends"]
+__all__ = ["DriveTrend", "GROWTH_THRESHOLD", "MIN_TREND_TESTS", "TREND_COLUMNS", "wear_trends"]
 
 #: Default growth of the half-width, rad, between a drive's first and last test (on its
 #: trend line) beyond which the drive is flagged: 3.5e-3 rad, a tenth of paper A's
@@ -121,6 +122,21 @@ def _trend(drive: str, dates: list[dt.date], theta: list[float], growth_threshol
                       bool(growth > growth_threshold))
 
 
+#: The columns of a results row that :func:`wear_trends` reads.
+TREND_COLUMNS = ("drive", "date", "status", "theta")
+
+
+def _day(k: int, day: Any) -> dt.date:
+    """A row's date: a ``datetime.date`` or an ISO 8601 string."""
+    if isinstance(day, dt.date):
+        return day.date() if isinstance(day, dt.datetime) else day
+    try:
+        return dt.date.fromisoformat(str(day))
+    except ValueError:
+        raise InputError(f"results row {k}: date {day!r} is not an ISO 8601 date (write "
+                         "e.g. 2026-01-05)") from None
+
+
 def wear_trends(
     results: Iterable[Mapping[str, Any]],
     *,
@@ -150,18 +166,22 @@ def wear_trends(
     Raises
     ------
     InputError
-        If a threshold is not a finite number.
+        If a threshold is not a finite number (``growth_threshold`` >= 0), or a row
+        misses a column of :data:`TREND_COLUMNS`, has a date that is no ISO date or an
+        identified ``theta`` that is not finite.
     """
-    v.finite_scalar("growth_threshold", growth_threshold)
+    v.nonnegative("growth_threshold", growth_threshold)
     v.finite_scalar("rate_threshold", rate_threshold)
     by_drive: dict[str, tuple[list[dt.date], list[float]]] = {}
-    for row in results:
+    for k, row in enumerate(results):
+        missing = [c for c in TREND_COLUMNS if c not in row]
+        if missing:
+            raise InputError(f"results row {k}: missing {', '.join(missing)}; a row of "
+                             "identify_fleet or read_results has them")
         if row["status"] != "ok" or row["theta"] is None:
             continue
-        day = row["date"]
-        day = day if isinstance(day, dt.date) else dt.date.fromisoformat(str(day))
         dates, thetas = by_drive.setdefault(str(row["drive"]), ([], []))
-        dates.append(day)
-        thetas.append(float(row["theta"]))
+        dates.append(_day(k, row["date"]))
+        thetas.append(v.finite_scalar(f"results row {k}: theta", row["theta"]))
     return [_trend(d, dates, thetas, growth_threshold, rate_threshold)
             for d, (dates, thetas) in by_drive.items()]
