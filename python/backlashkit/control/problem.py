@@ -33,8 +33,9 @@ ROUND_SLACK = 1e-9
 #: float64 columns take 440 MB.
 MAX_ROWS = 5e6
 #: Most integration steps (``duration / step``) a run may take: about 1 us each on
-#: paper B's example (20 s), and a signal given as a function is sampled on them (8
-#: bytes a step: 160 MB).
+#: paper B's example (``benchmarks/bench_control.py``: 0.066 s for its 60 000 steps),
+#: so some 20 s, and a signal given as a function is sampled on them (8 bytes a step:
+#: 160 MB).
 MAX_STEPS = 2e7
 #: Parameters of the kernels' compiled entry point that are integers, and matrices.
 _KERNEL_INTS = {"kind", "n_steps", "n_sub"}
