@@ -140,6 +140,11 @@ def test_a_delay_system_file_that_is_a_folder_or_holds_other_tables(tmp_path):
         read_delay_system(path)
 
 
+def test_a_scenario_that_is_a_folder_is_named_so(tmp_path, capsys):
+    assert main(["control", str(tmp_path)]) == 2
+    assert "is a directory; give a TOML file" in capsys.readouterr().err
+
+
 def test_the_control_command_does_not_write_its_trace_over_its_scenario(tmp_path, capsys):
     scenario = tmp_path / "in.toml"
     shutil.copy("examples/tao1995.toml", scenario)

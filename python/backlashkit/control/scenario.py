@@ -426,6 +426,8 @@ def load_scenario(path: str | Path) -> ControlScenario:
         One-line message naming the table, key and constraint.
     """
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"scenario file {str(p)!r} is a directory; give a TOML file")
     if not p.is_file():
         raise InputError(f"scenario file {str(p)!r} does not exist")
     try:
