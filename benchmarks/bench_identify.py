@@ -41,8 +41,9 @@ simulations' rate on whole spans, and again at a steadier unit, the median of
 also given in times of one simulation of the record (medians of 7, interleaved, in CPU
 time of the process, all its threads: other jobs' time slices do not count). It
 times the normal equations' products of one more fit's Levenberg-Marquardt steps
-apart (``normal_equations``), and its last line tallies the Levenberg-Marquardt step doublings of one more fit, each
-evaluated whether the parabola along the step tries it or not (``doublings``).
+apart (``normal_equations``), and its last line tallies the Levenberg-Marquardt step
+doublings of one more fit, each evaluated whether the parabola along the step tries it
+or not (``doublings``).
 
 The prior is paper A's drive with a 30 % error drawn as in the protocol.
 
