@@ -193,3 +193,18 @@ def test_fleet_files_and_rows_are_checked(tmp_path):
         wear_trends([ok], growth_threshold=-1)
     with pytest.raises(InputError, match="directory .*nodir does not exist"):
         write_wear_report([ok], tmp_path / "nodir" / "report")
+
+
+def test_results_of_control_and_the_fleet_print_short(tmp_path):
+    """MRCDesign printed every polynomial (about 400 characters), FleetTruth every
+    drive's parameters (about 800 with np.float64(...)), DriveTrend np.float64(...)."""
+    design = bk.design_mrc(G)
+    assert repr(design) == ("MRCDesign(n=2, n*=2, theta_1 and theta_2 [-32.25, -5.5, "
+                            "-78.375, -76.375], theta_3=1)")
+    truth = generate_fleet(2, 3, seed=1, out=tmp_path / "f", hold=3.0)
+    assert repr(truth).startswith("FleetTruth(2 drives, 3 weekly tests from 2026-01-05")
+    rows = [{"drive": "a", "date": f"2026-01-0{k + 1}", "status": "ok", "theta": 0.03 + k * 1e-3}
+            for k in range(5)]
+    trend = repr(wear_trends(rows)[0])
+    assert trend.startswith("DriveTrend('a', 5 tests 2026-01-01 to 2026-01-05, slope ")
+    assert "np.float64" not in trend and len(trend) < 160

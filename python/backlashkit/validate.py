@@ -94,7 +94,7 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, *, ndim: int =
         where = int(first[0]) if ndim == 1 else tuple(int(i) for i in first)
         raise InputError(
             f"{name} has a non-finite value ({arr[tuple(first)]}) at index {where}; "
-            "remove or fill NaN/inf samples first"
+            "remove or fill NaN/inf values first"
         )
     return arr
 

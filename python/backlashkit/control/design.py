@@ -163,6 +163,12 @@ class MRCDesign:
     h_num: np.ndarray
     h_den: np.ndarray
 
+    def __repr__(self) -> str:
+        # the dataclass's would print every polynomial as an array
+        th = ", ".join(f"{x:.6g}" for x in (*self.theta_1, *self.theta_2))
+        return (f"MRCDesign(n={self.n}, n*={self.relative_degree}, theta_1 and theta_2 "
+                f"[{th}], theta_3={self.theta_3:.6g})")
+
     @property
     def n(self) -> int:
         """Plant order ``n``."""

@@ -129,6 +129,8 @@ class TableReference:
     r: Sequence[float]
 
     def __post_init__(self) -> None:
+        v.real_numbers("reference t", self.t)
+        v.real_numbers("reference r", self.r)
         tt = v.finite_array("reference t", self.t)
         rr = v.finite_array("reference r", self.r)
         if tt.size < 2 or tt.size != rr.size:

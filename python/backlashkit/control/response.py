@@ -111,7 +111,8 @@ class ClosedLoopResponse:
         return float(np.max(np.abs(self._last(fraction))))
 
     def summary(self) -> dict[str, Any]:
-        """The keys of ``backlashkit control --json``.
+        """The keys of ``backlashkit control --json`` that the run itself gives (the
+        command adds ``delay_margin``, the linear loop's).
 
         Returns
         -------

@@ -262,7 +262,8 @@ def _check_tables(doc: dict, src: str) -> None:
     """Only known tables and keys, and every required table."""
     for table, val in doc.items():
         if table not in _ALLOWED:
-            raise InputError(f"{src}: unknown table [{table}]; expected one of {sorted(_ALLOWED)}")
+            raise InputError(f"{src}: unknown table [{table}]; expected one of "
+                             f"{', '.join(f'[{t}]' for t in sorted(_ALLOWED))}")
         if not isinstance(val, dict):
             raise InputError(f"{src}: [{table}] must be a table")
         extra = set(val) - _ALLOWED[table]

@@ -88,6 +88,11 @@ class FleetTruth:
     params: list[dict[str, float]]
     dates: list[dt.date]
 
+    def __repr__(self) -> str:
+        # the dataclass's prints every drive's parameters (hundreds of characters)
+        return (f"FleetTruth({len(self.drives)} drives, {len(self.dates)} weekly tests from "
+                f"{self.dates[0]}, manifest {str(self.manifest)!r})")
+
 
 def _draw(seed: np.random.SeedSequence, spread: float, theta_spread: float,
           max_rate: float) -> tuple[dict[str, float], float, float]:

@@ -86,6 +86,13 @@ class DriveTrend:
     significant: bool
     grew: bool
 
+    def __repr__(self) -> str:
+        # floats as floats (the fields hold NumPy's), the dates as ISO dates
+        return (f"DriveTrend({self.drive!r}, {self.n_tests} tests {self.first} to "
+                f"{self.last}, slope {float(self.slope):.4g} rad/yr [95 %: "
+                f"{float(self.ci95_low):.4g}, {float(self.ci95_high):.4g}], growth "
+                f"{float(self.growth):.4g} rad, flagged={self.flagged})")
+
     @property
     def flagged(self) -> bool:
         """Whether the drive needs a look: a significant trend or too much growth.
