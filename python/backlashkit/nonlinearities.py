@@ -249,6 +249,12 @@ class InverseKind:
     #: Which of the adaptive law's ``(c_r, m, c_l)`` adapt (1) or stay at 0 (0).
     adapted: ClassVar[tuple[float, float, float]] = (1.0, 1.0, 1.0)
 
+    @property
+    def rate(self) -> float:
+        """The rate of the inverse's own dynamics in 1/s (0: it has none); the closed
+        loop's integration step must resolve it."""
+        return 0.0
+
     def sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray, memory: InverseMemory,
                ts: float) -> float:
         """The inverse's output for one sample of a discrete controller.
@@ -330,6 +336,11 @@ class SmoothFilterInverse(InverseKind):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "alpha", _v.positive("alpha", self.alpha))
+
+    @property
+    def rate(self) -> float:
+        """``alpha``, the filter's bandwidth in rad/s."""
+        return self.alpha
 
     def _sample(self, u_d: float, u_d_dot: float, theta_b: np.ndarray,
                 memory: InverseMemory, ts: float) -> float:

@@ -37,6 +37,12 @@ MAX_ROWS = 5e6
 #: so some 20 s, and a signal given as a function is sampled on them (8 bytes a step:
 #: 160 MB).
 MAX_STEPS = 2e7
+#: Where the classical Runge-Kutta method's stability region ends on the negative real
+#: axis (``|1 + z + z^2/2 + z^3/6 + z^4/24| = 1`` at ``z = -2.7853``): a first-order
+#: lag of rate ``a`` integrated with a step ``h`` diverges beyond ``a h`` of this
+#: (``tests/test_qa_control_delay_fleet.py``: a smooth filter's ``alpha`` of 2 700 runs
+#: at 1 ms; 2 900 diverged).
+RK4_REAL_STABILITY = 2.785
 #: Parameters of the kernels' compiled entry point that are integers, and matrices.
 _KERNEL_INTS = {"kind", "n_steps", "n_sub"}
 _KERNEL_MATRICES = {"ap", "al", "am", "ah"}
@@ -223,6 +229,12 @@ def build_problem(
         compiled ``simulate_adaptive``.
     """
     h, n_sub, n_steps = _steps(duration, ts, step)
+    if inverse.rate * h > RK4_REAL_STABILITY:
+        raise InputError(
+            f"{inverse!r} with the integration step {h:.3g} s: alpha * step = "
+            f"{inverse.rate * h:.3g} is beyond the integration's stability (classical "
+            f"Runge-Kutta, {RK4_REAL_STABILITY:g}); give step <= "
+            f"{RK4_REAL_STABILITY / inverse.rate:.3g} s or a smaller alpha")
     plant_arrays = _plant(plant, initial_state)
     controller = _controller(design)
     adaptive = _adaptation(adaptation, inverse)
