@@ -118,6 +118,12 @@ def test_one_line_errors_exit_2(run_cli, tmp_path, text, args, message):
     assert message in err
 
 
+def test_the_neutral_refusal_names_the_file(run_cli, tmp_path):
+    p = write(tmp_path, "[delay_system]\nA0 = [[-1.0]]\nA = [[[-0.5]]]\nB = [[[1.0]]]\n")
+    status, _, err = run_cli(p)
+    assert status == 2 and f"backlashkit: error: {p}: " in err  # it said "B: ..." alone
+
+
 def test_missing_file(run_cli, tmp_path):
     status, _, err = run_cli(tmp_path / "nope.toml")
     assert status == 2 and "file not found" in err

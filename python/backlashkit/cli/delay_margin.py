@@ -117,7 +117,10 @@ def run(args: argparse.Namespace) -> int:
     h_range = _h_range(args.h_range)
     plot = _plot_path(args.plot, args.force)
     system = read_delay_system(args.system)
-    result = margin_of_system(system, method=args.method)
+    try:
+        result = margin_of_system(system, method=args.method)
+    except InputError as exc:  # e.g. a marginal neutral operator: say which file
+        raise InputError(f"{args.system}: {exc}") from None
     with flag_names({"h_range": "--h-range"}):
         summary = result.as_dict(h_range)
     if plot is not None:
