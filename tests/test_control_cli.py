@@ -25,6 +25,7 @@ def test_control_json_trace_plot(tmp_path, capsys):
     assert doc["controller"]["theta_3"] == pytest.approx(1.0, rel=1e-12)
     assert doc["rms_error_last"] <= 1e-3
     np.testing.assert_allclose(doc["theta_b_final"], [0.91, 0.7, -0.35], rtol=0.01)
+    assert doc["inverse"] == "exact" and doc["inverse_parameters"] == {}
     assert trace.read_text().splitlines()[0] == COLUMNS
     data = np.loadtxt(trace, delimiter=",", skiprows=1)
     assert data.shape == (6001, 11)

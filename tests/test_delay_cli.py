@@ -39,7 +39,9 @@ def test_json_fields_of_the_example(run_cli):
     status, out, err = run_cli(EXAMPLE, "--json")
     assert status == 0 and err == ""
     d = json.loads(out)
-    assert set(d) == {"h_max", "omega", "stable_at_zero", "delay_independent", "windows"}
+    assert set(d) == {"h_max", "omega", "stable_at_zero", "delay_independent", "windows",
+                      "difference_radius"}
+    assert d["difference_radius"] == 0.0  # retarded
     assert math.floor(d["h_max"] * 1e4) / 1e4 == 6.1725
     assert d["omega"] == pytest.approx(math.sqrt(0.19), rel=1e-12)
     assert d["stable_at_zero"] is True and d["delay_independent"] is False
@@ -116,6 +118,16 @@ def test_one_line_errors_exit_2(run_cli, tmp_path, text, args, message):
     assert status == 2 and out == ""
     assert err.startswith("backlashkit: error: ") and err.count("\n") == 1
     assert message in err
+
+
+def test_a_neutral_system_unstable_for_every_delay_says_why_in_json(run_cli, tmp_path):
+    """h_max 0 with stable_at_zero true and no reason: the radius is the reason. At
+    h = 0, -0.5 x' = 0.5 x is stable; B = 1.5 makes it unstable for every h > 0."""
+    p = write(tmp_path, "[delay_system]\nA0 = [[1.0]]\nA = [[[-0.5]]]\nB = [[[1.5]]]\n")
+    status, out, _ = run_cli(p, "--json")
+    d = json.loads(out)
+    assert status == 0 and d["h_max"] == 0.0 and d["stable_at_zero"] is True
+    assert d["difference_radius"] == pytest.approx(1.5)
 
 
 def test_the_neutral_refusal_names_the_file(run_cli, tmp_path):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -117,12 +117,16 @@ class ClosedLoopResponse:
         Returns
         -------
         dict
-            ``controller``, ``inverse``, ``theta_b_final``, ``rms_error_last``,
-            ``max_abs_error_last``, ``n_switches``, ``step``.
+            ``controller``, ``inverse``, ``inverse_parameters`` (``alpha`` of the smooth
+            filter, ``beta_r`` and ``beta_l`` of the ramps, none otherwise),
+            ``theta_b_final``, ``rms_error_last``, ``max_abs_error_last``,
+            ``n_switches``, ``step``.
         """
         return {
             "controller": self.design.as_dict(),
             "inverse": self.inverse.name,
+            "inverse_parameters": {f.name: float(getattr(self.inverse, f.name))
+                                   for f in fields(self.inverse)},
             "theta_b_final": [float(x) for x in self.theta_b[-1]],
             "rms_error_last": self.rms_error_last(),
             "max_abs_error_last": self.max_abs_error_last(),

@@ -138,7 +138,10 @@ class DelayMarginResult:
 
     def as_dict(self, h_range: tuple[float, float] | None = None) -> dict[str, Any]:
         """JSON-ready summary: ``h_max`` (``None`` when infinite), ``omega``,
-        ``stable_at_zero``, ``delay_independent``, ``windows`` over ``h_range``.
+        ``stable_at_zero``, ``delay_independent``, ``windows`` over ``h_range``, and
+        ``difference_radius`` (the neutral difference operator's spectral radius: 0
+        for a retarded system; above 1 the system is unstable for every ``h > 0``,
+        which is why ``h_max`` is then 0).
 
         Parameters
         ----------
@@ -156,6 +159,7 @@ class DelayMarginResult:
             "stable_at_zero": bool(self.stable_at_zero),
             "delay_independent": bool(self.delay_independent),
             "windows": [[float(a), float(b)] for a, b in self.stability_windows(h_range)],
+            "difference_radius": float(self.difference_radius),
         }
 
     def checked_range(self, h_range: Any) -> tuple[float, float]:
