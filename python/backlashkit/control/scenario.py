@@ -33,7 +33,7 @@ from ..nonlinearities import Backlash, InverseKind, inverse_from_name
 from .adaptive import AdaptiveLaw
 from .closed_loop import simulate_closed_loop
 from .design import design_mrc
-from .problem import DEFAULT_MAX_STEP, MAX_ROWS
+from .problem import DEFAULT_MAX_STEP, check_rows
 from .references import SumOfSines, TableReference
 from .response import ClosedLoopResponse
 
@@ -390,10 +390,10 @@ def _simulation(doc: dict, src: str,
     ts = _num(src, "simulation", "ts", _need(doc, src, "simulation", "ts"), cond=">0")
     if ts > duration:
         raise InputError(f"{src}: [simulation] ts must be <= duration ({duration!r}), got {ts!r}")
-    if duration / ts > MAX_ROWS:
-        raise InputError(
-            f"{src}: [simulation] duration/ts must be <= {MAX_ROWS:,.0f} rows, got "
-            f"{duration / ts:.3g}")
+    try:
+        check_rows(duration, ts)  # the library's rule, said with the file's name
+    except InputError as exc:
+        raise InputError(f"{src}: [simulation] {exc}") from None
     step = sim.get("step")
     step = None if step is None else _num(src, "simulation", "step", step, cond=">0")
     if isinstance(reference, SumOfSines):  # the integrator would alias it silently

@@ -53,8 +53,8 @@ DEFAULT_THETA_SPREAD = 0.2
 #: joint fit reads the step-down and needs only the level to have settled (the ringing
 #: decays in about 1.5 s on paper A's drive), so 10 s keeps the files and the fits small.
 DEFAULT_HOLD = 10.0
-#: Most samples a generated record may have (``2 hold / TS``): 2e7 samples make a CSV
-#: of about 1 GB, and the fleet writes two a drive and week.
+#: Most samples a generated record may have (``2 hold / TS``): a CSV of 2e7 rows of four
+#: numbers, and the fleet writes two a drive and week.
 MAX_HOLD_SAMPLES = 2e7
 #: The prior's header: where the values come from.
 _PRIOR_HEADER = ("# Catalogue values of the drive (paper A, Section 5), SI units; the\n"
