@@ -17,7 +17,7 @@ extrapolation: ``(4 D(h/2) - D(h)) / 3`` has an error of order ``h^4``, and a th
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -58,35 +58,64 @@ MAX_CUT = 0.1
 @dataclass
 class Agreement:
     """The largest over a drive's parameters of the best step's
-    ``max |D - S| / max |S|`` over the samples kept, and the samples left out."""
+    ``max |D - S| / max |S|`` over the samples kept, the samples left out, and each
+    parameter's error (by name)."""
 
     error: float
     left_out: int
     samples: int
+    columns: dict[str, float] = field(default_factory=dict)
 
 
 def near_grazing(res: bk.DriveResponse) -> bool:
     """Whether a change of ``res`` is crossed at a low rate: a contact change, or a
-    breakaway that the torque's rise crosses, at a relative speed below
-    :data:`GRAZING` of its largest, or an inertia's stop at a deceleration below
-    :data:`STOP_GRAZING` of its Coulomb torque's; or whether a slipping inertia
-    nearly stops (:func:`_near_stop`)."""
+    breakaway that the torque's rise crosses, at a rate below :data:`GRAZING` of its
+    scale (:func:`_crossed_slowly`), or an inertia's stop at a deceleration below
+    :data:`STOP_GRAZING` of its Coulomb torque's; or whether a slipping inertia nearly
+    stops (:func:`_near_stop`)."""
     if _near_stop(res):
         return True
-    rel = res.w_motor - res.w_load
-    slow = GRAZING * np.max(np.abs(rel))
     flank = int(res.modes[0, 0])
     for time, j, src, dst in res.event_array.tolist():
         j, src, dst = int(j), int(src), int(dst)
         if j == 0 or (src == 0 and not _set_off(res, time)):
-            # A stuck inertia's torque moves at the shaft's k (w_M - w_L), the damper's
-            # share neglected: the breakaway's rate is the contact's.
-            if abs(np.interp(time, res.t, rel)) < slow:
+            if _crossed_slowly(res, time, j, flank):
                 return True
         elif src and _stop_is_slow(res, time, j, src, flank):
             return True
         flank = dst if j == 0 else flank
     return False
+
+
+def _crossed_slowly(res: bk.DriveResponse, time: float, j: int, flank: int) -> bool:
+    """Whether the change of the simulator's row ``j`` at ``time``, a contact change or
+    a breakaway, is crossed at a relative speed ``w_M - w_L`` below :data:`GRAZING` of
+    its largest. A stuck inertia's torque moves at the shaft's ``k (w_M - w_L)``, the
+    damper's share neglected: the breakaway's rate is the contact's. Behind a current
+    loop the motor's torque ``T`` moves too, so a motor's breakaway is judged by the
+    rate of the torque on it, ``dT/dt - k (w_M - w_L)`` (the shaft's share only on a
+    flank), against :data:`GRAZING` of the shaft's largest, ``k max |w_M - w_L|``."""
+    rel = res.w_motor - res.w_load
+    slow = GRAZING * np.max(np.abs(rel))
+    rel_now = np.interp(time, res.t, rel)
+    if j != 1 or res.loop_torque is None:  # row 1: the motor's switch
+        return bool(abs(rel_now) < slow)
+    k = res.drive.k[0]
+    rate = _motor_torque(res, time)[1] - (k * rel_now if flank else 0.0)
+    return bool(abs(rate) < k * slow)
+
+
+def _motor_torque(res: bk.DriveResponse, time: float) -> tuple[float, float]:
+    """The motor torque in N m at ``time`` and its rate in N m/s: the held set-point
+    (rate 0) without a current loop, with one its exact first-order response from the
+    sample's start."""
+    k = np.searchsorted(res.t, time, side="right") - 1
+    u = res.torque[k]
+    if res.loop_torque is None:
+        return u, 0.0
+    tau_i = res.actuator.tau_i
+    torque = u + (res.loop_torque[k] - u) * np.exp(-(time - res.t[k]) / tau_i)
+    return torque, (u - torque) / tau_i
 
 
 def _near_stop(res: bk.DriveResponse) -> bool:
@@ -123,15 +152,14 @@ def _stop_is_slow(res: bk.DriveResponse, time: float, j: int, m: int, flank: int
     """Whether inertia ``j - 1`` (the simulator's event row ``j``), slipping in
     direction ``m``, reaches zero speed at ``time`` with its deceleration ``(T - m fc)
     / J`` below :data:`STOP_GRAZING` of ``fc / J`` (``T`` the torque on it from the
-    input and the shaft, from the record interpolated)."""
+    motor torque and the shaft, from the record interpolated)."""
     chain = res.drive
     i = j - 1  # the simulator's row j = 1 + i: inertia i's switch
     w_m, w_l, phi = (np.interp(time, res.t, col) for col in res.states.T)
     shaft = 0.0
     if flank:
         shaft = chain.k[0] * (phi - flank * chain.theta[0]) + chain.d[0] * (w_m - w_l)
-    u = res.torque[np.searchsorted(res.t, time, side="right") - 1]
-    torque = u - shaft if i == 0 else shaft
+    torque = _motor_torque(res, time)[0] - shaft if i == 0 else shaft
     return abs(torque - m * chain.fc[i]) < STOP_GRAZING * chain.fc[i]
 
 
@@ -142,9 +170,38 @@ def _changes(res: bk.DriveResponse) -> tuple[np.ndarray, list[tuple[int, int, in
     return rows[:, 0].copy(), [tuple(int(x) for x in r) for r in rows[:, 1:]]
 
 
-def _run(drive: bk.TwoMassDrive, t, u) -> tuple[np.ndarray, np.ndarray, list]:
-    res = drive.simulate(t, u)
-    return (np.stack([res.w_motor, res.w_load], axis=1), *_changes(res))
+@dataclass(frozen=True)
+class Start:
+    """What a run of the differences starts from: the drive, its current loop (None:
+    none), the initial state (None: the simulator's default) and its sensitivity
+    ``(states, len(names))`` to the parameters ``names`` (None: zero), with which the
+    initial state moves as a parameter is stepped."""
+
+    drive: bk.TwoMassDrive
+    names: tuple[str, ...]
+    actuator: bk.CurrentLoop | None = None
+    initial_state: np.ndarray | None = None
+    initial_sensitivity: np.ndarray | None = None
+
+    def value(self, name: str) -> float:
+        """The parameter ``name``'s value: the drive's, or the loop's ``tau_i``."""
+        return self.actuator.tau_i if name == "tau_i" else getattr(self.drive, name)
+
+    def run(self, t, u, name: str | None = None, e: float = 0.0
+            ) -> tuple[np.ndarray, np.ndarray, list]:
+        """The speeds ``(len(t), 2)`` and the changes of the run with ``name`` stepped
+        by the share ``e`` of its value."""
+        drive, actuator, x0 = self.drive, self.actuator, self.initial_state
+        if name == "tau_i":
+            actuator = bk.CurrentLoop(self.value(name) * (1 + e))
+        elif name is not None:  # fs_M, fs_L None: tied to fc
+            values = {n: getattr(drive, n) for n in PARAMS if n != "tau_i"}
+            drive = bk.TwoMassDrive(**{**values, name: values[name] * (1 + e)})
+        if name is not None and self.initial_sensitivity is not None:
+            col = self.initial_sensitivity[:, self.names.index(name)]
+            x0 = np.asarray(x0, float) + col * (e * self.value(name))
+        res = drive.simulate(t, u, actuator=actuator, initial_state=x0)
+        return (np.stack([res.w_motor, res.w_load], axis=1), *_changes(res))
 
 
 def _crossed(t: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -190,37 +247,49 @@ def extrapolate(diffs: list[np.ndarray]) -> np.ndarray:
 
 
 def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.ndarray,
-              params=None) -> Agreement | None:
+              params=None, *, actuator=None, initial_state=None, initial_sensitivity=None
+              ) -> Agreement | None:
     """``sens`` (``(len(t), 2, len(params))``) against the extrapolated differences;
     None near grazing, or where every step changes the sequence of changes (contact
     and friction) for some parameter. ``params``: the columns' names, default
-    ``default_params(drive)``."""
-    res = drive.simulate(t, u)
+    ``default_params(drive, actuator)``; ``actuator``, ``initial_state`` and
+    ``initial_sensitivity`` (``(states, len(params))``, with ``initial_state``) as the
+    twin's (None: rest, behind a loop settled at the first set-point, the default of
+    the simulator and of the twin)."""
+    names = default_params(drive, actuator) if params is None else tuple(params)
+    start = Start(drive, names, actuator, initial_state, initial_sensitivity)
+    res = drive.simulate(t, u, actuator=actuator, initial_state=initial_state)
     if not res.contact_events or near_grazing(res):
         return None
-    times0, kinds0 = _changes(res)
-    names = default_params(drive) if params is None else tuple(params)
-    values = {n: getattr(drive, n) for n in PARAMS}  # fs_M, fs_L None: tied to fc
-    worst, left_out = 0.0, 0
+    reference = (*_changes(res),)
+    columns, left_out = {}, 0
     for j, name in enumerate(names):
-        scale = np.max(np.abs(sens[:, :, j]))
-        best, best_out = np.inf, 0
-        for h in STEPS:
-            steps = [h / 2 ** i for i in range(LEVELS)]
-            runs = [_run(bk.TwoMassDrive(**{**values, name: values[name] * (1 + s * e)}), t, u)
-                    for e in steps for s in (1.0, -1.0)]
-            crossed = _left_out(t, times0, kinds0, runs)
-            if crossed is None:
-                continue
-            diffs = [(runs[2 * i][0] - runs[2 * i + 1][0]) / (2 * e * values[name])
-                     for i, e in enumerate(steps)]
-            err = np.max(np.abs(extrapolate(diffs) - sens[:, :, j])[~crossed]) / scale
-            if err < best:
-                best, best_out = err, int(np.sum(crossed))
-        if not np.isfinite(best):
+        columns[name], best_out = _column_error(start, t, u, sens[:, :, j], name, reference)
+        if not np.isfinite(columns[name]):
             return None
-        worst, left_out = max(worst, best), left_out + best_out
-    return Agreement(worst, left_out, t.size * len(names))
+        left_out += best_out
+    return Agreement(max(columns.values()), left_out, t.size * len(names), columns)
+
+
+def _column_error(start: Start, t, u, column: np.ndarray, name: str, reference
+                  ) -> tuple[float, int]:
+    """The best over :data:`STEPS` of ``max |D - S| / max |S|`` for the parameter
+    ``name``'s sensitivities ``column`` ``(len(t), 2)``, and that step's samples left
+    out (inf and 0 where no step keeps the nominal run's changes, ``reference``)."""
+    scale, value = np.max(np.abs(column)), start.value(name)
+    best, best_out = np.inf, 0
+    for h in STEPS:
+        steps = [h / 2 ** i for i in range(LEVELS)]
+        runs = [start.run(t, u, name, s * e) for e in steps for s in (1.0, -1.0)]
+        crossed = _left_out(t, *reference, runs)
+        if crossed is None:
+            continue
+        diffs = [(runs[2 * i][0] - runs[2 * i + 1][0]) / (2 * e * value)
+                 for i, e in enumerate(steps)]
+        err = np.max(np.abs(extrapolate(diffs) - column)[~crossed]) / scale
+        if err < best:
+            best, best_out = err, int(np.sum(crossed))
+    return best, best_out
 
 
 #: Issue 24's bar: the sensitivities within 1e-6 of the differences, relative to each

@@ -13,10 +13,11 @@ import warnings
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import backlashkit as bk
 from _differences import agreement, check_bar, near_grazing
-from _random_drives import KINDS, LEVELS, LOG_FACTORS, drive_record
+from _random_drives import FRICTIONS, KINDS, LEVELS, LOG_FACTORS, drive_record
 from backlashkit import _core
 from backlashkit._numpy_sensitivity import sensitivities as numpy_sensitivities
 from backlashkit._sensitivity import (
@@ -60,6 +61,72 @@ def test_paper_drive_matches_numpy_twin():
     assert err < RTOL
 
 
+#: Issue 20's current loop, a time constant of 1 ms.
+LOOP = bk.CurrentLoop(1e-3)
+#: The current loop's time constants of the random drives, in s: a decade about a
+#: drive's millisecond.
+TAUS = st.floats(3e-4, 3e-3)
+#: Random drives behind a loop, each kind's draws and least count checked away from
+#: grazing (``-s`` prints the counts: the Coulomb kind comes near grazing more often,
+#: 20 of 80 at its first draws).
+LOOP_KINDS = {"viscous": (st.just((0.0, 0.0)), 40, 25), "coulomb": (FRICTIONS, 150, 30)}
+
+
+def _loop_error(drive, t, u, loop, **start) -> float:
+    """Largest over the parameters of max |compiled - NumPy| / max |NumPy| behind
+    ``loop``."""
+    fast = sensitivities(drive, t, u, actuator=loop, **start)
+    ref = numpy_sensitivities(drive, t, u, actuator=loop, **start)
+    assert fast.shape == ref.shape == (t.size, 2, len(default_params(drive, loop)))
+    return float(np.max(np.max(np.abs(fast - ref), axis=(0, 1))
+                        / np.max(np.abs(ref), axis=(0, 1))))
+
+
+def test_a_current_loop_matches_numpy_twin():
+    """Behind issue 20's 1 ms loop, paper A's drive with its Coulomb torques: every
+    column, ``tau_i``'s too, compiled against the twin, from the default start (rest,
+    the loop settled at the first torque) and from the steady state with a
+    sensitivity."""
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    t = bk.signals.time_grid(3.0, 1e-3)
+    u = bk.signals.step_down(t, A2, t_s=1.5)
+    names = default_params(drive, LOOP)
+    assert names[-1] == "tau_i"
+    x0 = np.r_[drive.steady_state(A2), A2]
+    values = np.array([LOOP.tau_i if n == "tau_i" else getattr(drive, n) for n in names])
+    s0 = np.random.default_rng(5).standard_normal((4, len(names))) / values
+    for start in ({}, {"initial_state": x0, "initial_sensitivity": s0}):
+        err = _loop_error(drive, t, u, LOOP, **start)
+        print(f"behind a 1 ms loop{', from a start' if start else ''}: compiled vs NumPy "
+              f"{err:.2e}")
+        assert err < RTOL
+
+
+@pytest.mark.parametrize("kind", LOOP_KINDS)
+def test_random_drives_behind_a_loop_match_numpy_twin(kind):
+    """Random drives behind a random current loop, drawn as the others, compiled
+    against the twin (which ``tests/test_sensitivity.py`` checks against the
+    differences of the simulator with that loop)."""
+    checked: list[float] = []
+    frictions, draws, least = LOOP_KINDS[kind]
+
+    @settings(max_examples=draws, derandomize=True, deadline=None, database=None)
+    @given(LOG_FACTORS, LEVELS, frictions, TAUS)
+    def check(logs, level, friction, tau_i):
+        drive, t, u = drive_record(logs, level, friction)
+        loop = bk.CurrentLoop(tau_i)
+        if near_grazing(drive.simulate(t, u, actuator=loop)):
+            return
+        err = _loop_error(drive, t, u, loop)
+        assert err < RANDOM_RTOL
+        checked.append(err)
+
+    check()
+    print(f"{kind} behind a loop: {len(checked)} of {draws} random drives checked, "
+          f"largest difference {max(checked):.2e}, median {np.median(checked):.2e}")
+    assert len(checked) >= least
+
+
 def test_a_start_with_its_sensitivity_matches_numpy_twin():
     """From a moving state with a given sensitivity (a run that continues another):
     paper A's drive with Coulomb friction, kernel against twin, every column carrying
@@ -68,8 +135,9 @@ def test_a_start_with_its_sensitivity_matches_numpy_twin():
     t = bk.signals.time_grid(1.5, 1e-3)
     u = bk.signals.step_down(t, A2, t_s=0.5)
     x0 = drive.steady_state(A2)
-    s0 = np.random.default_rng(7).standard_normal((3, len(PARAMS)))
-    s0 /= np.array([getattr(drive, n) for n in PARAMS])  # dx/dp of a relative step
+    names = default_params(drive)
+    s0 = np.random.default_rng(7).standard_normal((3, len(names)))
+    s0 /= np.array([getattr(drive, n) for n in names])  # dx/dp of a relative step
     fast = sensitivities(drive, t, u, initial_state=x0, initial_sensitivity=s0)
     ref = numpy_sensitivities(drive, t, u, initial_state=x0, initial_sensitivity=s0)
     err = float(np.max(np.max(np.abs(fast - ref), axis=(0, 1))
@@ -295,23 +363,37 @@ def test_bad_inputs_raise_value_error():
     drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
     t = bk.signals.time_grid(0.1, 1e-3)
     u = np.full(t.size, 0.1)
-    p = np.array([getattr(drive, n) for n in PARAMS])
+    p = np.array([*(getattr(drive, n) for n in PARAMS[:-1]), 0.0])  # tau_i 0: no loop
     with pytest.raises(ValueError, match=r"J\[0\] must be finite and > 0"):
-        _core.drive_sensitivities(np.where(np.arange(9) == 0, -1.0, p), 0.0, 1e-3, u,
+        _core.drive_sensitivities(np.where(np.arange(10) == 0, -1.0, p), 0.0, 1e-3, u,
                                   np.zeros(3), LINEAR)
     with pytest.raises(ValueError, match="theta must be > 0"):
-        _core.drive_sensitivities(np.where(np.arange(9) == 6, 0.0, p), 0.0, 1e-3, u,
+        _core.drive_sensitivities(np.where(np.arange(10) == 6, 0.0, p), 0.0, 1e-3, u,
                                   np.zeros(3), LINEAR)
-    with pytest.raises(ValueError, match="params must have 9 entries, got 6"):
+    with pytest.raises(ValueError, match="tau_i must be finite and >= 0"):
+        _core.drive_sensitivities(np.where(np.arange(10) == 9, -1.0, p), 0.0, 1e-3, u,
+                                  np.zeros(3), LINEAR)
+    with pytest.raises(ValueError, match="params must have 10 entries, got 6"):
         _core.drive_sensitivities(p[:6], 0.0, 1e-3, u, np.zeros(3), LINEAR)
     with pytest.raises(ValueError, match="initial state must have 3 entries"):
         _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(2), LINEAR)
     with pytest.raises(ValueError, match="sample time must be > 0"):
         _core.drive_sensitivities(p, 0.0, -1e-3, u, np.zeros(3), LINEAR)
-    with pytest.raises(ValueError, match="distinct and below 9"):
+    with pytest.raises(ValueError, match="distinct and below 10"):
         _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [6, 6])
     with pytest.raises(ValueError, match="the sensitivity to fc_M needs fc_M > 0"):
         _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [7])
+    with pytest.raises(ValueError, match="the sensitivity to tau_i needs tau_i > 0"):
+        _core.drive_sensitivities(p, 0.0, 1e-3, u, np.zeros(3), [9])
+    loop = bk.CurrentLoop(1e-3)
+    with pytest.raises(ValueError, match="the sensitivity to tau_i needs a current loop"):
+        sensitivities(drive, t, u, params=("theta", "tau_i"))
+    with pytest.raises(ValueError, match=r"initial_state must hold the 4 states \(w_M, w_L"):
+        sensitivities(drive, t, u, actuator=loop, initial_state=np.zeros(3))
+    with pytest.raises(ValueError, match=r"initial_sensitivity must have shape \(4, 8\)"):
+        sensitivities(drive, t, u, actuator=loop, initial_sensitivity=np.zeros((3, 8)))
+    with pytest.raises(ValueError, match="actuator must be None or a CurrentLoop"):
+        sensitivities(drive, t, u, actuator=1e-3)
     with pytest.raises(ValueError, match="params must be distinct names"):
         sensitivities(drive, t, u, params=("theta", "k"))
     with pytest.raises(ValueError, match="one sample per time step"):
@@ -332,32 +414,42 @@ def test_along_the_simulators_run_the_same_values_to_the_bit():
     (``sensitivities_along``): the same values to the bit as a run that simulates
     again, on paper A's step-down with both Coulomb torques (sticks and breakaways)
     and with the load's alone (its switch is the simulator's third), from a start with
-    a sensitivity; into an array given, as into a new one. A run that does not fit the
-    drive, or an array of another shape, is a one-line ValueError."""
+    a sensitivity, and behind issue 20's current loop (four states); into an array
+    given, as into a new one. A run that does not fit the drive, or an array of another
+    shape, is a one-line ValueError."""
     from backlashkit.identify._model import packed_row
     from backlashkit.simulate import simulate_packed_runs
 
     ts = 2.0**-10  # a step that time_grid finds to the bit from the times
     t = np.arange(1537) * ts
     u = bk.signals.step_down(t, A2, t_s=0.75)
-    x0 = np.array([0.5, 0.4, 0.01])
-    for fc in ({"fc_M": 0.01, "fc_L": 0.02}, {"fc_L": 0.02}):
+    cases = (({"fc_M": 0.01, "fc_L": 0.02}, None), ({"fc_L": 0.02}, None),
+             ({"fc_M": 0.01, "fc_L": 0.02}, LOOP))
+    for fc, loop in cases:
         drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, **fc)
-        names = default_params(drive)
-        s0 = np.random.default_rng(3).standard_normal((3, len(names)))
-        run = simulate_packed_runs(2, packed_row(drive)[np.newaxis, :], 0.0, ts,
-                                   u[np.newaxis, :], x0[np.newaxis, :], law="paper",
-                                   workers=1).run(0)
+        names = default_params(drive, loop)
+        x0 = np.array([0.5, 0.4, 0.01, A2][: 3 if loop is None else 4])
+        s0 = np.random.default_rng(3).standard_normal((x0.size, len(names)))
+        row = packed_row(drive, 0.0 if loop is None else loop.tau_i)
+        run = simulate_packed_runs(2, row[np.newaxis, :], 0.0, ts, u[np.newaxis, :],
+                                   x0[np.newaxis, :], law="paper", workers=1).run(0)
         assert len(run.events) >= 4, run.events
         _, want = trajectory_and_sensitivities(drive, t, u, initial_state=x0,
-                                               initial_sensitivity=s0)
-        got = sensitivities_along(drive, run, initial_sensitivity=s0)
+                                               initial_sensitivity=s0, actuator=loop)
+        got = sensitivities_along(drive, run, initial_sensitivity=s0, actuator=loop)
         assert np.array_equal(got, want), fc
         # into a kept array (NaN: every value is written), as the fit's Jacobians ask
         out = np.full(want.shape, np.nan)
         for _ in range(2):
-            assert sensitivities_along(drive, run, initial_sensitivity=s0, out=out) is out
+            assert sensitivities_along(drive, run, initial_sensitivity=s0, out=out,
+                                       actuator=loop) is out
             assert np.array_equal(out, want), fc
+        end = sensitivity_at_end_along(drive, run, initial_sensitivity=s0, actuator=loop)
+        assert np.array_equal(end, want[-1]), fc
+    drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_L=0.02)
+    run = simulate_packed_runs(2, packed_row(drive)[np.newaxis, :], 0.0, ts,
+                               u[np.newaxis, :], np.zeros((1, 3)), law="paper",
+                               workers=1).run(0)
     shapes = r"^out must have shape \[1537, 3, 8\], got \[1537, 3, 7\]$"
     with pytest.raises(ValueError, match=shapes):
         sensitivities_along(drive, run, out=np.empty((1537, 3, 7)))

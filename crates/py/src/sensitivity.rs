@@ -1,7 +1,7 @@
 //! Bindings of the forward sensitivities of the two-mass drive.
 
 use backlashkit_core::hybrid::Event;
-use backlashkit_core::sensitivity::{self, N_PARAMS, N_STATES};
+use backlashkit_core::sensitivity::{self, state_count, N_PARAMS};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{
     IntoPyArray, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
@@ -10,20 +10,22 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-/// The states `(n, 3)`, the sensitivities `(n, 3, m)` and the near-grazing passes
-/// `(G, 3)`.
+/// The states `(n, s)`, the sensitivities `(n, s, m)` (`s` 3, or 4 behind a current
+/// loop) and the near-grazing passes `(G, 3)`.
 type SensitivityOutput<'py> = (
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray3<f64>>,
     Bound<'py, PyArray2<f64>>,
 );
 
-/// The states `(len(u), 3)` and sensitivities `dx/dp` of a two-mass drive, shape
-/// `(len(u), 3, len(wanted))`: state `[w_M, w_L, phi]` by parameter, the parameters
-/// `wanted` (indices into `[J_M, J_L, k_sh, f_M, f_L, f_sh, theta, fc_M, fc_L]`,
+/// The states `(len(u), n)` and sensitivities `dx/dp` of a two-mass drive, shape
+/// `(len(u), n, len(wanted))`: state `[w_M, w_L, phi]` (and `T`) by parameter, the
+/// parameters `wanted` (indices into `[J_M, J_L, k_sh, f_M, f_L, f_sh, theta, fc_M,
+/// fc_L, tau_i]`,
 /// the values `params` in that order), on the grid `t0 + i ts` under the held torque
-/// `u`, from `x0` with the sensitivity `s0` (`(3, len(wanted))`, default zero; paper
-/// A's law, Coulomb friction with the breakaway torques equal to it, no current loop);
+/// `u`, from `x0` with the sensitivity `s0` (`(n, len(wanted))`, default zero, `n` 3
+/// or 4 behind a current loop; paper A's law, Coulomb friction with the breakaway
+/// torques equal to it);
 /// and the run's near-grazing passes
 /// `(G, 3)` = `[time, shaft, margin]` as `simulate_chain` gives them. See
 /// `backlashkit._sensitivity`.
@@ -48,17 +50,17 @@ fn drive_sensitivities<'py>(
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
     Ok((
-        Array2::from_shape_vec((u.len(), N_STATES), out.states)
+        Array2::from_shape_vec((u.len(), state_count(&p)), out.states)
             .map_err(shape_err)?
             .into_pyarray(py),
-        Array3::from_shape_vec((u.len(), N_STATES, wanted.len()), out.values)
+        Array3::from_shape_vec((u.len(), state_count(&p), wanted.len()), out.values)
             .map_err(shape_err)?
             .into_pyarray(py),
         graze_rows(py, &out.grazes)?,
     ))
 }
 
-/// The states `(len(u), 3)` of a two-mass drive and the sums `sum_k s_c s_c^T` of the
+/// The states `(len(u), n)` of a two-mass drive and the sums `sum_k s_c s_c^T` of the
 /// outer products of each speed's sensitivities `s_c` (motor, load), shape
 /// `(2, len(wanted), len(wanted))`, arguments as `drive_sensitivities` from zero
 /// sensitivity; and the run's near-grazing passes. The white-noise Fisher
@@ -82,7 +84,7 @@ fn drive_information<'py>(
     let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
     let m = wanted.len();
     Ok((
-        Array2::from_shape_vec((u.len(), N_STATES), out.states)
+        Array2::from_shape_vec((u.len(), state_count(&p)), out.states)
             .map_err(shape_err)?
             .into_pyarray(py),
         Array3::from_shape_vec((2, m, m), out.gram)
@@ -107,7 +109,7 @@ fn graze_rows<'py>(
 }
 
 /// As `drive_sensitivities`, along the run the simulator has made of the same drive,
-/// grid and torque (`simulate_chain_batch`'s row): its states `(len(u), 3)`, its
+/// grid and torque (`simulate_chain_batch`'s row): its states `(len(u), n)`, its
 /// first sample's modes and its events `(E, 4)` = `[time, switch, from, to]`; the run
 /// starts from its first state. The same values to the bit, without simulating again.
 /// Returns the sensitivities alone: in `out` where given (C-contiguous, of that shape;
@@ -134,7 +136,7 @@ fn drive_sensitivities_along<'py>(
     let u = u.as_slice()?;
     let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
     if let Some(out) = out {
-        let shape = [u.len(), N_STATES, wanted.len()];
+        let shape = [u.len(), state_count(&p), wanted.len()];
         if out.shape() != shape {
             return Err(PyValueError::new_err(format!(
                 "out must have shape {shape:?}, got {:?}",
@@ -157,7 +159,7 @@ fn drive_sensitivities_along<'py>(
         .detach(|| sensitivity::drive_sensitivities_along(&p, t0, ts, u, &run, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(
-        Array3::from_shape_vec((u.len(), N_STATES, wanted.len()), values)
+        Array3::from_shape_vec((u.len(), state_count(&p), wanted.len()), values)
             .map_err(|e| PyValueError::new_err(e.to_string()))?
             .into_pyarray(py),
     )
@@ -222,7 +224,7 @@ fn drive_jacobian_rows_along<'py>(
     .map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
-/// The sensitivities `(3, len(wanted))` at the last sample of a run, as the last row
+/// The sensitivities `(n, len(wanted))` at the last sample of a run, as the last row
 /// of `drive_sensitivities_along`'s, without the others written out.
 #[pyfunction]
 #[pyo3(signature = (params, t0, ts, u, states, first_modes, events, wanted, s0=None))]
@@ -250,7 +252,7 @@ fn drive_sensitivity_at_end_along<'py>(
     let values = py
         .detach(|| sensitivity::drive_sensitivity_at_end_along(&p, t0, ts, u, &run, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
-    Ok(Array2::from_shape_vec((N_STATES, m), values)
+    Ok(Array2::from_shape_vec((state_count(&p), m), values)
         .map_err(|e| PyValueError::new_err(e.to_string()))?
         .into_pyarray(py))
 }

@@ -8,31 +8,31 @@
 
 use super::coupled::coupled_expm;
 use super::mode::{system, system_derivative, Mode, System};
-use super::{N_PARAMS, N_STATES};
+use super::N_PARAMS;
 use crate::linalg::{matvec, Mat, Vector};
 
 /// State and sensitivities: `x`, and `s[j] = scale_j dx/dp_j`.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Augmented {
-    pub x: Vector<N_STATES>,
-    pub s: [Vector<N_STATES>; N_PARAMS],
+pub(super) struct Augmented<const N: usize> {
+    pub x: Vector<N>,
+    pub s: [Vector<N>; N_PARAMS],
 }
 
 /// The exact flow of a mode over a span `tau` of held torque `u`:
 /// `x <- e x + xu u + x1`, `s_j <- e s_j + coupling_j x + su_j u + s1_j`.
 #[derive(Clone, Debug)]
-pub(super) struct Flow {
+pub(super) struct Flow<const N: usize> {
     /// Whether column `j`'s coupling block is nonzero.
     coupled: [bool; N_PARAMS],
-    pub(super) e: Mat<N_STATES>,
-    xu: Vector<N_STATES>,
-    x1: Vector<N_STATES>,
-    pub(super) coupling: [Mat<N_STATES>; N_PARAMS],
-    pub(super) su: [Vector<N_STATES>; N_PARAMS],
-    pub(super) s1: [Vector<N_STATES>; N_PARAMS],
+    pub(super) e: Mat<N>,
+    xu: Vector<N>,
+    x1: Vector<N>,
+    pub(super) coupling: [Mat<N>; N_PARAMS],
+    pub(super) su: [Vector<N>; N_PARAMS],
+    pub(super) s1: [Vector<N>; N_PARAMS],
 }
 
-impl Flow {
+impl<const N: usize> Flow<N> {
     /// The flow of `mode` over `tau`, sensitivities scaled by `scale`: the
     /// exponential of `[[A, 0], [scale_j A_j, A]] tau` and its integral for every `j`
     /// (see `coupled`), applied to the inputs `[b, scale_j b_j]` and `[c, scale_j c_j]`.
@@ -44,12 +44,12 @@ impl Flow {
         tau: f64,
         active: &[bool; N_PARAMS],
     ) -> Self {
-        let sys = system(p, mode);
-        let der: [System; N_PARAMS] =
+        let sys = system::<N>(p, mode);
+        let der: [System<N>; N_PARAMS] =
             std::array::from_fn(|j| system_derivative(p, mode, j).scaled(scale[j]));
         let ex = coupled_expm(&sys.a, &der.map(|d| d.a), tau, active);
         let (fb, fc) = (matvec(&ex.f, &sys.b), matvec(&ex.f, &sys.c));
-        let input = |j: usize, v: &Vector<N_STATES>, dv: &Vector<N_STATES>| {
+        let input = |j: usize, v: &Vector<N>, dv: &Vector<N>| {
             let (kv, fdv) = (matvec(&ex.k[j], v), matvec(&ex.f, dv));
             std::array::from_fn(|i| kv[i] + fdv[i])
         };
@@ -68,23 +68,23 @@ impl Flow {
     /// from the state `x` at the span's start. A column whose coupling is zero
     /// (`theta`'s: `A` does not depend on it) skips that product.
     #[inline(always)]
-    fn step_column(&self, j: usize, s: &mut Vector<N_STATES>, x: &Vector<N_STATES>, u: f64) {
+    fn step_column(&self, j: usize, s: &mut Vector<N>, x: &Vector<N>, u: f64) {
         let es = matvec(&self.e, s);
         let cx = if self.coupled[j] {
             matvec(&self.coupling[j], x)
         } else {
-            [0.0; N_STATES]
+            [0.0; N]
         };
-        for i in 0..N_STATES {
+        for i in 0..N {
             s[i] = es[i] + cx[i] + self.su[j][i] * u + self.s1[j][i];
         }
     }
 
     /// The state of `z` advanced in place by the flow under torque `u`.
     #[inline]
-    fn apply_state(&self, z: &mut Augmented, u: f64) {
+    fn apply_state(&self, z: &mut Augmented<N>, u: f64) {
         let ex = matvec(&self.e, &z.x);
-        for i in 0..N_STATES {
+        for i in 0..N {
             z.x[i] = ex[i] + self.xu[i] * u + self.x1[i];
         }
     }
@@ -92,7 +92,7 @@ impl Flow {
     /// `z` advanced in place by the flow under torque `u`: the carried sensitivities
     /// `cols` first (they need the state at the span's start), then the state.
     #[inline]
-    pub fn apply(&self, z: &mut Augmented, u: f64, cols: &[usize]) {
+    pub fn apply(&self, z: &mut Augmented<N>, u: f64, cols: &[usize]) {
         for &j in cols {
             self.step_column(j, &mut z.s[j], &z.x, u);
         }

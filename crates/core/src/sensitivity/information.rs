@@ -105,9 +105,9 @@ impl Gram {
     }
 }
 
-impl Sink for Gram {
+impl<const N: usize> Sink<N> for Gram {
     #[inline(always)]
-    fn take(&mut self, row: &Row) {
+    fn take(&mut self, row: &Row<N>) {
         for speed in &row[..SPEEDS] {
             push_lanes(&mut self.block, speed, self.groups);
         }

@@ -117,9 +117,9 @@ struct JacobianRows<'a, 'b> {
     next: usize,
 }
 
-impl Sink for JacobianRows<'_, '_> {
+impl<const N: usize> Sink<N> for JacobianRows<'_, '_> {
     #[inline(always)]
-    fn take(&mut self, row: &Row) {
+    fn take(&mut self, row: &Row<N>) {
         let w = self.weights;
         if w.selected.get(self.next) == Some(&self.sample) {
             let (m, n) = (self.m, w.selected.len());

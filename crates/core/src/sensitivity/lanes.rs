@@ -12,7 +12,7 @@
 //! else (`information`).
 
 use super::flow::Flow;
-use super::{N_PARAMS, N_STATES};
+use super::N_PARAMS;
 use crate::linalg::{Mat, Vector};
 
 /// Columns per group: four doubles fill a 256-bit register (AVX2, chosen at run time
@@ -24,13 +24,13 @@ const MAX_GROUPS: usize = N_PARAMS.div_ceil(LANES);
 /// Lanes of a [`Row`]: every group's, side by side.
 pub(super) const WIDTH: usize = MAX_GROUPS * LANES;
 
-/// One sample's carried columns in the parameters' units: a state's row of
-/// [`WIDTH`] lanes, the columns in the order wanted, zero beyond them.
-pub(super) type Row = [[f64; WIDTH]; N_STATES];
+/// One sample's carried columns in the parameters' units: each of the `N` states' row
+/// of [`WIDTH`] lanes, the columns in the order wanted, zero beyond them.
+pub(super) type Row<const N: usize> = [[f64; WIDTH]; N];
 
-/// Where the rows of a run go, one per sample, in order.
-pub(super) trait Sink {
-    fn take(&mut self, row: &Row);
+/// Where the rows of a run of `N` states go, one per sample, in order.
+pub(super) trait Sink<const N: usize> {
+    fn take(&mut self, row: &Row<N>);
 }
 
 /// The lanes of the first `groups` groups of `lanes` pushed onto `out`: a copy of a
@@ -61,20 +61,24 @@ pub(super) fn copy_lanes(dst: &mut [f64], lanes: &[f64; WIDTH], groups: usize) {
 /// Up to [`LANES`] carried columns of one mode's whole-sample flow, side by side; the
 /// group `g` of a run carries the wanted columns `g LANES ..`.
 #[derive(Clone, Debug)]
-pub(super) struct Group {
+pub(super) struct Group<const N: usize> {
     /// Each lane's parameter.
     params: Vec<usize>,
-    e: Mat<N_STATES>,
+    e: Mat<N>,
     /// `coupling[r][q][lane]`, and so on: lane-innermost for the vector instructions.
-    coupling: [[Lanes; N_STATES]; N_STATES],
-    su: [Lanes; N_STATES],
-    s1: [Lanes; N_STATES],
+    coupling: [[Lanes; N]; N],
+    su: [Lanes; N],
+    s1: [Lanes; N],
     unscale: Lanes,
 }
 
 /// The columns `wanted` of `flow` in groups of [`LANES`]; a column `j` is written
 /// times `unscale[j]`.
-pub(super) fn groups(flow: &Flow, wanted: &[usize], unscale: &[f64; N_PARAMS]) -> Vec<Group> {
+pub(super) fn groups<const N: usize>(
+    flow: &Flow<N>,
+    wanted: &[usize],
+    unscale: &[f64; N_PARAMS],
+) -> Vec<Group<N>> {
     wanted
         .chunks(LANES)
         .map(|chunk| {
@@ -96,12 +100,12 @@ pub(super) fn groups(flow: &Flow, wanted: &[usize], unscale: &[f64; N_PARAMS]) -
 }
 
 /// The columns of `s` that `groups` carry, over whole samples, one per torque of `u`,
-/// along the simulator's states `x` (one row of 3 per sample's start); each sample's
+/// along the simulator's states `x` (one row of `N` per sample's start); each sample's
 /// start goes to `sink`. Runs the same arithmetic with AVX2's wider registers where
 /// the processor has them.
-pub(super) fn stream<S: Sink>(
-    groups: &[Group],
-    s: &mut [Vector<N_STATES>; N_PARAMS],
+pub(super) fn stream<const N: usize, S: Sink<N>>(
+    groups: &[Group<N>],
+    s: &mut [Vector<N>; N_PARAMS],
     u: &[f64],
     x: &[f64],
     sink: &mut S,
@@ -120,9 +124,9 @@ pub(super) fn stream<S: Sink>(
 /// The processor must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn stream_avx2<S: Sink>(
-    groups: &[Group],
-    s: &mut [Vector<N_STATES>; N_PARAMS],
+unsafe fn stream_avx2<const N: usize, S: Sink<N>>(
+    groups: &[Group<N>],
+    s: &mut [Vector<N>; N_PARAMS],
     u: &[f64],
     x: &[f64],
     sink: &mut S,
@@ -132,26 +136,26 @@ unsafe fn stream_avx2<S: Sink>(
 
 /// The body of [`stream`].
 #[inline(always)]
-fn stream_lanes<S: Sink>(
-    groups: &[Group],
-    s: &mut [Vector<N_STATES>; N_PARAMS],
+fn stream_lanes<const N: usize, S: Sink<N>>(
+    groups: &[Group<N>],
+    s: &mut [Vector<N>; N_PARAMS],
     u: &[f64],
     x: &[f64],
     sink: &mut S,
 ) {
-    let mut v = [[[0.0; LANES]; N_STATES]; MAX_GROUPS];
+    let mut v = [[[0.0; LANES]; N]; MAX_GROUPS];
     for (group, vg) in groups.iter().zip(v.iter_mut()) {
         for (l, &j) in group.params.iter().enumerate() {
-            for r in 0..N_STATES {
+            for r in 0..N {
                 vg[r][l] = s[j][r];
             }
         }
     }
-    let mut row: Row = [[0.0; WIDTH]; N_STATES];
-    for (xi, &ui) in x.chunks_exact(N_STATES).zip(u) {
-        let xi = [xi[0], xi[1], xi[2]];
+    let mut row: Row<N> = [[0.0; WIDTH]; N];
+    for (xi, &ui) in x.chunks_exact(N).zip(u) {
+        let xi: Vector<N> = std::array::from_fn(|i| xi[i]);
         for (g, (group, vg)) in groups.iter().zip(v.iter_mut()).enumerate() {
-            for r in 0..N_STATES {
+            for r in 0..N {
                 for l in 0..LANES {
                     row[r][g * LANES + l] = vg[r][l] * group.unscale[l];
                 }
@@ -162,24 +166,24 @@ fn stream_lanes<S: Sink>(
     }
     for (group, vg) in groups.iter().zip(v.iter()) {
         for (l, &j) in group.params.iter().enumerate() {
-            for r in 0..N_STATES {
+            for r in 0..N {
                 s[j][r] = vg[r][l];
             }
         }
     }
 }
 
-impl Group {
+impl<const N: usize> Group<N> {
     /// One whole sample: `e v + coupling x + su u + s1`, lane by lane (plain loops:
     /// the compiler vectorises them; `array::from_fn` closures it did not inline).
     #[inline(always)]
-    fn step(&self, v: &[Lanes; N_STATES], x: Vector<N_STATES>, u: f64) -> [Lanes; N_STATES] {
-        let mut next = [[0.0; LANES]; N_STATES];
-        for r in 0..N_STATES {
+    fn step(&self, v: &[Lanes; N], x: Vector<N>, u: f64) -> [Lanes; N] {
+        let mut next = [[0.0; LANES]; N];
+        for r in 0..N {
             for l in 0..LANES {
                 next[r][l] = self.su[r][l] * u + self.s1[r][l];
             }
-            for q in 0..N_STATES {
+            for q in 0..N {
                 for l in 0..LANES {
                     next[r][l] += self.e[r][q] * v[q][l] + self.coupling[r][q][l] * x[q];
                 }
@@ -195,10 +199,10 @@ mod tests {
     use super::*;
 
     /// Every row the walk hands over.
-    struct Record(Vec<Row>);
+    struct Record<const N: usize>(Vec<Row<N>>);
 
-    impl Sink for Record {
-        fn take(&mut self, row: &Row) {
+    impl<const N: usize> Sink<N> for Record<N> {
+        fn take(&mut self, row: &Row<N>) {
             self.0.push(*row);
         }
     }
@@ -207,27 +211,40 @@ mod tests {
     fn the_wide_registers_give_the_baseline_builds_bits() {
         // The walk picks the AVX2 build where the processor has it; its lanes must
         // carry the baseline build's arithmetic to the bit (no fused multiply-add).
-        // Paper A's drive with Coulomb torques, all nine columns (three groups), in
-        // contact and in the play, from a start with a sensitivity.
-        let p = [
-            4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.01, 0.02,
+        // Paper A's drive with Coulomb torques, every column (three groups), in
+        // contact and in the play, from a start with a sensitivity; without and with a
+        // current loop.
+        let mut p = [
+            4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.01, 0.02, 0.0,
         ];
-        let wanted: Vec<usize> = (0..N_PARAMS).collect();
-        let unscale = p.map(|v| 1.0 / v);
+        wide_and_baseline_agree::<3>(&p, N_PARAMS - 1);
+        p[N_PARAMS - 1] = 1e-3;
+        wide_and_baseline_agree::<4>(&p, N_PARAMS);
+    }
+
+    /// The wide and the baseline build's rows and end, `n_wanted` first columns.
+    fn wide_and_baseline_agree<const N: usize>(p: &[f64; N_PARAMS], n_wanted: usize) {
+        let wanted: Vec<usize> = (0..n_wanted).collect();
+        let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
+        let unscale = scale.map(|v| 1.0 / v);
         let u: Vec<f64> = (0..500).map(|i| 0.9 * (i as f64 * 0.03).sin()).collect();
-        let x: Vec<f64> = (0..3 * u.len())
+        let x: Vec<f64> = (0..N * u.len())
             .map(|i| 0.1 * (i as f64 * 0.011).cos())
             .collect();
+        let active = std::array::from_fn(|j| j < n_wanted);
         for flank in [1, 0] {
-            let flow = Flow::new(&p, &p, Mode::contact(flank), 1e-3, &[true; N_PARAMS]);
+            let flow = Flow::<N>::new(p, &scale, Mode::contact(flank), 1e-3, &active);
             let groups = groups(&flow, &wanted, &unscale);
-            let start: [Vector<N_STATES>; N_PARAMS] =
-                std::array::from_fn(|j| std::array::from_fn(|r| 1e-2 * (j * 3 + r) as f64));
+            let start: [Vector<N>; N_PARAMS] =
+                std::array::from_fn(|j| std::array::from_fn(|r| 1e-2 * (j * N + r) as f64));
             let (mut s_wide, mut s_base) = (start, start);
             let (mut wide, mut base) = (Record(Vec::new()), Record(Vec::new()));
             stream(&groups, &mut s_wide, &u, &x, &mut wide);
             stream_lanes(&groups, &mut s_base, &u, &x, &mut base);
-            assert!(wide.0 == base.0 && s_wide == s_base, "flank {flank}");
+            assert!(
+                wide.0 == base.0 && s_wide == s_base,
+                "flank {flank}, {N} states"
+            );
             assert!(base
                 .0
                 .iter()

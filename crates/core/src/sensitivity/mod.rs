@@ -1,8 +1,9 @@
 //! Exact forward sensitivities of the two-mass drive (issue 24): the derivatives of the
-//! state `[w_M, w_L, phi]` with respect to the parameters [`PARAMS`], under paper A's
-//! contact law, with Coulomb friction whose breakaway torque is the Coulomb torque
-//! (`fs = fc`) or none, without current loop, from a given state and its sensitivity
-//! (zero from rest; a held torque's run or a steady state's where a run continues one).
+//! state `[w_M, w_L, phi]` (`[w_M, w_L, phi, T]` behind a current loop, `T` the motor
+//! torque) with respect to the parameters [`PARAMS`], under paper A's contact law, with
+//! Coulomb friction whose breakaway torque is the Coulomb torque (`fs = fc`) or none,
+//! from a given state and its sensitivity (zero from rest; a held torque's run or a
+//! steady state's where a run continues one).
 //!
 //! Inside a mode the drive is linear, `dx/dt = A x + b u + c`, and so is each
 //! sensitivity `S_j = dx/dp_j`: `dS_j/dt = A S_j + A_j x + b_j u + c_j` (`A_j = dA/dp_j`
@@ -42,16 +43,28 @@ pub use run::{
 /// The parameters, in the order of a parameter vector: motor and load inertias, shaft
 /// stiffness, motor and load viscous frictions, shaft damping, backlash half-width
 /// (paper A's model, the first [`N_LINEAR`]), then the motor's and the load's Coulomb
-/// torques (0: no Coulomb friction).
+/// torques (0: no Coulomb friction), then the current loop's time constant (0: none).
 pub const PARAMS: [&str; N_PARAMS] = [
-    "J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta", "fc_M", "fc_L",
+    "J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta", "fc_M", "fc_L", "tau_i",
 ];
 /// Number of parameters.
-pub const N_PARAMS: usize = 9;
+pub const N_PARAMS: usize = 10;
 /// Paper A's model: the parameters before the Coulomb torques.
 pub const N_LINEAR: usize = 7;
 /// States of the two-mass drive: `[w_M, w_L, phi]`.
 pub const N_STATES: usize = 3;
+/// States behind a current loop: the drive's, then the motor torque `T`.
+pub const N_LOOP_STATES: usize = N_STATES + 1;
+
+/// The state count of a drive with parameters `p`: [`N_LOOP_STATES`] where its current
+/// loop's time constant is positive, else [`N_STATES`].
+pub fn state_count(p: &[f64; N_PARAMS]) -> usize {
+    if p[index::TAU] > 0.0 {
+        N_LOOP_STATES
+    } else {
+        N_STATES
+    }
+}
 
 /// Indices into a parameter array (order [`PARAMS`]).
 pub(crate) mod index {
@@ -64,4 +77,5 @@ pub(crate) mod index {
     pub const THETA: usize = 6;
     pub const FC_M: usize = 7;
     pub const FC_L: usize = 8;
+    pub const TAU: usize = 9;
 }

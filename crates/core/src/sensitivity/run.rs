@@ -2,10 +2,10 @@
 //! stick-slip changes, and the saltation jump at each change.
 
 use super::flow::{Augmented, Flow};
-use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, THETA};
+use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, TAU, THETA};
 use super::lanes::{copy_lanes, groups, push_lanes, stream, Group, Row, Sink, LANES, WIDTH};
 use super::mode::{balance, balance_derivative, system, Mode, N_MODES};
-use super::{N_LINEAR, N_PARAMS, N_STATES, PARAMS};
+use super::{state_count, N_LINEAR, N_LOOP_STATES, N_PARAMS, N_STATES, PARAMS};
 use crate::chain::{simulate_chain, ChainParams, Law};
 use crate::hybrid::{Event, Graze};
 use crate::Error;
@@ -13,11 +13,11 @@ use crate::Error;
 /// Sensitivities along a run, the run's states, and its near-grazing passes.
 #[derive(Clone, Debug, Default)]
 pub struct DriveSensitivities {
-    /// `dx/dp`, row-major `(samples, 3, m)`: state by parameter, for the `m`
-    /// parameters asked for (all seven, in the order [`PARAMS`](super::PARAMS), for
-    /// [`drive_sensitivities`]).
+    /// `dx/dp`, row-major `(samples, n, m)` (`n` the drive's [`state_count`]): state
+    /// by parameter, for the `m` parameters asked for (all seven, in the order
+    /// [`PARAMS`](super::PARAMS), for [`drive_sensitivities`]).
     pub values: Vec<f64>,
-    /// The simulator's states `x`, row-major `(samples, 3)`.
+    /// The simulator's states `x`, row-major `(samples, n)`.
     pub states: Vec<f64>,
     /// The simulator's near-grazing passes (see [`Graze`]): after one, the
     /// sensitivities are ill-conditioned (the derivative barely exists).
@@ -25,16 +25,18 @@ pub struct DriveSensitivities {
 }
 
 /// Sensitivities `dx/dp` of the two-mass drive on the grid `t0 + i ts`, row-major
-/// `(u.len(), 3, 7)`: state `[w_M, w_L, phi]` by parameter of paper A's model (the
-/// first [`N_LINEAR`] of [`PARAMS`]), in the parameters' SI units. The torque `u[i]`
-/// is held over `[t_i, t_{i+1})`; the run starts at `x0` with zero sensitivity (paper
-/// A's law, Coulomb friction `p[7..]` with breakaway torques equal to it, no current
-/// loop).
+/// `(u.len(), n, 7)`: state `[w_M, w_L, phi]` (and the motor torque `T` behind a
+/// current loop, `n` = [`state_count`]) by parameter of paper A's model (the first
+/// [`N_LINEAR`] of [`PARAMS`]), in the parameters' SI units. The torque `u[i]` (the
+/// loop's set-point where there is one) is held over `[t_i, t_{i+1})`; the run starts
+/// at `x0` with zero sensitivity (paper A's law, Coulomb friction `p[7..9]` with
+/// breakaway torques equal to it, a current loop of time constant `p[9]` where > 0).
 ///
 /// Also returns the simulator's near-grazing passes.
 ///
-/// Errors: invalid parameters (`J`, `k`, `theta` must be > 0, the frictions >= 0, all
-/// finite), sample time, input or initial state; a simulation error; a change at which
+/// Errors: invalid parameters (`J`, `k`, `theta` must be > 0, the frictions and
+/// `tau_i` >= 0, all finite), sample time, input or initial state; a simulation
+/// error; a change at which
 /// the shaft exactly grazes a flank ([`Error::Grazing`]).
 pub fn drive_sensitivities(
     p: &[f64; N_PARAMS],
@@ -67,7 +69,7 @@ pub fn drive_sensitivities_of(
 }
 
 /// As [`drive_sensitivities_of`], from `x0` whose sensitivity `dx0/dp` is `s0`
-/// (row-major `(3, wanted.len())`, the output's layout; `None`: zero): a run that
+/// (row-major `(n, wanted.len())`, the output's layout; `None`: zero): a run that
 /// continues another, such as the window after a held torque's run, or one that
 /// starts from a steady state that moves with the parameters. The jumps and the flow
 /// are linear in the sensitivities, so the run carries `s0` exactly.
@@ -82,7 +84,7 @@ pub fn drive_sensitivities_from(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<DriveSensitivities, Error> {
-    let mut rows = Rows::new(u.len(), wanted.len());
+    let mut rows = Rows::new(u.len(), state_count(p), wanted.len());
     let (states, grazes) = simulate_and_walk(p, t0, ts, u, x0, s0, wanted, &mut rows)?;
     Ok(DriveSensitivities {
         values: rows.out,
@@ -91,11 +93,11 @@ pub fn drive_sensitivities_from(
     })
 }
 
-/// The run of the simulator (its states, row-major `(samples, 3)`, and its
+/// The run of the simulator (its states, row-major `(samples, n)`, and its
 /// near-grazing passes), and the sensitivities along it to `sink`: the body of
 /// [`drive_sensitivities_from`], whatever becomes of the rows.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn simulate_and_walk<S: Sink>(
+pub(super) fn simulate_and_walk<S: EitherSink>(
     p: &[f64; N_PARAMS],
     t0: f64,
     ts: f64,
@@ -126,7 +128,7 @@ pub(super) fn simulate_and_walk<S: Sink>(
 }
 
 /// A run of the simulator that the sensitivities can follow without simulating it
-/// again: its states, row-major `(samples, 3)`; its first sample's modes (the contact,
+/// again: its states, row-major `(samples, n)`; its first sample's modes (the contact,
 /// then each inertia with friction, as the simulator writes them); and its changes.
 #[derive(Clone, Copy, Debug)]
 pub struct Along<'a> {
@@ -137,7 +139,7 @@ pub struct Along<'a> {
 
 /// As [`drive_sensitivities_from`], along `run`, the simulator's run of the same
 /// drive, grid and torque from `run`'s first state (the simulator's output for
-/// `x0 = run.states[..3]`): the joint fit has just simulated the point whose
+/// `x0 = run.states[..n]`): the joint fit has just simulated the point whose
 /// Jacobian it wants, and this skips simulating it again. The same arithmetic, so
 /// the same values to the bit as [`drive_sensitivities_from`] on that run. Returns
 /// `dx/dp` alone.
@@ -154,12 +156,12 @@ pub fn drive_sensitivities_along(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<Vec<f64>, Error> {
-    let mut out = vec![0.0; u.len() * N_STATES * wanted.len()];
+    let mut out = vec![0.0; u.len() * state_count(p) * wanted.len()];
     drive_sensitivities_along_into(p, t0, ts, u, run, s0, wanted, &mut out)?;
     Ok(out)
 }
 
-/// As [`drive_sensitivities_along`], into `out` (row-major `(u.len(), 3,
+/// As [`drive_sensitivities_along`], into `out` (row-major `(u.len(), n,
 /// wanted.len())`): a caller that asks again and again for runs of one size (the joint
 /// fit's Jacobians) keeps one array, where a new one each time costs its fresh pages.
 ///
@@ -176,10 +178,11 @@ pub fn drive_sensitivities_along_into(
     out: &mut [f64],
 ) -> Result<(), Error> {
     let (active, sticky) = checked_along(p, t0, ts, u, run, s0, wanted)?;
-    let size = u.len() * N_STATES * wanted.len();
+    let n = state_count(p);
+    let size = u.len() * n * wanted.len();
     if out.len() != size {
         return Err(Error::InvalidArgument(format!(
-            "the output must hold {} x {N_STATES} x {} values, got {}",
+            "the output must hold {} x {n} x {} values, got {}",
             u.len(),
             wanted.len(),
             out.len()
@@ -205,12 +208,12 @@ pub(super) fn checked_along(
 ) -> Result<([bool; N_PARAMS], Vec<usize>), Error> {
     let active = checked(p, s0, wanted)?;
     let sticky = chain_params(p)?.sticky();
-    check_run(t0, ts, u.len(), run, &sticky)?;
+    check_run(t0, ts, (u.len(), state_count(p)), run, &sticky)?;
     Ok((active, sticky))
 }
 
 /// As [`drive_sensitivities_along`], the last sample's sensitivities alone, row-major
-/// `(3, wanted.len())`: a run whose end alone is wanted (a held torque's, which the
+/// `(n, wanted.len())`: a run whose end alone is wanted (a held torque's, which the
 /// window after it starts from) writes no other row.
 ///
 /// Errors: as [`drive_sensitivities_along`], and a run of no sample.
@@ -230,31 +233,38 @@ pub fn drive_sensitivity_at_end_along(
         ));
     }
     let mut last = Last {
-        row: [[0.0; WIDTH]; N_STATES],
+        row: [[0.0; WIDTH]; N_LOOP_STATES],
         left: u.len(),
     };
     walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut last)?;
     let m = wanted.len();
-    Ok(last.row.iter().flat_map(|r| &r[..m]).copied().collect())
+    let rows = &last.row[..state_count(p)];
+    Ok(rows.iter().flat_map(|r| &r[..m]).copied().collect())
 }
 
-/// The last of `left` rows, copied when it comes, and the others not at all.
+/// A sink for the runs of either state count: the drive's own, or behind a loop.
+pub(super) trait EitherSink: Sink<N_STATES> + Sink<N_LOOP_STATES> {}
+
+impl<S: Sink<N_STATES> + Sink<N_LOOP_STATES>> EitherSink for S {}
+
+/// The last of `left` rows, copied when it comes, and the others not at all (its
+/// first `N` states' rows).
 struct Last {
-    row: Row,
+    row: Row<N_LOOP_STATES>,
     left: usize,
 }
 
-impl Sink for Last {
+impl<const N: usize> Sink<N> for Last {
     #[inline(always)]
-    fn take(&mut self, row: &Row) {
+    fn take(&mut self, row: &Row<N>) {
         self.left -= 1;
         if self.left == 0 {
-            self.row = *row;
+            self.row[..N].copy_from_slice(row);
         }
     }
 }
 
-/// The rows written into a given array, row-major `(samples, 3, m)`, in order.
+/// The rows written into a given array, row-major `(samples, n, m)`, in order.
 struct RowsInto<'a> {
     out: &'a mut [f64],
     m: usize,
@@ -273,12 +283,12 @@ impl<'a> RowsInto<'a> {
     }
 }
 
-impl Sink for RowsInto<'_> {
+impl<const N: usize> Sink<N> for RowsInto<'_> {
     /// Each state's lanes of the groups carried where the array has room for them
     /// (the next row overwrites what lies past this one's `m`; see [`copy_lanes`]),
     /// else its `m` values.
     #[inline(always)]
-    fn take(&mut self, row: &Row) {
+    fn take(&mut self, row: &Row<N>) {
         for r in row {
             let (pos, m) = (self.pos, self.m);
             if pos + self.groups * LANES <= self.out.len() {
@@ -291,7 +301,7 @@ impl Sink for RowsInto<'_> {
     }
 }
 
-/// The rows pushed onto a new array, row-major `(samples, 3, m)`: unlike [`RowsInto`]
+/// The rows pushed onto a new array, row-major `(samples, n, m)`: unlike [`RowsInto`]
 /// on a zeroed one, nothing is written twice.
 struct Rows {
     m: usize,
@@ -300,20 +310,20 @@ struct Rows {
 }
 
 impl Rows {
-    fn new(samples: usize, m: usize) -> Self {
+    fn new(samples: usize, n: usize, m: usize) -> Self {
         Rows {
             m,
             groups: m.div_ceil(LANES),
-            out: Vec::with_capacity(samples * N_STATES * m + WIDTH),
+            out: Vec::with_capacity(samples * n * m + WIDTH),
         }
     }
 }
 
-impl Sink for Rows {
+impl<const N: usize> Sink<N> for Rows {
     /// Each state's lanes of the groups carried, then back to its first `m` (see
     /// [`push_lanes`]; the capacity has a row's room to spare).
     #[inline(always)]
-    fn take(&mut self, row: &Row) {
+    fn take(&mut self, row: &Row<N>) {
         for r in row {
             let len = self.out.len();
             push_lanes(&mut self.out, r, self.groups);
@@ -345,9 +355,10 @@ fn checked(
         )));
     }
     if let Some(s0) = s0 {
-        if s0.len() != N_STATES * wanted.len() || !s0.iter().all(|v| v.is_finite()) {
+        let n = state_count(p);
+        if s0.len() != n * wanted.len() || !s0.iter().all(|v| v.is_finite()) {
             return Err(Error::InvalidArgument(format!(
-                "the initial sensitivity must hold {N_STATES} x {} finite values (states by \
+                "the initial sensitivity must hold {n} x {} finite values (states by \
                  parameters), got {} values",
                 wanted.len(),
                 s0.len()
@@ -360,7 +371,13 @@ fn checked(
 /// A run given to [`drive_sensitivities_along`] checked against the grid of `n`
 /// samples and the drive's switches: the contact (event 0), then each inertia `i` of
 /// `sticky` (event `1 + i`, the simulator's numbering).
-fn check_run(t0: f64, ts: f64, n: usize, run: &Along<'_>, sticky: &[usize]) -> Result<(), Error> {
+fn check_run(
+    t0: f64,
+    ts: f64,
+    (n, n_states): (usize, usize),
+    run: &Along<'_>,
+    sticky: &[usize],
+) -> Result<(), Error> {
     let switches = 1 + sticky.len();
     let bad = |what: String| Err(Error::InvalidArgument(format!("the run given {what}")));
     if !(t0.is_finite() && ts.is_finite() && ts > 0.0) {
@@ -368,9 +385,9 @@ fn check_run(t0: f64, ts: f64, n: usize, run: &Along<'_>, sticky: &[usize]) -> R
             "needs a finite start and a sample time > 0, got {t0} and {ts}"
         ));
     }
-    if run.states.len() != n * N_STATES || !run.states.iter().all(|v| v.is_finite()) {
+    if run.states.len() != n * n_states || !run.states.iter().all(|v| v.is_finite()) {
         return bad(format!(
-            "must hold {n} x {N_STATES} finite states, got {} values",
+            "must hold {n} x {n_states} finite states, got {} values",
             run.states.len()
         ));
     }
@@ -399,9 +416,31 @@ fn check_run(t0: f64, ts: f64, n: usize, run: &Along<'_>, sticky: &[usize]) -> R
 }
 
 /// The sensitivities along a run of the drive (`run`, checked; `sticky`: its inertias
-/// with a friction switch), from `s0`, each sample's row to `sink`.
+/// with a friction switch), from `s0`, each sample's row to `sink`: of the drive's
+/// three states, or four behind a current loop.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn walk<S: Sink>(
+pub(super) fn walk<S: EitherSink>(
+    p: &[f64; N_PARAMS],
+    sticky: &[usize],
+    t0: f64,
+    ts: f64,
+    u: &[f64],
+    run: &Along<'_>,
+    s0: Option<&[f64]>,
+    wanted: &[usize],
+    active: [bool; N_PARAMS],
+    sink: &mut S,
+) -> Result<(), Error> {
+    if state_count(p) == N_LOOP_STATES {
+        walk_states::<N_LOOP_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink)
+    } else {
+        walk_states::<N_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink)
+    }
+}
+
+/// [`walk`] for a state of `N` entries.
+#[allow(clippy::too_many_arguments)]
+fn walk_states<const N: usize, S: Sink<N>>(
     p: &[f64; N_PARAMS],
     sticky: &[usize],
     t0: f64,
@@ -420,10 +459,10 @@ pub(super) fn walk<S: Sink>(
     // Sensitivities are carried per log-parameter (see `flow`); a zero friction or
     // damping keeps the plain derivative.
     let scale = p.map(|v| if v > 0.0 { v } else { 1.0 });
-    let x = [run.states[0], run.states[1], run.states[2]];
-    let mut s = [[0.0; N_STATES]; N_PARAMS];
+    let x = std::array::from_fn(|i| run.states[i]);
+    let mut s = [[0.0; N]; N_PARAMS];
     for (c, &j) in wanted.iter().enumerate() {
-        for i in 0..N_STATES {
+        for i in 0..N {
             s[j][i] = s0.map_or(0.0, |s0| s0[i * wanted.len() + c] * scale[j]);
         }
     }
@@ -455,6 +494,7 @@ fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
     if p[FC_M] != 0.0 || p[FC_L] != 0.0 {
         chain.fc = vec![p[FC_M], p[FC_L]];
     }
+    chain.tau_i = p[TAU];
     chain.validate()?;
     if p[THETA] <= 0.0 {
         return Err(Error::InvalidArgument(format!(
@@ -465,8 +505,8 @@ fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
     Ok(chain)
 }
 
-/// The state of the walk along the samples.
-struct Walk<'a> {
+/// The state of the walk along the samples, of `N` states.
+struct Walk<'a, const N: usize> {
     p: &'a [f64; N_PARAMS],
     scale: [f64; N_PARAMS],
     /// `1 / scale`: the written sensitivities are in the parameters' units.
@@ -477,20 +517,24 @@ struct Walk<'a> {
     /// Current mode: contact and friction switches (the simulator's event `1 + i`
     /// switches inertia `i`'s).
     mode: Mode,
-    z: Augmented,
+    z: Augmented<N>,
     /// The last change's time and `dtau/dp`, for a breakaway it sets off.
     last: (f64, [f64; N_PARAMS]),
     /// Whole-sample flows of the modes in groups of columns (by [`Mode::slot`]),
     /// built when first needed.
-    full: [Option<Vec<Group>>; N_MODES],
+    full: [Option<Vec<Group<N>>>; N_MODES],
 }
 
-impl Walk<'_> {
+impl<const N: usize> Walk<'_, N> {
+    /// Whether the input steps at each sample's instant on the inertias: without a
+    /// current loop (behind one the motor torque is a state, continuous in time).
+    const STEPPED: bool = N == N_STATES;
+
     /// The sensitivities at every sample, along the simulator's `states` (row-major
     /// `(u.len(), 3)`). Between the samples that hold contact changes the mode is
     /// fixed, and the columns advance over those whole samples side by side (see
     /// `lanes`); a sample holding changes is split at them.
-    fn run<S: Sink>(
+    fn run<S: Sink<N>>(
         &mut self,
         t0: f64,
         ts: f64,
@@ -506,19 +550,22 @@ impl Walk<'_> {
             // breakaway at a sample's start is the next torque's (see `pinned`).
             let next = events.get(next_event);
             let split = (k..n - 1)
-                .find(|&i| next.is_some_and(|e| within(e, t0 + (i + 1) as f64 * ts)))
+                .find(|&i| next.is_some_and(|e| within(e, t0 + (i + 1) as f64 * ts, Self::STEPPED)))
                 .unwrap_or(n - 1);
             self.steady(ts, k, split, u, states, sink);
-            self.z.x = std::array::from_fn(|i| states[split * N_STATES + i]);
+            self.z.x = std::array::from_fn(|i| states[split * N + i]);
             sink.take(&self.row());
             if split + 1 == n {
                 return Ok(());
             }
             let (t_start, t_end) = (t0 + split as f64 * ts, t0 + (split + 1) as f64 * ts);
             let mut t_now = t_start;
-            while let Some(ev) = events.get(next_event).filter(|e| within(e, t_end)) {
+            while let Some(ev) = events
+                .get(next_event)
+                .filter(|e| within(e, t_end, Self::STEPPED))
+            {
                 self.advance(u[split], ev.time - t_now);
-                self.jump(ev, u[split], pinned(ev, t_start))?;
+                self.jump(ev, u[split], Self::STEPPED && pinned(ev, t_start))?;
                 (t_now, next_event) = (ev.time, next_event + 1);
             }
             self.advance(u[split], t_end - t_now);
@@ -528,7 +575,7 @@ impl Walk<'_> {
 
     /// Rows `k..end` to `sink`, over the whole samples `k..end` in the current mode,
     /// leaving the carried columns at sample `end`'s start.
-    fn steady<S: Sink>(
+    fn steady<S: Sink<N>>(
         &mut self,
         ts: f64,
         k: usize,
@@ -544,14 +591,14 @@ impl Walk<'_> {
         let (wanted, unscale) = (self.wanted, &self.unscale);
         let groups = self.full[mode.slot()]
             .get_or_insert_with(|| groups(&Flow::new(p, scale, mode, ts, active), wanted, unscale));
-        let x = &states[k * N_STATES..end * N_STATES];
+        let x = &states[k * N..end * N];
         stream(groups, &mut self.z.s, &u[k..end], x, sink);
     }
 
     /// The current sample's row of `dx/dp`.
-    fn row(&self) -> Row {
-        let mut row = [[0.0; WIDTH]; N_STATES];
-        for i in 0..N_STATES {
+    fn row(&self) -> Row<N> {
+        let mut row = [[0.0; WIDTH]; N];
+        for i in 0..N {
             for (c, &j) in self.wanted.iter().enumerate() {
                 row[i][c] = self.z.s[j][i] * self.unscale[j];
             }
@@ -582,8 +629,8 @@ impl Walk<'_> {
             after.slip[i] = ev.to;
             (ev.to == 0).then_some(i)
         };
-        let f_minus = system(self.p, self.mode).field(&self.z.x, u);
-        let f_plus = system(self.p, after).field(&self.z.x, u);
+        let f_minus = system::<N>(self.p, self.mode).field(&self.z.x, u);
+        let f_plus = system::<N>(self.p, after).field(&self.z.x, u);
         let set_off = ev.index > 0 && ev.from == 0 && self.last.0 == ev.time;
         let dtau = if pinned {
             [0.0; N_PARAMS]
@@ -597,7 +644,7 @@ impl Walk<'_> {
             if !dtau[j].is_finite() {
                 return Err(Error::Grazing { time: ev.time });
             }
-            for i in 0..N_STATES {
+            for i in 0..N {
                 self.z.s[j][i] += (f_minus[i] - f_plus[i]) * dtau[j];
             }
             if let Some(i) = stuck {
@@ -615,10 +662,11 @@ impl Walk<'_> {
     /// `phi - s theta` (`s` the flank met or left); a slipping inertia's speed `w_i`
     /// crossing zero; a stuck inertia's breakaway `s T_i - fc_i`, `T_i` the torque on
     /// it (input and shaft, friction excluded) and `s` the direction it breaks away
-    /// in, the breakaway torque tied to the Coulomb torque.
-    fn guard(&self, ev: &Event, f_minus: &[f64; N_STATES], u: f64) -> Guard {
+    /// in, the breakaway torque tied to the Coulomb torque (behind a current loop the
+    /// torque on the motor is the state `T`, not the input).
+    fn guard(&self, ev: &Event, f_minus: &[f64; N], u: f64) -> Guard<N> {
         let mut g = Guard {
-            dg_dx: [0.0; N_STATES],
+            dg_dx: [0.0; N],
             dg_dp: [0.0; N_PARAMS],
             rate: 0.0,
         };
@@ -632,9 +680,9 @@ impl Walk<'_> {
         } else {
             let (i, s) = (ev.index - 1, ev.to as f64);
             let flank = self.mode.flank;
-            g.dg_dx = balance(self.p, flank).r[i].map(|v| s * v);
+            g.dg_dx = balance::<N>(self.p, flank).r[i].map(|v| s * v);
             for j in (0..N_PARAMS).filter(|&j| self.active[j] && j != J_M && j != J_L) {
-                let torque = balance_derivative(self.p, flank, j).torque(i, &self.z.x, u);
+                let torque = balance_derivative::<N>(self.p, flank, j).torque(i, &self.z.x, u);
                 g.dg_dp[j] = s * torque * self.scale[j];
             }
             let fc = [FC_M, FC_L][i];
@@ -648,9 +696,10 @@ impl Walk<'_> {
 }
 
 /// Whether change `ev` belongs to the sample ending at `t_end`: it is before, or at
-/// the end and not [`pinned`] there.
-fn within(ev: &Event, t_end: f64) -> bool {
-    ev.time < t_end || (ev.time == t_end && !pinned(ev, t_end))
+/// the end and not [`pinned`] there (where the input steps at the samples' instants,
+/// `stepped`; behind a current loop nothing is pinned).
+fn within(ev: &Event, t_end: f64, stepped: bool) -> bool {
+    ev.time < t_end || (ev.time == t_end && !(stepped && pinned(ev, t_end)))
 }
 
 /// Whether change `ev` is a breakaway at the sample's start `t_start`: the torque
@@ -664,15 +713,15 @@ fn pinned(ev: &Event, t_start: f64) -> bool {
 
 /// A change's guard linearised: `dg/dx`, `dg/dp` per log-parameter, and its rate
 /// `dg/dx f_-` along the flow before the change.
-struct Guard {
-    dg_dx: [f64; N_STATES],
+struct Guard<const N: usize> {
+    dg_dx: [f64; N],
     dg_dp: [f64; N_PARAMS],
     rate: f64,
 }
 
-impl Guard {
+impl<const N: usize> Guard<N> {
     /// `dg/dx v`.
-    fn slope(&self, v: &[f64; N_STATES]) -> f64 {
-        (0..N_STATES).map(|q| self.dg_dx[q] * v[q]).sum()
+    fn slope(&self, v: &[f64; N]) -> f64 {
+        (0..N).map(|q| self.dg_dx[q] * v[q]).sum()
     }
 }

@@ -1,4 +1,4 @@
-use super::index::{FC_L, FC_M, F_M, J_M, THETA};
+use super::index::{FC_L, FC_M, F_M, J_M, TAU, THETA};
 use super::mode::{system, system_derivative, Mode};
 use super::*;
 use crate::chain::{simulate_chain, ChainParams, Law};
@@ -7,15 +7,28 @@ use crate::Error;
 
 /// Paper A's drive (Section 5) in the order [`PARAMS`], without Coulomb friction.
 const PAPER: [f64; N_PARAMS] = [
-    4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.0, 0.0,
+    4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.0, 0.0, 0.0,
 ];
 /// Paper A's drive with issue 20's Coulomb torques, 0.01 and 0.02 N m (about 1 and
 /// 2 % of the larger level).
 const COULOMB: [f64; N_PARAMS] = [
-    4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.01, 0.02,
+    4.88e-3, 6.8e-2, 78.0, 0.5e-2, 0.5e-2, 1.575e-2, 3.49e-2, 0.01, 0.02, 0.0,
 ];
+/// Issue 20's current loop, a time constant of 1 ms.
+const LOOP_TAU: f64 = 1e-3;
+/// Paper A's drive behind issue 20's current loop.
+const LOOP: [f64; N_PARAMS] = with_loop(PAPER);
+/// Paper A's drive with issue 20's Coulomb torques behind its current loop.
+const COULOMB_LOOP: [f64; N_PARAMS] = with_loop(COULOMB);
 /// Paper A's model, then both Coulomb torques.
-const ALL: [usize; N_PARAMS] = [0, 1, 2, 3, 4, 5, 6, FC_M, FC_L];
+const ALL: [usize; 9] = [0, 1, 2, 3, 4, 5, 6, FC_M, FC_L];
+/// Every parameter: paper A's model, the Coulomb torques and the loop's time constant.
+const EVERY: [usize; N_PARAMS] = [0, 1, 2, 3, 4, 5, 6, FC_M, FC_L, TAU];
+
+const fn with_loop(mut p: [f64; N_PARAMS]) -> [f64; N_PARAMS] {
+    p[TAU] = LOOP_TAU;
+    p
+}
 const TS: f64 = 1e-3;
 /// Paper A's second torque level (0.6 of 1.57 N m), stepped down to 0 half-way.
 const LEVEL: f64 = 0.942;
@@ -34,10 +47,10 @@ fn step_down(seconds: f64, level: f64) -> Vec<f64> {
 }
 
 fn simulate(p: &[f64; N_PARAMS], u: &[f64]) -> crate::chain::ChainOutput {
-    simulate_from(p, u, &[0.0; 3])
+    simulate_from(p, u, &vec![0.0; state_count(p)])
 }
 
-fn simulate_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64; 3]) -> crate::chain::ChainOutput {
+fn simulate_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64]) -> crate::chain::ChainOutput {
     let mut chain = ChainParams::new(
         vec![p[0], p[1]],
         vec![p[3], p[4]],
@@ -48,6 +61,7 @@ fn simulate_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64; 3]) -> crate::chain:
     if p[FC_M] != 0.0 || p[FC_L] != 0.0 {
         chain.fc = vec![p[FC_M], p[FC_L]];
     }
+    chain.tau_i = p[TAU];
     simulate_chain(&chain, Law::Paper, 0.0, TS, u, x0).unwrap()
 }
 
@@ -66,21 +80,26 @@ fn every_mode() -> impl Iterator<Item = Mode> {
 
 #[test]
 fn mode_derivatives_match_differences() {
-    // The mode matrices are affine in k, f, d, theta, fc and smooth in J: a relative
-    // step of 1e-6 leaves a central difference ~1e-12 off, far below the bar of 1e-8.
-    // The Coulomb torques are 300 times smaller than the shaft's torque beside them in
-    // `c`, whose rounding a step of 1e-6 would divide by 1e-8: they take 1e-4, exact
-    // as `c` is affine in them.
+    // The mode matrices are affine in k, f, d, theta, fc and smooth in J and tau_i: a
+    // relative step of 1e-6 leaves a central difference ~1e-12 off, far below the bar
+    // of 1e-8. The Coulomb torques are 300 times smaller than the shaft's torque beside
+    // them in `c`, whose rounding a step of 1e-6 would divide by 1e-8: they take 1e-4,
+    // exact as `c` is affine in them.
+    mode_derivatives_match::<3>(&COULOMB, &ALL);
+    mode_derivatives_match::<4>(&COULOMB_LOOP, &EVERY);
+}
+
+fn mode_derivatives_match<const N: usize>(p: &[f64; N_PARAMS], cols: &[usize]) {
     for mode in every_mode() {
-        for j in 0..N_PARAMS {
-            let h = if j < N_LINEAR { 1e-6 } else { 1e-4 };
-            let (mut hi, mut lo) = (COULOMB, COULOMB);
+        for &j in cols {
+            let h = if j < N_LINEAR || j == TAU { 1e-6 } else { 1e-4 };
+            let (mut hi, mut lo) = (*p, *p);
             hi[j] *= 1.0 + h;
             lo[j] *= 1.0 - h;
-            let (a, b) = (system(&hi, mode), system(&lo, mode));
-            let der = system_derivative(&COULOMB, mode, j);
-            let step = 2.0 * h * COULOMB[j];
-            let flat = |s: &mode::System| -> Vec<f64> {
+            let (a, b) = (system::<N>(&hi, mode), system::<N>(&lo, mode));
+            let der = system_derivative::<N>(p, mode, j);
+            let step = 2.0 * h * p[j];
+            let flat = |s: &mode::System<N>| -> Vec<f64> {
                 s.a.iter()
                     .flatten()
                     .chain(&s.b)
@@ -137,17 +156,13 @@ fn free_motor_matches_closed_form() {
 /// Largest over paper A's parameters of the best step's max |FD - S| / max |S|, over
 /// the speeds, from rest; `None` if a step changes the number of changes.
 fn worst_error(p: &[f64; N_PARAMS], u: &[f64]) -> Option<f64> {
-    worst_error_from(p, u, &[0.0; 3], &ALL[..N_LINEAR])
+    worst_error_from(p, u, &vec![0.0; state_count(p)], &ALL[..N_LINEAR])
 }
 
 /// As [`worst_error`], from `x0` (held fixed as the parameters move), over the
 /// parameters `wanted`.
-fn worst_error_from(
-    p: &[f64; N_PARAMS],
-    u: &[f64],
-    x0: &[f64; 3],
-    wanted: &[usize],
-) -> Option<f64> {
+fn worst_error_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64], wanted: &[usize]) -> Option<f64> {
+    let n = state_count(p);
     // Relative steps: the differences' error falls like h^2, the simulator's rounding
     // and event location grow like 1/h; the best of these resolves ~5e-7. The large
     // steps serve the small columns (a light friction's), the small ones the curved.
@@ -161,7 +176,7 @@ fn worst_error_from(
     for (c, &j) in wanted.iter().enumerate() {
         let col: Vec<f64> = (0..u.len())
             .flat_map(|k| (0..2).map(move |i| (k, i)))
-            .map(|(k, i)| sens[(k * N_STATES + i) * m + c])
+            .map(|(k, i)| sens[(k * n + i) * m + c])
             .collect();
         let big = col.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let mut best = f64::INFINITY;
@@ -176,7 +191,7 @@ fn worst_error_from(
                 return None;
             }
             let err = (0..u.len())
-                .flat_map(|k| (0..2).map(move |i| k * N_STATES + i))
+                .flat_map(|k| (0..2).map(move |i| k * n + i))
                 .zip(&col)
                 .map(|(q, s)| ((hi.states[q] - lo.states[q]) / (2.0 * h * p[j]) - s).abs())
                 .fold(0.0f64, f64::max);
@@ -268,9 +283,9 @@ fn coupled_exponential_matches_the_dense_one() {
     // it is held to 1e-12 of the norm there.
     use crate::linalg::expm_and_integral;
     for mode in every_mode() {
-        let a = system(&COULOMB, mode).a;
+        let a = system::<3>(&COULOMB, mode).a;
         let d: [_; N_PARAMS] = std::array::from_fn(|j| {
-            system_derivative(&COULOMB, mode, j)
+            system_derivative::<3>(&COULOMB, mode, j)
                 .a
                 .map(|r| r.map(|v| v * COULOMB[j]))
         });
@@ -328,7 +343,7 @@ fn a_subset_of_parameters_gives_their_columns_and_the_states() {
             }
         }
     }
-    for bad in [vec![N_PARAMS], vec![THETA, THETA], vec![FC_M]] {
+    for bad in [vec![N_PARAMS], vec![THETA, THETA], vec![FC_M], vec![TAU]] {
         assert!(matches!(
             drive_sensitivities_of(&PAPER, 0.0, TS, &u, &[0.0; 3], &bad),
             Err(Error::InvalidArgument(_))
@@ -359,6 +374,37 @@ fn coulomb_friction_matches_central_differences() {
         run.events.len()
     );
     assert!(err < LONG_RTOL, "largest error {err:.2e}");
+}
+
+#[test]
+fn a_current_loop_matches_central_differences() {
+    // Behind issue 20's 1 ms loop the motor torque is a state that lags the set-point:
+    // every column, the loop's time constant's too, across the step-down's contact
+    // changes; with the Coulomb torques, across their sticks and breakaways as well
+    // (on a stuck motor the breakaway's torque is the lagging state, not the input).
+    let u = step_down(3.0, LEVEL);
+    let n_events = simulate(&LOOP, &u).events.len();
+    assert!(n_events >= 10, "{n_events} contact changes");
+    let wanted: Vec<usize> = (0..N_LINEAR).chain([TAU]).collect();
+    let err = worst_error_from(&LOOP, &u, &[0.0; 4], &wanted).expect("no step changes them");
+    eprintln!("current loop, {n_events} changes: largest error {err:.2e}");
+    assert!(err < RTOL, "largest error {err:.2e}");
+    let u: Vec<f64> = (0..1501)
+        .map(|i| match i {
+            0..=199 => 0.005,
+            200..=999 => 0.3,
+            _ => 0.0,
+        })
+        .collect();
+    let run = simulate(&COULOMB_LOOP, &u);
+    let breakaways = run.events.iter().filter(|e| e.index > 0 && e.from == 0);
+    assert!(breakaways.count() >= 1, "no breakaway");
+    let err = worst_error_from(&COULOMB_LOOP, &u, &[0.0; 4], &EVERY).expect("no step changes");
+    eprintln!(
+        "Coulomb friction and a loop, {} changes: largest error {err:.2e}",
+        run.events.len()
+    );
+    assert!(err < RTOL, "largest error {err:.2e}");
 }
 
 #[test]
@@ -475,18 +521,20 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
     let u = step_down(4.0, LEVEL);
     let mut load = PAPER;
     load[FC_L] = COULOMB[FC_L];
-    let cases: [(&[f64; N_PARAMS], Vec<usize>); 3] = [
+    let cases: [(&[f64; N_PARAMS], Vec<usize>); 5] = [
         (&PAPER, (0..N_LINEAR).collect()),
         (&COULOMB, ALL.to_vec()),
         (&load, (0..N_LINEAR).chain([FC_L]).collect()),
+        (&LOOP, (0..N_LINEAR).chain([TAU]).collect()),
+        (&COULOMB_LOOP, EVERY.to_vec()),
     ];
     for (p, wanted) in cases {
-        let x0 = [0.3, 0.2, 0.01];
-        let s0: Vec<f64> = (0..N_STATES * wanted.len())
+        let x0 = &[0.3, 0.2, 0.01, 0.5][..state_count(p)];
+        let s0: Vec<f64> = (0..state_count(p) * wanted.len())
             .map(|i| 1e-3 * i as f64)
             .collect();
-        let want = drive_sensitivities_from(p, 0.0, TS, &u, &x0, Some(&s0), &wanted).unwrap();
-        let run = simulate_from(p, &u, &x0);
+        let want = drive_sensitivities_from(p, 0.0, TS, &u, x0, Some(&s0), &wanted).unwrap();
+        let run = simulate_from(p, &u, x0);
         assert!(run.events.len() >= 4, "{} changes", run.events.len());
         let switches = run.modes.len() / u.len();
         let along = Along {
@@ -536,9 +584,9 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
 }
 
 /// `sum_k s_c s_c^T` of the written sensitivities, both speeds, row-major `(2, m, m)`.
-fn products(values: &[f64], m: usize) -> Vec<f64> {
+fn products(values: &[f64], n: usize, m: usize) -> Vec<f64> {
     let mut out = vec![0.0; 2 * m * m];
-    for row in values.chunks_exact(N_STATES * m) {
+    for row in values.chunks_exact(n * m) {
         for c in 0..2 {
             let s = &row[c * m..(c + 1) * m];
             for a in 0..m {
@@ -555,18 +603,19 @@ fn products(values: &[f64], m: usize) -> Vec<f64> {
 fn the_information_sums_the_written_sensitivities_products() {
     // Groups of lanes from one to three, a lone column, and the columns out of order.
     let u = step_down(4.0, LEVEL);
-    let cases: [(&[f64; N_PARAMS], &[usize]); 4] = [
+    let cases: [(&[f64; N_PARAMS], &[usize]); 5] = [
         (&PAPER, &[0, 1, 2, 3, 4, 5, 6]),
         (&PAPER, &[THETA]),
         (&COULOMB, &ALL),
         (&COULOMB, &[FC_L, THETA, J_M, F_M, 2]),
+        (&COULOMB_LOOP, &[TAU, FC_L, THETA, J_M, F_M, 2]),
     ];
     for (p, wanted) in cases {
-        let m = wanted.len();
-        let info = drive_information(p, 0.0, TS, &u, &[0.0; 3], wanted).unwrap();
-        let sens = drive_sensitivities_of(p, 0.0, TS, &u, &[0.0; 3], wanted).unwrap();
+        let (m, x0) = (wanted.len(), vec![0.0; state_count(p)]);
+        let info = drive_information(p, 0.0, TS, &u, &x0, wanted).unwrap();
+        let sens = drive_sensitivities_of(p, 0.0, TS, &u, &x0, wanted).unwrap();
         assert_eq!(info.states, sens.states);
-        let want = products(&sens.values, m);
+        let want = products(&sens.values, state_count(p), m);
         assert_eq!(info.gram.len(), want.len());
         for (i, (&got, &w)) in info.gram.iter().zip(&want).enumerate() {
             let (c, a, b) = (i / (m * m), i / m % m, i % m);
@@ -592,13 +641,16 @@ fn the_jacobian_rows_are_the_weighed_sensitivities_to_the_bit() {
     // same two operations, they must be equal to the bit. Two windows of a run with
     // contact changes, and every sample; paper A's drive and both Coulomb torques.
     let u = step_down(4.0, LEVEL);
-    let cases: [(&[f64; N_PARAMS], Vec<usize>); 2] =
-        [(&PAPER, vec![THETA, 0, 2, 5]), (&COULOMB, ALL.to_vec())];
+    let cases: [(&[f64; N_PARAMS], Vec<usize>); 3] = [
+        (&PAPER, vec![THETA, 0, 2, 5]),
+        (&COULOMB, ALL.to_vec()),
+        (&COULOMB_LOOP, EVERY.to_vec()),
+    ];
     for (p, wanted) in cases {
-        let m = wanted.len();
-        let x0 = [0.3, 0.2, 0.01];
-        let s0: Vec<f64> = (0..N_STATES * m).map(|i| 1e-3 * i as f64).collect();
-        let run = simulate_from(p, &u, &x0);
+        let (m, n_states) = (wanted.len(), state_count(p));
+        let x0 = &[0.3, 0.2, 0.01, 0.5][..n_states];
+        let s0: Vec<f64> = (0..n_states * m).map(|i| 1e-3 * i as f64).collect();
+        let run = simulate_from(p, &u, x0);
         let switches = run.modes.len() / u.len();
         let along = Along {
             states: &run.states,
@@ -633,7 +685,7 @@ fn the_jacobian_rows_are_the_weighed_sensitivities_to_the_bit() {
             for (c, s) in level.iter().enumerate() {
                 for (r, &k) in selected.iter().enumerate() {
                     for j in 0..m {
-                        let want = sens[(k * N_STATES + c) * m + j] * factor[j] / s;
+                        let want = sens[(k * n_states + c) * m + j] * factor[j] / s;
                         assert!(out[(c * n + r) * m + j].to_bits() == want.to_bits());
                     }
                 }
@@ -673,8 +725,13 @@ fn the_end_alone_is_the_last_row_to_the_bit() {
     // A held torque's run is wanted for its end alone: the last row of the written
     // sensitivities, to the bit, with and without a starting sensitivity.
     let u = step_down(3.0, LEVEL);
-    for (p, wanted) in [(&PAPER, vec![THETA, 2, 0]), (&COULOMB, ALL.to_vec())] {
-        let m = wanted.len();
+    let cases = [
+        (&PAPER, vec![THETA, 2, 0]),
+        (&COULOMB, ALL.to_vec()),
+        (&LOOP, vec![TAU, THETA]),
+    ];
+    for (p, wanted) in cases {
+        let (m, n_states) = (wanted.len(), state_count(p));
         let run = simulate(p, &u);
         let switches = run.modes.len() / u.len();
         let along = Along {
@@ -682,11 +739,11 @@ fn the_end_alone_is_the_last_row_to_the_bit() {
             first_modes: &run.modes[..switches],
             events: &run.events,
         };
-        let s0: Vec<f64> = (0..N_STATES * m).map(|i| 2e-3 * i as f64).collect();
+        let s0: Vec<f64> = (0..n_states * m).map(|i| 2e-3 * i as f64).collect();
         for s0 in [None, Some(&s0[..])] {
             let all = drive_sensitivities_along(p, 0.0, TS, &u, &along, s0, &wanted).unwrap();
             let end = drive_sensitivity_at_end_along(p, 0.0, TS, &u, &along, s0, &wanted).unwrap();
-            assert!(end == all[all.len() - N_STATES * m..], "{wanted:?}");
+            assert!(end == all[all.len() - n_states * m..], "{wanted:?}");
         }
         let none = Along {
             states: &[],
