@@ -163,8 +163,15 @@ def test_crb_from_exact_sensitivities_matches_central_differences(short, initial
     _, exact = crb._exact(rough, with_fc, 0.0, t, u, "paper", x0)
     kernel = sensitivities(rough, t, u, initial_state=x0, params=with_fc)
     np.testing.assert_array_equal(exact, kernel)
-    # outside it (a current loop, a breakaway torque of its own) the bound differences
-    assert crb._exact(rough, names, 1e-3, t, u, "paper", x0) == (None, None)
+    # behind a current loop too, its time constant's column as well: the kernel's with
+    # the loop, which starts at the first torque (as the differences' runs do)
+    looped = (*names, "tau_i")
+    _, exact = crb._exact(rough, looped, 1e-3, t, u, "paper", x0)
+    start = np.r_[np.zeros(3) if x0 is None else x0, u[0]]
+    kernel = sensitivities(rough, t, u, initial_state=start, params=looped,
+                           actuator=bk.CurrentLoop(1e-3))
+    np.testing.assert_array_equal(exact, kernel)
+    # outside it (a breakaway torque of its own) the bound differences
     sticky = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fs_M=0.02)
     assert crb._exact(sticky, names, 0.0, t, u, "paper", x0) == (None, None)
 
@@ -276,6 +283,7 @@ def test_the_steady_starts_sensitivity_is_the_long_holds():
     from backlashkit.identify._model import Span, initial_states, packed_row, span_start
     from backlashkit.identify._model import steady_sensitivity as steady
 
+    PARAMS = PARAMS[:-1]  # noqa: N806 (the drive's: tau_i is the loop's)
     drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
     for level in (A2, -A2, 0.02):  # 0.02 N m < fc_M + fc_L: held stuck
         got = steady(drive, level, PARAMS)
@@ -303,14 +311,15 @@ def _check_coulomb_columns(pb, sig, z):
     torques tied to them) the Jacobian is the kernel's sensitivities weighed as the
     residual (tests/test_sensitivity_kernel.py checks those against extrapolated
     differences: plain ones resolve only 1e-2 on this record); a torque held at its
-    floor has a zero column; with a current loop there is none."""
+    floor has a zero column; behind a current loop they are the kernel's with it."""
     from backlashkit._sensitivity import sensitivities
 
     rough = pb.with_params(("fc_M", "fc_L"), {"fc_M": 1e-9, "fc_L": 1e-9},
                            {"fc_M": 0.01, "fc_L": 0.01})
     res = rough.residual(rough.spans, None, sig)
     for zr in (np.r_[z, 1.0, 2.0], np.r_[z, 1.0, -1.0]):  # the second at fc_L's floor
-        jac, drive = res.exact_jacobian(zr), rough.exact_drive(zr)
+        jac, (drive, loop) = res.exact_jacobian(zr), rough.exact_model(zr)
+        assert loop is None
         # fs None: the breakaway torques are the Coulomb torques
         assert (drive.fc_M, drive.fs_M, drive.fs_L) == (0.01, None, None)
         assert drive.fc_L == (0.02 if zr[-1] > 0 else 1e-9)
@@ -328,9 +337,14 @@ def _check_coulomb_columns(pb, sig, z):
         assert np.array_equal(res.jacobian(zr, r), jac)
     looped = rough.with_params(("tau_i",), {"tau_i": 1e-5}, {})
     res_loop, zl = looped.residual(looped.spans, None, sig), np.r_[z, 1.0, 1.0, np.log(1e-3)]
-    assert res_loop.exact_jacobian(zl) is None
+    jac, (drive, loop) = res_loop.exact_jacobian(zl), looped.exact_model(zl)
+    assert loop.tau_i == pytest.approx(1e-3, rel=1e-12)
     r = res_loop.at(zl)
-    assert np.array_equal(res_loop.jacobian(zl, r), res_loop.forward_jacobian(zl, r))
+    assert np.array_equal(res_loop.jacobian(zl, r), jac)
+    forward = res_loop.forward_jacobian(zl, r)
+    # the loop's column against forward differences (their step's error, about 1e-3)
+    big = np.max(np.abs(jac[:, -1]))
+    assert np.max(np.abs(forward[:, -1] - jac[:, -1])) < 1e-2 * big
 
 
 @pytest.mark.parametrize(

@@ -275,27 +275,33 @@ def hold_grid(span: Span) -> tuple[int, float]:
 
 
 def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str],
-               hold: PackedRun | None = None
+               hold: PackedRun | None = None, *, actuator: CurrentLoop | None = None
                ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """The state ``[w_M, w_L, phi]`` the model starts ``span`` from and its sensitivity
-    to ``names`` (``(3, len(names))``), for the compiled sensitivities: ``(None,
-    None)`` from rest; the end of the held torque's run on the coarse grid of
-    :func:`simulate_span` (along ``hold``, that run of ``drive``, where given); or the
-    steady state and :func:`steady_sensitivity`."""
+    """The state ``[w_M, w_L, phi]`` (and the motor torque ``T`` behind the current
+    loop ``actuator``) the model starts ``span`` from and its sensitivity to ``names``
+    (``(n, len(names))``), for the compiled sensitivities: ``(None, None)`` from rest;
+    the end of the held torque's run on the coarse grid of :func:`simulate_span`
+    (along ``hold``, that run of ``drive``, where given); or the steady state and
+    :func:`steady_sensitivity` (the loop's torque is the held level, whatever the
+    parameters)."""
     from .._sensitivity import sensitivity_at_end_along, trajectory_and_sensitivities
 
+    kw = {"params": names, "actuator": actuator}
     if span.hold is not None:
         if hold is not None:
-            return hold.states[-1], sensitivity_at_end_along(drive, hold, params=names)
+            return hold.states[-1], sensitivity_at_end_along(drive, hold, **kw)
         n, _ = hold_grid(span)  # the grid's step as time_grid finds it: hold / n
+        p = packed_row(drive, 0.0 if actuator is None else actuator.tau_i)[np.newaxis, :]
         x, sens = trajectory_and_sensitivities(
             drive, np.linspace(0.0, span.hold, n + 1), np.full(n + 1, span.level),
-            params=names)
+            initial_state=initial_states(p, None, span.level)[0], **kw)
         return x[-1], sens[-1]
     if span.level is None:
         return None, None
-    x0 = initial_states(packed_row(drive)[np.newaxis, :], span.level)[0]
-    return x0, steady_sensitivity(drive, span.level, names)
+    p = packed_row(drive, 0.0 if actuator is None else actuator.tau_i)[np.newaxis, :]
+    x0 = initial_states(p, span.level)[0]
+    sens = steady_sensitivity(drive, span.level, names)
+    return x0, np.vstack([sens, np.zeros((x0.size - sens.shape[0], len(names)))])
 
 
 def simulate_span(p: np.ndarray, span: Span, law, workers, end: int | None = None, *,

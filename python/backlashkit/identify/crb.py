@@ -17,6 +17,7 @@ from functools import partial
 import numpy as np
 
 from .. import validate as v
+from ..actuator import CurrentLoop
 from ..errors import InputError, SensitivityWarning
 from ..plants import TwoMassDrive
 from ._model import LINEAR_PARAMS, drive_with, initial_states, packed_row, rel_std
@@ -258,7 +259,8 @@ def _exact_information(drive, names, tau_i, t, torque, law, initial_state, noise
             speeds, partial(_information, sens, noise_ar=noise_ar))
     if not _in_scope(drive, names, tau_i, law, initial_state):
         return None, None
-    x, gram = _kernel(trajectory_and_information, drive, names, t, torque, initial_state)
+    x, gram = _kernel(trajectory_and_information, drive, names, tau_i, t, torque,
+                      initial_state)
     return (x[:, 0], x[:, 1]), lambda sig: gram[0] / sig[0] ** 2 + gram[1] / sig[1] ** 2
 
 
@@ -272,29 +274,36 @@ def _exact(drive, names, tau_i, t, torque, law, initial_state):
 
     if not _in_scope(drive, names, tau_i, law, initial_state):
         return None, None
-    x, sens = _kernel(trajectory_and_sensitivities, drive, names, t, torque, initial_state)
+    x, sens = _kernel(trajectory_and_sensitivities, drive, names, tau_i, t, torque,
+                      initial_state)
     return (x[:, 0], x[:, 1]), sens[:, :2, :]
 
 
 def _in_scope(drive, names, tau_i, law, initial_state) -> bool:
-    """Whether the compiled sensitivities serve: paper A's law, no current loop,
-    breakaway torques tied to the Coulomb torques, a Coulomb torque estimated only
-    where positive, a known start."""
-    from .._sensitivity import PARAMS
+    """Whether the compiled sensitivities serve: paper A's law, breakaway torques tied
+    to the Coulomb torques, a Coulomb torque estimated only where positive (``tau_i``
+    only behind a loop: refused before), a known start."""
+    from .._sensitivity import COULOMB, PARAMS
 
-    return not (law != "paper" or tau_i or drive.fs_M is not None or drive.fs_L is not None
+    return not (law != "paper" or drive.fs_M is not None or drive.fs_L is not None
                 or not set(names) <= set(PARAMS) or isinstance(initial_state, str)
-                or any(getattr(drive, n) == 0 for n in names if n in PARAMS[7:]))
+                or any(getattr(drive, n) == 0 for n in names if n in COULOMB))
 
 
-def _kernel(run, drive, names, t, torque, initial_state):
-    """``run(drive, t, torque, ...)`` of the estimated parameters, quiet near grazing
-    (as the differences are), its errors the bound's."""
+def _kernel(run, drive, names, tau_i, t, torque, initial_state):
+    """``run(drive, t, torque, ...)`` of the estimated parameters behind a current loop
+    of time constant ``tau_i`` (0: none), quiet near grazing (as the differences are),
+    its errors the bound's. The loop starts settled at the first torque where the
+    start gives the drive's three states alone, as :func:`_speeds`'s (and the
+    sensitivities' own default start)."""
     x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
+    loop = CurrentLoop(tau_i) if tau_i > 0 else None
+    if loop is not None and x0 is not None and x0.size == 3:
+        x0 = np.append(x0, np.ravel(torque)[:1])
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SensitivityWarning)
-            return run(drive, t, torque, initial_state=x0, params=names)
+            return run(drive, t, torque, initial_state=x0, params=names, actuator=loop)
     except ValueError as exc:
         raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
 
