@@ -28,7 +28,8 @@
    with ``friction="viscous"``, ``"coulomb"`` and the default ``"auto"`` (the last two
    against the first, as ratios of medians), one worker thread, in one process; in
    wall time and in the process's CPU time (which other jobs on a busy machine do not
-   lengthen).
+   lengthen). With ``--trial K``, the default fit of trial ``K`` of each scenario of
+   ``--drives`` and ``--effects`` instead, ``--repeats`` times.
 
 Run: ``python benchmarks/real_drive.py [--trials 200] [--jobs 2] [--drives paper,other]
 [--effects "ideal,coulomb,loop 1 ms,coulomb + loop,encoder,all three" | extended]
@@ -728,6 +729,8 @@ def offset_trial(task, seed):
 
 
 def speed(args) -> None:
+    if args.trial is not None:
+        return speed_trials(args)
     r1, r2, prior = protocol_records(0.3, np.random.SeedSequence(args.seed))
     wall: dict[str, list[float]] = {}
     cpu: dict[str, list[float]] = {}
@@ -748,6 +751,34 @@ def speed(args) -> None:
         print(f"friction={name!r:<10} median {med:6.2f} s over {len(ts)} "
               f"(x{med / base:.2f} the viscous fit); CPU {med_cpu:6.2f} s "
               f"(x{med_cpu / base_cpu:.2f})")
+
+
+def speed_trials(args) -> None:
+    """``--speed --trial K``: the default fit of trial ``K`` of each scenario, timed
+    ``--repeats`` times on one thread (median wall and CPU time): the study's own
+    records, which the protocol's comparison does not have (a current loop)."""
+    seeds = scenario_seeds(args.seed)
+    for dname, (linear, theta) in DRIVES.items():
+        for ename, effect in {**EFFECTS, **EXTENDED}.items():
+            if dname not in args.drives or ename not in args.effects:
+                continue
+            fc, tau, counts = effect
+            task = Task(linear, theta, clean_records(linear, theta, fc, tau, counts), counts,
+                        args.snr, args.prior_rel_std)
+            trial_seeds = task_seeds(seeds[dname, ename], max(args.trial) + 1)
+            for k in args.trial:
+                prior, kw = trial_prior(linear, args.prior_rel_std, trial_seeds[k])
+                recs = trial_records(task, trial_seeds[k])
+                wall, cpu = [], []
+                for _ in range(args.repeats):
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    fit = _fit(prior, recs, **kw)
+                    wall.append(time.perf_counter() - t0)
+                    cpu.append(time.process_time() - c0)
+                theta_ = fit if isinstance(fit, str) else (
+                    f"theta {fit.theta_:.9g} rad, std {fit.std_:.3g} rad")
+                print(f"{dname}, {ename}, trial {k}: median {statistics.median(wall):.2f} s "
+                      f"over {args.repeats} (CPU {statistics.median(cpu):.2f} s); {theta_}")
 
 
 def main(argv=None) -> int:
