@@ -36,8 +36,7 @@ pub struct DriveSensitivities {
 ///
 /// Errors: invalid parameters (`J`, `k`, `theta` must be > 0, the frictions and
 /// `tau_i` >= 0, all finite), sample time, input or initial state; a simulation
-/// error; a change at which
-/// the shaft exactly grazes a flank ([`Error::Grazing`]).
+/// error; a change at which the shaft exactly grazes a flank ([`Error::Grazing`]).
 pub fn drive_sensitivities(
     p: &[f64; N_PARAMS],
     t0: f64,
@@ -480,7 +479,8 @@ fn walk_states<const N: usize, S: Sink<N>>(
     walk.run(t0, ts, u, run.states, run.events, sink)
 }
 
-/// The chain of the two-mass drive, validated; `theta` must be positive, the NumPy
+/// The chain of the two-mass drive (behind its current loop, where `tau_i > 0`),
+/// validated; `theta` must be positive, the NumPy
 /// twin's scope (with no gap both flanks' changes fall at one instant, not checked).
 /// The breakaway torques are the Coulomb torques (`fs` left empty).
 fn chain_params(p: &[f64; N_PARAMS]) -> Result<ChainParams, Error> {
