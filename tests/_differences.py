@@ -175,13 +175,15 @@ class Start:
     """What a run of the differences starts from: the drive, its current loop (None:
     none), the initial state (None: the simulator's default) and its sensitivity
     ``(states, len(names))`` to the parameters ``names`` (None: zero), with which the
-    initial state moves as a parameter is stepped."""
+    initial state moves as a parameter is stepped; and whether the runs give the
+    motor's angle too (from 0, tracked in the run)."""
 
     drive: bk.TwoMassDrive
     names: tuple[str, ...]
     actuator: bk.CurrentLoop | None = None
     initial_state: np.ndarray | None = None
     initial_sensitivity: np.ndarray | None = None
+    motor_angle: bool = False
 
     def value(self, name: str) -> float:
         """The parameter ``name``'s value: the drive's, or the loop's ``tau_i``."""
@@ -189,8 +191,9 @@ class Start:
 
     def run(self, t, u, name: str | None = None, e: float = 0.0
             ) -> tuple[np.ndarray, np.ndarray, list]:
-        """The speeds ``(len(t), 2)`` and the changes of the run with ``name`` stepped
-        by the share ``e`` of its value."""
+        """The speeds ``(len(t), 2)`` (and the motor's angle, a third column, where
+        :attr:`motor_angle`) and the changes of the run with ``name`` stepped by the
+        share ``e`` of its value."""
         drive, actuator, x0 = self.drive, self.actuator, self.initial_state
         if name == "tau_i":
             actuator = bk.CurrentLoop(self.value(name) * (1 + e))
@@ -200,8 +203,10 @@ class Start:
         if name is not None and self.initial_sensitivity is not None:
             col = self.initial_sensitivity[:, self.names.index(name)]
             x0 = np.asarray(x0, float) + col * (e * self.value(name))
-        res = drive.simulate(t, u, actuator=actuator, initial_state=x0)
-        return (np.stack([res.w_motor, res.w_load], axis=1), *_changes(res))
+        res = drive.simulate(t, u, actuator=actuator, initial_state=x0,
+                             positions=self.motor_angle)
+        cols = [res.w_motor, res.w_load, *([res.phi_motor] if self.motor_angle else [])]
+        return (np.stack(cols, axis=1), *_changes(res))
 
 
 def _crossed(t: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -247,9 +252,10 @@ def extrapolate(diffs: list[np.ndarray]) -> np.ndarray:
 
 
 def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.ndarray,
-              params=None, *, actuator=None, initial_state=None, initial_sensitivity=None
-              ) -> Agreement | None:
-    """``sens`` (``(len(t), 2, len(params))``) against the extrapolated differences;
+              params=None, *, actuator=None, initial_state=None, initial_sensitivity=None,
+              motor_angle: bool = False) -> Agreement | None:
+    """``sens`` (``(len(t), 2, len(params))``, with ``motor_angle`` ``(len(t), 3,
+    len(params))``, the motor's angle last) against the extrapolated differences;
     None near grazing, or where every step changes the sequence of changes (contact
     and friction) for some parameter. ``params``: the columns' names, default
     ``default_params(drive, actuator)``; ``actuator``, ``initial_state`` and
@@ -257,7 +263,7 @@ def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.nda
     twin's (None: rest, behind a loop settled at the first set-point, the default of
     the simulator and of the twin)."""
     names = default_params(drive, actuator) if params is None else tuple(params)
-    start = Start(drive, names, actuator, initial_state, initial_sensitivity)
+    start = Start(drive, names, actuator, initial_state, initial_sensitivity, motor_angle)
     res = drive.simulate(t, u, actuator=actuator, initial_state=initial_state)
     if not res.contact_events or near_grazing(res):
         return None
@@ -274,8 +280,9 @@ def agreement(drive: bk.TwoMassDrive, t: np.ndarray, u: np.ndarray, sens: np.nda
 def _column_error(start: Start, t, u, column: np.ndarray, name: str, reference
                   ) -> tuple[float, int]:
     """The best over :data:`STEPS` of ``max |D - S| / max |S|`` for the parameter
-    ``name``'s sensitivities ``column`` ``(len(t), 2)``, and that step's samples left
-    out (inf and 0 where no step keeps the nominal run's changes, ``reference``)."""
+    ``name``'s sensitivities ``column`` ``(len(t), 2)`` (3 with the motor's angle), and
+    that step's samples left out (inf and 0 where no step keeps the nominal run's
+    changes, ``reference``)."""
     scale, value = np.max(np.abs(column)), start.value(name)
     best, best_out = np.inf, 0
     for h in STEPS:

@@ -123,6 +123,13 @@ CHECK_STEP = 1e-5
 #: ... the agreement asked of the sensitivities (of each column's largest) and of the
 #: two bounds of theta (``-s`` prints it).
 SENS_FD_RTOL, CRB_EXACT_RTOL = 1e-4, 1e-5
+#: Encoder angles' residuals differenced: the simulator's angles carry its rounding,
+#: grown along the record, which a step of 1e-5 divides into 1.3e-3 of the shaft
+#: damping's column behind a loop (whose angles barely move with it); at 1e-4 every
+#: case agrees within 1.1e-4, the step's truncation (``-s`` prints it). The kernel's
+#: angle against extrapolated differences, to 1e-6: crates/core's
+#: ``the_motor_angle_matches_central_differences``.
+ANGLE_STEP, ANGLE_RTOL = 1e-4, 3e-4
 
 
 @pytest.mark.parametrize("initial_state", [None, "steady-values"])
@@ -176,21 +183,22 @@ def test_crb_from_exact_sensitivities_matches_central_differences(short, initial
     assert crb._exact(sticky, names, 0.0, t, u, "paper", x0) == (None, None)
 
 
-def _exact_against_differences(res, z: np.ndarray, what: str) -> np.ndarray:
+def _exact_against_differences(res, z: np.ndarray, what: str, step: float = CHECK_STEP,
+                               rtol: float = SENS_FD_RTOL) -> np.ndarray:
     """The residual's exact Jacobian at ``z``, checked against its central differences
-    (step CHECK_STEP) to SENS_FD_RTOL of each column's largest; ``-s`` prints the
+    (step ``step``) to ``rtol`` of each column's largest; ``-s`` prints the
     agreement."""
     exact = res.exact_jacobian(z)
     assert exact is not None and exact.shape == (res.n_res, z.size)
     zz = np.repeat(z[np.newaxis, :], 2 * z.size, axis=0)
     for i in range(z.size):
-        zz[2 * i, i] += CHECK_STEP
-        zz[2 * i + 1, i] -= CHECK_STEP
+        zz[2 * i, i] += step
+        zz[2 * i + 1, i] -= step
     rr = res(zz)
-    fd = ((rr[0::2] - rr[1::2]) / (2 * CHECK_STEP)).T
+    fd = ((rr[0::2] - rr[1::2]) / (2 * step)).T
     worst = np.max(np.max(np.abs(exact - fd), axis=0) / np.max(np.abs(fd), axis=0))
     print(f"exact Jacobian {what} against central differences: {worst:.1e}")
-    assert worst < SENS_FD_RTOL
+    assert worst < rtol
     return exact
 
 
@@ -240,6 +248,40 @@ def test_the_exact_jacobian_from_a_start_that_moves_with_the_parameters(short, s
     res = pb.residual(spans, horizon, sig)
     _exact_against_differences(res, np.log([getattr(TRUE, n) for n in pb.names]),
                                f"from a {start} start")
+
+
+@pytest.mark.parametrize("what", ["whole", "hold", "loop", "ar"])
+def test_the_exact_jacobian_of_encoder_angles_matches_central_differences(short, what):
+    """Records of encoder angles are fitted as angles, each span's from its first
+    sample, less their mean: the Jacobian from the sensitivity of the motor's angle,
+    which the span's run tracks, agrees with central differences of the residual; on
+    the whole records, on the windows after a held torque, behind a current loop (its
+    time constant's column too), and whitened by an AR noise model."""
+    from backlashkit.identify._model import rel_std
+    from backlashkit.identify._problem import build_problem
+
+    t, u, clean = short
+    rng = np.random.default_rng(7)
+    # the angles' values do not enter the Jacobian (they are offsets of the residual)
+    phi_m, phi_l = np.cumsum(clean.w_motor) * 1e-3, np.cumsum(clean.w_load) * 1e-3
+    recs = [Record.from_positions(t, u, phi_m + rng.normal(0, 1e-4, t.size), phi_l,
+                                  name=f"enc{k}") for k in range(2)]
+    pb, sig = build_problem(TRUE.with_theta(None), recs, rel_std(0.3, LINEAR_PARAMS), None,
+                            JointSearch(), "paper", 1)
+    z = np.log([getattr(TRUE, n) for n in pb.names])
+    spans, horizon, lags = pb.spans, None, None
+    if what == "hold":
+        spans, horizon = pb.screen, 0.3
+        assert any(sp.hold is not None for sp in spans)
+    elif what == "loop":
+        pb = pb.with_params(("tau_i",), {"tau_i": 1e-5}, {})
+        z = np.r_[z, np.log(1e-3)]
+        spans = pb.spans
+    elif what == "ar":
+        lags = np.tile([-0.5, 0.1], (len(recs), 2, 1))
+    assert all(sp.positions for sp in spans)
+    res = pb.residual(spans, horizon, sig, lags)
+    _exact_against_differences(res, z, f"of encoder angles ({what})", ANGLE_STEP, ANGLE_RTOL)
 
 
 def test_the_exact_jacobian_follows_the_residuals_own_runs(short, monkeypatch):

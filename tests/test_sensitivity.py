@@ -272,6 +272,35 @@ def test_current_loop_on_the_paper_drive():
     assert found.error < BAR
 
 
+def test_the_motor_angle_on_the_paper_drive():
+    """The motor's angle (an encoder's record, fitted as angles), one more state:
+    paper A's step-down, and its drive with issue 20's Coulomb torques behind a 1 ms
+    loop through sticks and breakaways (the record of
+    :func:`test_current_loop_on_the_paper_drive`); every column of the speeds and the
+    angle within the bar of the simulator's extrapolated differences (its angle tracked
+    in the run), and the speeds' columns those of the twin without the angle, to
+    rounding."""
+    rough = bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01, fc_L=0.02)
+    long, short = bk.signals.time_grid(3.0, 1e-3), bk.signals.time_grid(1.5, 1e-3)
+    cases = (("paper A's step-down", bk.TwoMassDrive(**P_TRUE, theta=THETA), None, long,
+              bk.signals.step_down(long, A2, t_s=1.5)),
+             ("Coulomb, a 1 ms loop", rough, bk.CurrentLoop(1e-3), short,
+              np.select([short < 0.375, short < 0.75], [0.3, -0.3], 0.0)))
+    for what, drive, loop, t, u in cases:
+        x0 = None if loop is None else REST  # the loop's record from T = 0, as there
+        with_angle = None if x0 is None else np.r_[x0, 0.0]
+        sens = sensitivities(drive, t, u, actuator=loop, motor_angle=True,
+                             initial_state=with_angle)
+        assert sens.shape == (t.size, 3, len(default_params(drive, loop)))
+        plain = sensitivities(drive, t, u, actuator=loop, initial_state=x0)
+        # to rounding (SciPy's exponential of a larger matrix; 5e-10 at the sticks)
+        np.testing.assert_allclose(sens[:, :2], plain, rtol=0, atol=1e-8 * np.max(np.abs(plain)))
+        found = agreement(drive, t, u, sens, actuator=loop, motor_angle=True,
+                          initial_state=x0)
+        print(f"the motor angle, {what}: largest error {found.error:.2e}")
+        assert found.error < BAR
+
+
 def test_without_a_loop_unchanged():
     """No actuator, ``actuator=None`` and ``CurrentLoop(0.0)`` (the set-point applied
     exactly): the same sensitivities to the bit, the three-state run's (the twin at

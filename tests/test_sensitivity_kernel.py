@@ -465,6 +465,72 @@ def test_along_the_simulators_run_the_same_values_to_the_bit():
             sensitivities_along(drive, bad)
 
 
+def _angle_error(drive, t, u, loop=None, s0=None) -> float:
+    """Largest over the parameters of max |compiled - NumPy| / max |NumPy| of the
+    sensitivities of the speeds and the motor's angle, the compiled ones along the
+    simulator's run that tracks the angle (as the fit of encoder angles takes them),
+    from rest (behind ``loop`` settled at the first torque) with sensitivity ``s0``."""
+    from backlashkit.identify._model import packed_row
+    from backlashkit.simulate import simulate_packed_runs
+
+    x0 = np.zeros(5 if loop else 4)
+    if loop is not None:
+        x0[3] = u[0]
+    row = packed_row(drive, 0.0 if loop is None else loop.tau_i)
+    run = simulate_packed_runs(2, row[np.newaxis, :], t[0], t[1] - t[0], u[np.newaxis, :],
+                               x0[np.newaxis, :], law="paper", workers=1,
+                               track_angle=True).run(0)
+    fast = sensitivities_along(drive, run, initial_sensitivity=s0, actuator=loop)
+    ref = numpy_sensitivities(drive, t, u, actuator=loop, motor_angle=True,
+                              initial_sensitivity=s0)
+    assert fast.shape == (t.size, x0.size, len(default_params(drive, loop)))
+    fast = fast[:, [0, 1, -1], :]
+    return float(np.max(np.max(np.abs(fast - ref), axis=(0, 1))
+                        / np.max(np.abs(ref), axis=(0, 1))))
+
+
+def test_the_motor_angle_matches_numpy_twin():
+    """An encoder's record is fitted as angles: the sensitivity of the motor's angle
+    (one more state, which the simulator's run tracks), compiled against the twin, on
+    paper A's drive, with its Coulomb torques, behind its current loop (five states),
+    and from a start with a sensitivity; and on random drives with and without
+    Coulomb friction, behind a loop or not. The twin's angle is checked against
+    extrapolated differences in ``tests/test_sensitivity.py``, the kernel's in
+    ``crates/core`` (``the_motor_angle_matches_central_differences``)."""
+    t = bk.signals.time_grid(3.0, 1e-3)
+    u = bk.signals.step_down(t, A2, t_s=1.5)
+    coulomb = {"fc_M": 0.01, "fc_L": 0.02}
+    for fc, loop in (({}, None), (coulomb, None), (coulomb, LOOP)):
+        drive = bk.TwoMassDrive(**P_TRUE, theta=THETA, **fc)
+        names = default_params(drive, loop)
+        values = np.array([loop.tau_i if n == "tau_i" else getattr(drive, n) for n in names])
+        s0 = np.random.default_rng(4).standard_normal((5 if loop else 4, len(names))) / values
+        for start in (None, s0):
+            err = _angle_error(drive, t, u, loop, start)
+            print(f"the motor angle, {'Coulomb' if fc else 'viscous'}, "
+                  f"{'a loop' if loop else 'no loop'}"
+                  f"{', from a start' if start is not None else ''}: {err:.2e}")
+            assert err < RTOL
+    checked: list[float] = []
+
+    @settings(max_examples=40, derandomize=True, deadline=None, database=None)
+    @given(LOG_FACTORS, LEVELS, st.one_of(st.just((0.0, 0.0)), FRICTIONS),
+           st.one_of(st.just(0.0), TAUS))
+    def check(logs, level, friction, tau_i):
+        drive, t, u = drive_record(logs, level, friction)
+        loop = bk.CurrentLoop(tau_i) if tau_i else None
+        if near_grazing(drive.simulate(t, u, actuator=loop)):
+            return
+        err = _angle_error(drive, t, u, loop)
+        assert err < RANDOM_RTOL
+        checked.append(err)
+
+    check()
+    print(f"the motor angle: {len(checked)} of 40 random drives checked, largest "
+          f"difference {max(checked):.2e}, median {np.median(checked):.2e}")
+    assert len(checked) >= 15
+
+
 def _tangent_case(margin_rel: float):
     """test_simulate.py's free flight towards the positive flank whose twist peaks at
     ``theta (1 - margin_rel)``, at 25.5 ms (no friction, constant torque)."""

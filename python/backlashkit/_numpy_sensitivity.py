@@ -10,7 +10,9 @@ loop. Not used by the estimators.
 
 The state is ``x = [w_M, w_L, phi]``, or with a current loop (``tau_i > 0``) ``[w_M,
 w_L, phi, T]``: the motor torque ``T`` follows the set-point ``u`` by ``tau_i dT/dt = u
-- T`` and acts on the motor in place of ``u``.
+- T`` and acts on the motor in place of ``u``. With ``motor_angle`` the motor's angle
+``phi_M`` (``dphi_M/dt = w_M``) is one more state, last: its sensitivity is the motor
+speed's integral, and no change makes it jump (the speeds are continuous).
 
 A mode is the shaft's contact (gap, or flank ``s = +-1``) and, for each inertia with
 ``fc > 0``, its friction switch: slipping forwards or backwards (``+1`` / ``-1``, a
@@ -85,18 +87,26 @@ def has_loop(p) -> bool:
 
 
 def n_states(p) -> int:
-    """The state count of a run with parameters ``p``: :data:`STATES`, or
-    :data:`LOOP_STATES` with a current loop."""
+    """The drive's state count with parameters ``p``: :data:`STATES`, or
+    :data:`LOOP_STATES` with a current loop (the motor's angle, where carried, is one
+    more)."""
     return len(LOOP_STATES if has_loop(p) else STATES)
 
 
-def mode_system(p, mode: tuple[int, int, int], *, friction: bool = True):
+def _has_angle(p, x: np.ndarray) -> bool:
+    """Whether the state ``x`` carries the motor's angle, after the drive's."""
+    return x.size > n_states(p)
+
+
+def mode_system(p, mode: tuple[int, int, int], *, friction: bool = True,
+                angle: bool = False):
     """``(A, b, c)`` of ``mode = (flank, m_M, m_L)`` for parameters ``p`` (the ten of
     :data:`PARAMS`, real or complex; ``tau_i > 0`` adds the loop's torque ``T`` as a
-    fourth state); without the viscous and Coulomb friction when not ``friction``
-    (``J_i`` times row ``i`` is then the torque on inertia ``i``)."""
+    fourth state, ``angle`` the motor's angle last); without the viscous and Coulomb
+    friction when not ``friction`` (``J_i`` times row ``i`` is then the torque on
+    inertia ``i``)."""
     j_m, j_l, k, f_m, f_l, d, theta, fc_m, fc_l, tau_i = p
-    flank, n = mode[0], n_states(p)
+    flank, n = mode[0], n_states(p) + angle
     dtype = np.result_type(*p, float)
     a = np.zeros((n, n), dtype)
     b, c = np.zeros(n, dtype), np.zeros(n, dtype)
@@ -111,6 +121,8 @@ def mode_system(p, mode: tuple[int, int, int], *, friction: bool = True):
         a[0, _T], a[_T, _T], b[_T] = 1.0 / j_m, -1.0 / tau_i, 1.0 / tau_i
     else:
         b[0] = 1.0 / j_m
+    if angle:  # dphi_M/dt = w_M
+        a[-1, 0] = 1.0
     if friction:
         for i, (j_i, fc_i) in enumerate(((j_m, fc_m), (j_l, fc_l))):
             if mode[1 + i] == 0:  # stuck: the speed stays at 0 (T's row never is)
@@ -126,19 +138,21 @@ def _complex_step(p: np.ndarray, col: int) -> np.ndarray:
     return pj
 
 
-def augmented_flow(p: np.ndarray, mode: tuple[int, int, int], tau: float, cols):
+def augmented_flow(p: np.ndarray, mode: tuple[int, int, int], tau: float, cols,
+                   angle: bool = False):
     """``(Phi, Gamma)``: ``z(tau) = Phi z(0) + Gamma [u, 1]`` for ``z = [x, S_1 ..]``,
     the sensitivities to the parameters ``cols`` (indices in :data:`PARAMS`), in a mode
-    under a held torque ``u``."""
-    a, b, c = mode_system(p, mode)
-    n = n_states(p)
+    under a held torque ``u`` (the motor's angle carried where ``angle``)."""
+    a, b, c = mode_system(p, mode, angle=angle)
+    n = a.shape[0]
     m = n * (1 + len(cols))
     big = np.zeros((m + 2, m + 2))
     for blk in range(1 + len(cols)):
         big[blk * n:(blk + 1) * n, blk * n:(blk + 1) * n] = a
     big[:n, m], big[:n, m + 1] = b, c
     for j, col in enumerate(cols):
-        da, db, dc = (x.imag / COMPLEX_STEP for x in mode_system(_complex_step(p, col), mode))
+        da, db, dc = (x.imag / COMPLEX_STEP
+                      for x in mode_system(_complex_step(p, col), mode, angle=angle))
         rows = slice((1 + j) * n, (2 + j) * n)
         big[rows, :n] = da
         big[rows, m], big[rows, m + 1] = db, dc
@@ -147,8 +161,9 @@ def augmented_flow(p: np.ndarray, mode: tuple[int, int, int], tau: float, cols):
 
 
 def field(p: np.ndarray, mode: tuple[int, int, int], x: np.ndarray, u: float) -> np.ndarray:
-    """The vector field ``A x + b u + c`` of a mode."""
-    a, b, c = mode_system(p, mode)
+    """The vector field ``A x + b u + c`` of a mode at ``x`` (with the motor's angle where
+    ``x`` has it)."""
+    a, b, c = mode_system(p, mode, angle=_has_angle(p, x))
     return a @ x + b * u + c
 
 
@@ -156,14 +171,17 @@ def drive_torque(p, flank: int, i: int, x: np.ndarray, u: float):
     """The torque in N m on inertia ``i`` from the motor torque (``u``, or the loop's
     ``T`` in ``x``) and the shaft (friction excluded) at the state ``x``; complex with
     complex ``p``."""
-    a, b, c = mode_system(p, (flank, NO_SWITCH, NO_SWITCH), friction=False)
+    a, b, c = mode_system(p, (flank, NO_SWITCH, NO_SWITCH), friction=False,
+                          angle=_has_angle(p, x))
     return p[i] * (a[i] @ x + b[i] * u + c[i])  # p[i]: J_i
 
 
 def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
                   params=None, initial_state=None, initial_sensitivity=None,
-                  actuator: CurrentLoop | None = None) -> np.ndarray:
-    """Derivatives of ``(w_M, w_L)`` at ``t`` with respect to ``params``.
+                  actuator: CurrentLoop | None = None, motor_angle: bool = False
+                  ) -> np.ndarray:
+    """Derivatives of ``(w_M, w_L)`` (and the motor's angle) at ``t`` with respect to
+    ``params``.
 
     Parameters
     ----------
@@ -187,11 +205,16 @@ def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
     actuator : CurrentLoop, optional
         The current loop between the set-point and the motor torque; default none (as
         ``CurrentLoop(0.0)``: the set-point applied exactly).
+    motor_angle : bool, optional
+        Carry the motor's angle in rad as one more state, last (from 0, with zero
+        sensitivity; ``initial_state`` and ``initial_sensitivity`` then have its
+        entry), and return its sensitivity; default False.
 
     Returns
     -------
     numpy.ndarray
-        ``(len(t), 2, len(params))``: ``d w / d p`` in the parameters' SI units.
+        ``(len(t), 2, len(params))``: ``d w / d p`` in the parameters' SI units; with
+        ``motor_angle`` ``(len(t), 3, len(params))``, the angle's last.
 
     Raises
     ------
@@ -205,43 +228,46 @@ def sensitivities(drive: TwoMassDrive, t: np.ndarray, torque: np.ndarray, *,
     names = _checked_params(drive, params, actuator)
     cols = [PARAMS.index(n) for n in names]
     p = _param_values(drive, actuator)
-    x0, s0 = _checked_start(initial_state, initial_sensitivity,
-                            LOOP_STATES if has_loop(p) else STATES, len(cols))
+    states = (LOOP_STATES if has_loop(p) else STATES) + (("phi_M",) if motor_angle else ())
+    x0, s0 = _checked_start(initial_state, initial_sensitivity, states, len(cols))
     if initial_state is None and has_loop(p):  # the loop settled, as the simulator's
-        x0[-1] = float(torque[0])
-    res = drive.simulate(t, torque, initial_state=x0, actuator=actuator)
+        x0[n_states(p) - 1] = float(torque[0])
+    # the simulator's changes do not depend on the angle, which it leaves out
+    res = drive.simulate(t, torque, initial_state=x0[:n_states(p)], actuator=actuator)
     z = np.concatenate([x0, s0.T.ravel()])  # z holds a column's states together
-    return _walk(p, (t, torque, res), cols, z)
+    return _walk(p, (t, torque, res), cols, z, motor_angle)
 
 
-def _walk(p: np.ndarray, run, cols: list[int], z: np.ndarray) -> np.ndarray:
+def _walk(p: np.ndarray, run, cols: list[int], z: np.ndarray, angle: bool = False
+          ) -> np.ndarray:
     """The speeds' sensitivities ``(len(t), 2, len(cols))`` along ``run = (t, torque,
     res)``, ``res`` the simulator's run on that grid and torque, from ``z = [x, S_1
-    ..]`` at ``t[0]``."""
-    (t, torque, res), n = run, n_states(p)
+    ..]`` at ``t[0]``; with the motor's angle's last where ``angle`` (``z`` has it)."""
+    (t, torque, res), n = run, n_states(p) + angle
+    rows = [0, 1, n - 1] if angle else [0, 1]
     ts = float(t[1] - t[0])
     sticky = [i for i in (0, 1) if p[_FC[i]] > 0]
     changes = [(time, int(j), int(to)) for time, j, _, to in res.event_array.tolist()]
     mode = _initial_mode(res, sticky)
     i_ev, full, last = 0, {}, (-np.inf, None)
-    out = np.empty((t.size, 2, len(cols)))
+    out = np.empty((t.size, len(rows), len(cols)))
     for k in range(t.size):
-        out[k] = z[n:].reshape(len(cols), n)[:, :2].T
+        out[k] = z[n:].reshape(len(cols), n)[:, rows].T
         if k == t.size - 1:
             break
         t_now, u = float(t[k]), float(torque[k])
         while i_ev < len(changes) and changes[i_ev][0] <= t[k + 1]:
             t_ev, j, to = changes[i_ev]
-            z = _advance(p, mode, z, u, t_ev - t_now, cols)
+            z = _advance(p, mode, z, u, t_ev - t_now, cols, angle)
             z, mode, last = _change(p, z, u, mode, (j, to), (t_ev, ts, last), cols)
             t_now, i_ev = t_ev, i_ev + 1
         if t_now == t[k]:  # a whole sample in one mode: its flow is cached
             if mode not in full:
-                full[mode] = augmented_flow(p, mode, ts, cols)
+                full[mode] = augmented_flow(p, mode, ts, cols, angle)
             phi, gam = full[mode]
             z = phi @ z + gam @ np.array([u, 1.0])
         else:
-            z = _advance(p, mode, z, u, float(t[k + 1]) - t_now, cols)
+            z = _advance(p, mode, z, u, float(t[k + 1]) - t_now, cols, angle)
     return out
 
 
@@ -306,10 +332,10 @@ def _initial_mode(res, sticky: list[int]) -> tuple[int, int, int]:
     return (int(res.modes[0, 0]), *m)
 
 
-def _advance(p, mode, z, u, tau, cols):
+def _advance(p, mode, z, u, tau, cols, angle):
     if tau <= 0.0:
         return z
-    phi, gam = augmented_flow(p, mode, tau, cols)
+    phi, gam = augmented_flow(p, mode, tau, cols, angle)
     return phi @ z + gam @ np.array([u, 1.0])
 
 
@@ -318,7 +344,7 @@ def _change(p, z, u, before, change, when, cols):
     event row ``j``: 0 the shaft, ``1 + i`` inertia ``i``'s switch, to mode ``to``) at
     ``when = (time, sample time, the last change's (time, dtau/dp))``."""
     (slot, to), (t_ev, ts, (t_last, dtau_last)) = change, when
-    n = n_states(p)
+    n = z.size // (1 + len(cols))
     after = list(before)
     after[slot] = to
     after = tuple(after)
@@ -356,7 +382,8 @@ def _guard(p, x, u, before, slot, to, cols):
     if m:  # a slipping inertia stops: g = -m w_i
         dg_dx[i] = -m
         return None, dg_dx, dg_dp
-    a, _, _ = mode_system(p, (before[0], NO_SWITCH, NO_SWITCH), friction=False)
+    a, _, _ = mode_system(p, (before[0], NO_SWITCH, NO_SWITCH), friction=False,
+                          angle=_has_angle(p, x))
     dg_dx = to * p[i] * a[i]  # breakaway in direction s = to: g = s T_i - fc_i (T too)
     for n, col in enumerate(cols):
         dt_dp = drive_torque(_complex_step(p, col), before[0], i, x, u).imag / COMPLEX_STEP
@@ -373,7 +400,7 @@ def jump_time(p, z, u, before, dg_dx, dg_dp, time: float) -> np.ndarray:
     ValueError
         Where the guard's rate ``dg/dx f_-`` is 0 (exactly grazing).
     """
-    n = n_states(p)
+    n = dg_dx.size
     x = z[:n]
     sens = z[n:].reshape(-1, n).T  # (state, parameter)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -389,7 +416,7 @@ def saltation(p: np.ndarray, z: np.ndarray, u: float, before, after, dtau: np.nd
     """``z`` after a change from mode ``before`` to ``after`` that moves by ``dtau`` per
     parameter: the sensitivities jump by ``(f_- - f_+) dtau/dp`` (the loop's torque's
     row of the two fields is one, so its sensitivity does not jump)."""
-    n = n_states(p)
+    n = z.size // (1 + dtau.size)
     x = z[:n]
     sens = z[n:].reshape(-1, n).T  # (state, parameter)
     f_minus, f_plus = field(p, before, x, u), field(p, after, x, u)

@@ -29,7 +29,8 @@ PARAMS = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta", "fc_M", "fc_L", "
 LINEAR_AND_THETA = PARAMS[:7]
 #: The Coulomb torques: a sensitivity to one needs it positive.
 COULOMB = ("fc_M", "fc_L")
-#: The kernel's state: the speeds, the twist, and behind a current loop the motor torque.
+#: The kernel's state: the speeds, the twist, and behind a current loop the motor torque
+#: (a run along the simulator's that tracks the motor's angle carries it last).
 STATES = ("w_M", "w_L", "phi", "T")
 
 
@@ -234,8 +235,11 @@ def sensitivities_along(
 ) -> np.ndarray:
     """The sensitivities ``(n, s, len(params))`` of the ``s`` states along ``run``, the
     simulator's run of ``drive`` behind ``actuator``
-    (:func:`backlashkit.simulate.simulate_packed_runs`, paper A's law, no motor
-    angle), from its first state.
+    (:func:`backlashkit.simulate.simulate_packed_runs`, paper A's law), from its first
+    state. A run that tracks the motor's angle (``track_angle``: its states end with
+    it, one more than the drive's) gives the angle's sensitivity too, last: the
+    speed's integral, which no jump moves (the speeds are continuous at every
+    change).
 
     The same values to the bit as :func:`trajectory_and_sensitivities` from that state
     on that grid and torque, without simulating the drive again: the joint fit has

@@ -109,9 +109,11 @@ fn graze_rows<'py>(
 }
 
 /// As `drive_sensitivities`, along the run the simulator has made of the same drive,
-/// grid and torque (`simulate_chain_batch`'s row): its states `(len(u), n)`, its
-/// first sample's modes and its events `(E, 4)` = `[time, switch, from, to]`; the run
-/// starts from its first state. The same values to the bit, without simulating again.
+/// grid and torque (`simulate_chain_batch`'s row): its states `(len(u), n)` (with the
+/// motor's angle last where the run tracked it: its sensitivity then comes last too),
+/// its first sample's modes and its events `(E, 4)` = `[time, switch, from, to]`; the
+/// run starts from its first state. The same values to the bit, without simulating
+/// again.
 /// Returns the sensitivities alone: in `out` where given (C-contiguous, of that shape;
 /// a caller asking again and again for runs of one size keeps one array).
 #[pyfunction]
@@ -132,11 +134,11 @@ fn drive_sensitivities_along<'py>(
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
-    let run = along(&states, &first_modes, &events)?;
+    let run = along(&p, &states, &first_modes, &events)?;
     let u = u.as_slice()?;
     let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
     if let Some(out) = out {
-        let shape = [u.len(), state_count(&p), wanted.len()];
+        let shape = [u.len(), run.state_count(&p), wanted.len()];
         if out.shape() != shape {
             return Err(PyValueError::new_err(format!(
                 "out must have shape {shape:?}, got {:?}",
@@ -159,7 +161,7 @@ fn drive_sensitivities_along<'py>(
         .detach(|| sensitivity::drive_sensitivities_along(&p, t0, ts, u, &run, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(
-        Array3::from_shape_vec((u.len(), state_count(&p), wanted.len()), values)
+        Array3::from_shape_vec((u.len(), run.state_count(&p), wanted.len()), values)
             .map_err(|e| PyValueError::new_err(e.to_string()))?
             .into_pyarray(py),
     )
@@ -191,7 +193,7 @@ fn drive_jacobian_rows_along<'py>(
 ) -> PyResult<()> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
-    let run = along(&states, &first_modes, &events)?;
+    let run = along(&p, &states, &first_modes, &events)?;
     let selected = selected
         .as_slice()?
         .iter()
@@ -243,7 +245,7 @@ fn drive_sensitivity_at_end_along<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let p = param_array(&params)?;
     let events = event_list(&events)?;
-    let run = along(&states, &first_modes, &events)?;
+    let run = along(&p, &states, &first_modes, &events)?;
     let (u, s0) = (
         u.as_slice()?,
         s0.as_ref().map(|s| s.as_slice()).transpose()?,
@@ -252,14 +254,16 @@ fn drive_sensitivity_at_end_along<'py>(
     let values = py
         .detach(|| sensitivity::drive_sensitivity_at_end_along(&p, t0, ts, u, &run, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
-    Ok(Array2::from_shape_vec((state_count(&p), m), values)
+    Ok(Array2::from_shape_vec((run.state_count(&p), m), values)
         .map_err(|e| PyValueError::new_err(e.to_string()))?
         .into_pyarray(py))
 }
 
 /// A run of the simulator as the kernel follows it: its states, first sample's modes
-/// and changes.
+/// and changes; states with a column more than the drive of `params` has end with the
+/// motor's angle (the simulator's `track_angle`).
 fn along<'a>(
+    params: &[f64; N_PARAMS],
     states: &'a PyReadonlyArray2<'_, f64>,
     first_modes: &'a PyReadonlyArray1<'_, i8>,
     events: &'a [Event],
@@ -268,6 +272,7 @@ fn along<'a>(
         states: states.as_slice()?,
         first_modes: first_modes.as_slice()?,
         events,
+        motor_angle: states.shape()[1] == state_count(params) + 1,
     })
 }
 

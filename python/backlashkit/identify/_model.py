@@ -278,12 +278,23 @@ def span_start(drive: TwoMassDrive, span: Span, names: Sequence[str],
                hold: PackedRun | None = None, *, actuator: CurrentLoop | None = None
                ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The state ``[w_M, w_L, phi]`` (and the motor torque ``T`` behind the current
-    loop ``actuator``) the model starts ``span`` from and its sensitivity to ``names``
-    (``(n, len(names))``), for the compiled sensitivities: ``(None, None)`` from rest;
-    the end of the held torque's run on the coarse grid of :func:`simulate_span`
-    (along ``hold``, that run of ``drive``, where given); or the steady state and
-    :func:`steady_sensitivity` (the loop's torque is the held level, whatever the
-    parameters)."""
+    loop ``actuator``, then the motor's angle, 0, where the span fits angles) the model
+    starts ``span`` from and its sensitivity to ``names`` (``(n, len(names))``), for
+    the compiled sensitivities: ``(None, None)`` from rest; the end of the held
+    torque's run on the coarse grid of :func:`simulate_span` (along ``hold``, that run
+    of ``drive``, where given); or the steady state and :func:`steady_sensitivity` (the
+    loop's torque is the held level, whatever the parameters)."""
+    x0, s0 = _drive_start(drive, span, names, hold, actuator)
+    if x0 is None or not span.positions:
+        return x0, s0
+    # the angles are measured from the span's first sample, whatever the parameters
+    return np.append(x0, 0.0), np.vstack([s0, np.zeros((1, len(names)))])
+
+
+def _drive_start(drive: TwoMassDrive, span: Span, names: Sequence[str],
+                 hold: PackedRun | None, actuator: CurrentLoop | None
+                 ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """:func:`span_start` without the motor's angle."""
     from .._sensitivity import sensitivity_at_end_along, trajectory_and_sensitivities
 
     kw = {"params": names, "actuator": actuator}

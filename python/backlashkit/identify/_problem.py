@@ -282,7 +282,7 @@ class Residual:
 
     def __call__(self, z_rows: np.ndarray) -> np.ndarray:
         pb, lag = self.problem, self.lag
-        runs = [] if len(z_rows) == 1 and not any(sp.positions for sp in self.spans) else None
+        runs = [] if len(z_rows) == 1 else None
         sims = pb.simulate(z_rows, self.spans, self.ends, runs=runs)
         if runs is not None:
             self.keep(z_rows[0], runs)
@@ -355,16 +355,15 @@ class Residual:
         """The Jacobian in the estimated values from the compiled forward
         sensitivities, one run per span of the estimated parameters alone (without
         ``theta``'s column where ``with_theta`` is false: a refit that holds it); None
-        outside their scope (:meth:`Problem.exact_model`, encoder angles) or where a
-        change grazes (no derivative there: the caller differences instead). The
+        outside their scope (:meth:`Problem.exact_model`) or where a change grazes (no
+        derivative there: the caller differences instead). The
         sensitivities follow the residual's own simulation at ``z`` (:attr:`kept`
         where it has just been simulated there, else simulated now), so they are
         those of the model the residual evaluates. A span that starts after a held
         torque or from a steady state starts with that state's sensitivity
-        (:func:`~backlashkit.identify._model.span_start`)."""
+        (:func:`~backlashkit.identify._model.span_start`). A span of encoder angles
+        takes the sensitivity of the motor's angle, which its run tracks (:meth:`_angle_rows`)."""
         pb = self.problem
-        if any(sp.positions for sp in self.spans):
-            return None
         model = pb.exact_model(z)
         if model is None:
             return None
@@ -385,7 +384,12 @@ class Residual:
                 # along a run the kernel does not warn (the differences would not)
                 _, s0 = span_start(drive, sp, names, run.hold, actuator=loop)
                 block = out[pos : pos + 2 * (m - self.lag)]
-                if self.ar is None:  # weigh's arithmetic, by the kernel (the spans are speeds)
+                if sp.positions:
+                    sens = sensitivities_along(drive, run.span, initial_sensitivity=s0,
+                                               params=names, out=self._sens_out(i, run, names),
+                                               actuator=loop)
+                    self._angle_rows(sp, s_, sens, minus_per_z, block)
+                elif self.ar is None:  # weigh's arithmetic, by the kernel
                     jacobian_rows_along(drive, run.span, selected=self._selected(i),
                                         factor=minus_per_z, level=tuple(self.sig[sp.k]),
                                         out=block, initial_sensitivity=s0, params=names,
@@ -404,6 +408,25 @@ class Residual:
         out[pos:] = 0.0
         out[pos:, 1 - first:] = np.diag(prior)  # theta has no prior row
         return out
+
+    def _angle_rows(self, sp: Span, s_, sens: np.ndarray, minus_per_z: np.ndarray,
+                    block: np.ndarray) -> None:
+        """The rows of span ``sp`` of encoder angles into ``block``, from the
+        sensitivities ``sens`` of its run's states, the motor's angle last: the motor's
+        angle's, then the load's (the motor's less the twist's change since the span's
+        first sample, :func:`~backlashkit.identify._model.model_angles`), of the selected
+        samples ``s_``, each times ``minus_per_z`` and weighed as the residual's rows."""
+        chosen = sens[s_]
+        motor = chosen[:, -1, :]
+        load = motor - (chosen[:, 2, :] - sens[0, 2, :])
+        for c, (rows, angle) in enumerate(zip(np.split(block, 2), (motor, load), strict=True)):
+            if self.ar is not None:
+                rows[...] = self.weigh(sp, c, (angle * minus_per_z).T).T
+                continue
+            # weigh's arithmetic along the samples' axis, in place
+            np.multiply(angle, minus_per_z, out=rows)
+            rows -= rows.mean(axis=0)
+            rows /= self.sig[sp.k, c]
 
     def _selected(self, i: int) -> np.ndarray:
         """Span ``i``'s selected samples as indices (int64), made once."""

@@ -1,6 +1,7 @@
 //! Exact forward sensitivities of the two-mass drive (issue 24): the derivatives of the
 //! state `[w_M, w_L, phi]` (`[w_M, w_L, phi, T]` behind a current loop, `T` the motor
-//! torque) with respect to the parameters [`PARAMS`], under paper A's contact law, with
+//! torque; then the motor's angle where the run tracks it, an encoder's record) with
+//! respect to the parameters [`PARAMS`], under paper A's contact law, with
 //! Coulomb friction whose breakaway torque is the Coulomb torque (`fs = fc`) or none,
 //! from a given state and its sensitivity (zero from rest; a held torque's run or a
 //! steady state's where a run continues one).
@@ -55,15 +56,25 @@ pub const N_LINEAR: usize = 7;
 pub const N_STATES: usize = 3;
 /// States behind a current loop: the drive's, then the motor torque `T`.
 pub const N_LOOP_STATES: usize = N_STATES + 1;
+/// The most states a run carries: behind a loop, with the motor's angle last (the
+/// simulator's `track_angle`, which an encoder's record is fitted with).
+pub const N_MAX_STATES: usize = N_LOOP_STATES + 1;
 
 /// The state count of a drive with parameters `p`: [`N_LOOP_STATES`] where its current
-/// loop's time constant is positive, else [`N_STATES`].
+/// loop's time constant is positive, else [`N_STATES`] (the motor's angle, where a run
+/// tracks it, is one more: [`Along::state_count`]).
 pub fn state_count(p: &[f64; N_PARAMS]) -> usize {
-    if p[index::TAU] > 0.0 {
+    if has_loop(p) {
         N_LOOP_STATES
     } else {
         N_STATES
     }
+}
+
+/// Whether the drive with parameters `p` is behind a current loop (`tau_i > 0`), whose
+/// torque `T` is then the state after the drive's three.
+pub(crate) fn has_loop(p: &[f64; N_PARAMS]) -> bool {
+    p[index::TAU] > 0.0
 }
 
 /// Indices into a parameter array (order [`PARAMS`]).

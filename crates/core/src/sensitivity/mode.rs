@@ -4,13 +4,15 @@
 //! A mode is the shaft's contact and each inertia's friction switch: slipping forwards
 //! or backwards (the Coulomb torque `-+fc_i` on it) or stuck (its speed row zero).
 //!
-//! The state has `N` entries: the drive's three, and behind a current loop (`N = 4`)
+//! The state has `N` entries: the drive's three; behind a current loop (`tau_i > 0`)
 //! the motor torque `T`, `tau_i dT/dt = u - T`, which then drives the motor in place of
-//! `u`. The loop's row is the same in every mode (a stuck motor's torque still follows
-//! its set-point).
+//! `u`; and last, where `N` has room for it beyond those, the motor's angle,
+//! `dphi_M/dt = w_M`. The loop's and the angle's rows are the same in every mode (a
+//! stuck motor's torque still follows its set-point, and its angle stays with its
+//! speed at 0), and nothing in the drive depends on the angle.
 
 use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, TAU, THETA};
-use super::{N_PARAMS, N_STATES};
+use super::{has_loop, state_count, N_PARAMS, N_STATES};
 use crate::linalg::{matvec, Mat, Vector};
 
 /// `dx/dt = a x + b u + c` (or the derivative of these with respect to a parameter).
@@ -147,7 +149,7 @@ pub(super) fn balance<const N: usize>(p: &[f64; N_PARAMS], flank: i8) -> Balance
     };
     bal.r[0][..N_STATES].copy_from_slice(&[-p[F_M] - on * d, on * d, -on * k]);
     bal.r[1][..N_STATES].copy_from_slice(&[on * d, -p[F_L] - on * d, on * k]);
-    if N > N_STATES {
+    if has_loop(p) {
         bal.r[0][N_STATES] = 1.0;
     } else {
         bal.beta[0] = 1.0;
@@ -200,9 +202,12 @@ fn from_balance<const N: usize>(bal: &Balance<N>, inertia: [f64; 2], twist: bool
 /// `(A, b, c)` of `mode`.
 pub(super) fn system<const N: usize>(p: &[f64; N_PARAMS], mode: Mode) -> System<N> {
     let mut sys = from_balance(&balance_with_friction(p, mode), [p[J_M], p[J_L]], true);
-    if N > N_STATES {
+    if has_loop(p) {
         // tau_i dT/dt = u - T
         (sys.a[N_STATES][N_STATES], sys.b[N_STATES]) = (-1.0 / p[TAU], 1.0 / p[TAU]);
+    }
+    if N > state_count(p) {
+        sys.a[N - 1][0] = 1.0; // dphi_M/dt = w_M
     }
     stuck_rows_zero(sys, mode)
 }
@@ -226,7 +231,7 @@ pub(super) fn system_derivative<const N: usize>(
         // The loop's row alone: d(-1 / tau)/dtau = 1 / tau^2, and minus that for b.
         TAU => {
             let mut sys = System::default();
-            if N > N_STATES {
+            if has_loop(p) {
                 let inv2 = 1.0 / (p[TAU] * p[TAU]);
                 (sys.a[N_STATES][N_STATES], sys.b[N_STATES]) = (inv2, -inv2);
             }

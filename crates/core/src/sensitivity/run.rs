@@ -5,7 +5,9 @@ use super::flow::{Augmented, Flow};
 use super::index::{D, FC_L, FC_M, F_L, F_M, J_L, J_M, K, TAU, THETA};
 use super::lanes::{copy_lanes, groups, push_lanes, stream, Group, Row, Sink, LANES, WIDTH};
 use super::mode::{balance, balance_derivative, system, Mode, N_MODES};
-use super::{state_count, N_LINEAR, N_LOOP_STATES, N_PARAMS, N_STATES, PARAMS};
+use super::{
+    has_loop, state_count, N_LINEAR, N_LOOP_STATES, N_MAX_STATES, N_PARAMS, N_STATES, PARAMS,
+};
 use crate::chain::{simulate_chain, ChainParams, Law};
 use crate::hybrid::{Event, Graze};
 use crate::Error;
@@ -96,7 +98,7 @@ pub fn drive_sensitivities_from(
 /// near-grazing passes), and the sensitivities along it to `sink`: the body of
 /// [`drive_sensitivities_from`], whatever becomes of the rows.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn simulate_and_walk<S: EitherSink>(
+pub(super) fn simulate_and_walk<S: AnySink>(
     p: &[f64; N_PARAMS],
     t0: f64,
     ts: f64,
@@ -106,7 +108,7 @@ pub(super) fn simulate_and_walk<S: EitherSink>(
     wanted: &[usize],
     sink: &mut S,
 ) -> Result<(Vec<f64>, Vec<Graze>), Error> {
-    let active = checked(p, s0, wanted)?;
+    let active = checked(p, state_count(p), s0, wanted)?;
     let chain = chain_params(p)?;
     if !t0.is_finite() {
         return Err(Error::InvalidArgument(format!(
@@ -120,6 +122,7 @@ pub(super) fn simulate_and_walk<S: EitherSink>(
             states: &run.states,
             first_modes: first,
             events: &run.events,
+            motor_angle: false,
         };
         walk(p, &sticky, t0, ts, u, &along, s0, wanted, active, sink)?;
     }
@@ -128,12 +131,23 @@ pub(super) fn simulate_and_walk<S: EitherSink>(
 
 /// A run of the simulator that the sensitivities can follow without simulating it
 /// again: its states, row-major `(samples, n)`; its first sample's modes (the contact,
-/// then each inertia with friction, as the simulator writes them); and its changes.
+/// then each inertia with friction, as the simulator writes them); its changes; and
+/// whether its states end with the motor's angle (the simulator's `track_angle`), whose
+/// sensitivity the walk then carries too (an encoder's record is fitted as angles).
 #[derive(Clone, Copy, Debug)]
 pub struct Along<'a> {
     pub states: &'a [f64],
     pub first_modes: &'a [i8],
     pub events: &'a [Event],
+    pub motor_angle: bool,
+}
+
+impl Along<'_> {
+    /// The states of each sample of the run of a drive with parameters `p`: the
+    /// drive's ([`state_count`]), and the motor's angle where tracked.
+    pub fn state_count(&self, p: &[f64; N_PARAMS]) -> usize {
+        state_count(p) + self.motor_angle as usize
+    }
 }
 
 /// As [`drive_sensitivities_from`], along `run`, the simulator's run of the same
@@ -155,7 +169,7 @@ pub fn drive_sensitivities_along(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<Vec<f64>, Error> {
-    let mut out = vec![0.0; u.len() * state_count(p) * wanted.len()];
+    let mut out = vec![0.0; u.len() * run.state_count(p) * wanted.len()];
     drive_sensitivities_along_into(p, t0, ts, u, run, s0, wanted, &mut out)?;
     Ok(out)
 }
@@ -177,7 +191,7 @@ pub fn drive_sensitivities_along_into(
     out: &mut [f64],
 ) -> Result<(), Error> {
     let (active, sticky) = checked_along(p, t0, ts, u, run, s0, wanted)?;
-    let n = state_count(p);
+    let n = run.state_count(p);
     let size = u.len() * n * wanted.len();
     if out.len() != size {
         return Err(Error::InvalidArgument(format!(
@@ -205,9 +219,9 @@ pub(super) fn checked_along(
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<([bool; N_PARAMS], Vec<usize>), Error> {
-    let active = checked(p, s0, wanted)?;
+    let active = checked(p, run.state_count(p), s0, wanted)?;
     let sticky = chain_params(p)?.sticky();
-    check_run(t0, ts, (u.len(), state_count(p)), run, &sticky)?;
+    check_run(t0, ts, (u.len(), run.state_count(p)), run, &sticky)?;
     Ok((active, sticky))
 }
 
@@ -232,24 +246,25 @@ pub fn drive_sensitivity_at_end_along(
         ));
     }
     let mut last = Last {
-        row: [[0.0; WIDTH]; N_LOOP_STATES],
+        row: [[0.0; WIDTH]; N_MAX_STATES],
         left: u.len(),
     };
     walk(p, &sticky, t0, ts, u, run, s0, wanted, active, &mut last)?;
     let m = wanted.len();
-    let rows = &last.row[..state_count(p)];
+    let rows = &last.row[..run.state_count(p)];
     Ok(rows.iter().flat_map(|r| &r[..m]).copied().collect())
 }
 
-/// A sink for the runs of either state count: the drive's own, or behind a loop.
-pub(super) trait EitherSink: Sink<N_STATES> + Sink<N_LOOP_STATES> {}
+/// A sink for the runs of any state count: the drive's own, behind a loop, and either
+/// with the motor's angle.
+pub(super) trait AnySink: Sink<N_STATES> + Sink<N_LOOP_STATES> + Sink<N_MAX_STATES> {}
 
-impl<S: Sink<N_STATES> + Sink<N_LOOP_STATES>> EitherSink for S {}
+impl<S: Sink<N_STATES> + Sink<N_LOOP_STATES> + Sink<N_MAX_STATES>> AnySink for S {}
 
 /// The last of `left` rows, copied when it comes, and the others not at all (its
 /// first `N` states' rows).
 struct Last {
-    row: Row<N_LOOP_STATES>,
+    row: Row<N_MAX_STATES>,
     left: usize,
 }
 
@@ -332,9 +347,11 @@ impl<const N: usize> Sink<N> for Rows {
 }
 
 /// Which parameters are carried: `wanted`, checked (distinct, in range, a Coulomb
-/// torque only where positive), with `s0` of the matching size.
+/// torque only where positive), with `s0` of the matching size (`n` states by the
+/// parameters).
 fn checked(
     p: &[f64; N_PARAMS],
+    n: usize,
     s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<[bool; N_PARAMS], Error> {
@@ -354,7 +371,6 @@ fn checked(
         )));
     }
     if let Some(s0) = s0 {
-        let n = state_count(p);
         if s0.len() != n * wanted.len() || !s0.iter().all(|v| v.is_finite()) {
             return Err(Error::InvalidArgument(format!(
                 "the initial sensitivity must hold {n} x {} finite values (states by \
@@ -416,9 +432,9 @@ fn check_run(
 
 /// The sensitivities along a run of the drive (`run`, checked; `sticky`: its inertias
 /// with a friction switch), from `s0`, each sample's row to `sink`: of the drive's
-/// three states, or four behind a current loop.
+/// three states, four behind a current loop, and one more with the motor's angle.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn walk<S: EitherSink>(
+pub(super) fn walk<S: AnySink>(
     p: &[f64; N_PARAMS],
     sticky: &[usize],
     t0: f64,
@@ -430,10 +446,12 @@ pub(super) fn walk<S: EitherSink>(
     active: [bool; N_PARAMS],
     sink: &mut S,
 ) -> Result<(), Error> {
-    if state_count(p) == N_LOOP_STATES {
-        walk_states::<N_LOOP_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink)
-    } else {
-        walk_states::<N_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink)
+    match run.state_count(p) {
+        N_STATES => walk_states::<N_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink),
+        N_LOOP_STATES => {
+            walk_states::<N_LOOP_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink)
+        }
+        _ => walk_states::<N_MAX_STATES, S>(p, sticky, t0, ts, u, run, s0, wanted, active, sink),
     }
 }
 
@@ -475,6 +493,7 @@ fn walk_states<const N: usize, S: Sink<N>>(
         z: Augmented { x, s },
         last: (f64::NAN, [0.0; N_PARAMS]),
         full: std::array::from_fn(|_| None),
+        stepped: !has_loop(p),
     };
     walk.run(t0, ts, u, run.states, run.events, sink)
 }
@@ -523,15 +542,14 @@ struct Walk<'a, const N: usize> {
     /// Whole-sample flows of the modes in groups of columns (by [`Mode::slot`]),
     /// built when first needed.
     full: [Option<Vec<Group<N>>>; N_MODES],
+    /// Whether the input steps at each sample's instant on the inertias: without a
+    /// current loop (behind one the motor torque is a state, continuous in time).
+    stepped: bool,
 }
 
 impl<const N: usize> Walk<'_, N> {
-    /// Whether the input steps at each sample's instant on the inertias: without a
-    /// current loop (behind one the motor torque is a state, continuous in time).
-    const STEPPED: bool = N == N_STATES;
-
     /// The sensitivities at every sample, along the simulator's `states` (row-major
-    /// `(u.len(), 3)`). Between the samples that hold contact changes the mode is
+    /// `(u.len(), N)`). Between the samples that hold contact changes the mode is
     /// fixed, and the columns advance over those whole samples side by side (see
     /// `lanes`); a sample holding changes is split at them.
     fn run<S: Sink<N>>(
@@ -550,7 +568,7 @@ impl<const N: usize> Walk<'_, N> {
             // breakaway at a sample's start is the next torque's (see `pinned`).
             let next = events.get(next_event);
             let split = (k..n - 1)
-                .find(|&i| next.is_some_and(|e| within(e, t0 + (i + 1) as f64 * ts, Self::STEPPED)))
+                .find(|&i| next.is_some_and(|e| within(e, t0 + (i + 1) as f64 * ts, self.stepped)))
                 .unwrap_or(n - 1);
             self.steady(ts, k, split, u, states, sink);
             self.z.x = std::array::from_fn(|i| states[split * N + i]);
@@ -562,10 +580,10 @@ impl<const N: usize> Walk<'_, N> {
             let mut t_now = t_start;
             while let Some(ev) = events
                 .get(next_event)
-                .filter(|e| within(e, t_end, Self::STEPPED))
+                .filter(|e| within(e, t_end, self.stepped))
             {
                 self.advance(u[split], ev.time - t_now);
-                self.jump(ev, u[split], Self::STEPPED && pinned(ev, t_start))?;
+                self.jump(ev, u[split], self.stepped && pinned(ev, t_start))?;
                 (t_now, next_event) = (ev.time, next_event + 1);
             }
             self.advance(u[split], t_end - t_now);

@@ -51,6 +51,17 @@ fn simulate(p: &[f64; N_PARAMS], u: &[f64]) -> crate::chain::ChainOutput {
 }
 
 fn simulate_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64]) -> crate::chain::ChainOutput {
+    simulate_tracking(p, u, x0, false)
+}
+
+/// As [`simulate_from`], with the motor's angle tracked (`x0` then ends with it) where
+/// `angle`.
+fn simulate_tracking(
+    p: &[f64; N_PARAMS],
+    u: &[f64],
+    x0: &[f64],
+    angle: bool,
+) -> crate::chain::ChainOutput {
     let mut chain = ChainParams::new(
         vec![p[0], p[1]],
         vec![p[3], p[4]],
@@ -62,6 +73,7 @@ fn simulate_from(p: &[f64; N_PARAMS], u: &[f64], x0: &[f64]) -> crate::chain::Ch
         chain.fc = vec![p[FC_M], p[FC_L]];
     }
     chain.tau_i = p[TAU];
+    chain.track_angle = angle;
     simulate_chain(&chain, Law::Paper, 0.0, TS, u, x0).unwrap()
 }
 
@@ -408,6 +420,126 @@ fn a_current_loop_matches_central_differences() {
 }
 
 #[test]
+fn the_motor_angle_matches_central_differences() {
+    // An encoder's record is fitted as angles: along a run that tracks the motor's
+    // angle (one more state, `dphi_M/dt = w_M`), its sensitivity and the load's angle's
+    // (the motor's less the twist's change) match differences of the simulator's
+    // angles; on paper A's drive, and with the Coulomb torques behind the loop (five
+    // states), across their sticks and breakaways. The speeds' columns are those of the
+    // run without the angle, to rounding (the flows' scaling sees one more row).
+    let hold: Vec<f64> = (0..1501)
+        .map(|i| match i {
+            0..=199 => 0.005,
+            200..=999 => 0.3,
+            _ => 0.0,
+        })
+        .collect();
+    let cases: [(&[f64; N_PARAMS], Vec<f64>, Vec<usize>); 2] = [
+        (&PAPER, step_down(3.0, LEVEL), (0..N_LINEAR).collect()),
+        (&COULOMB_LOOP, hold, EVERY.to_vec()),
+    ];
+    for (p, u, wanted) in cases {
+        let (n, m) = (state_count(p) + 1, wanted.len());
+        let x0 = vec![0.0; n];
+        let run = simulate_tracking(p, &u, &x0, true);
+        assert!(run.events.len() >= 4, "{} changes", run.events.len());
+        let switches = run.modes.len() / u.len();
+        let along = Along {
+            states: &run.states,
+            first_modes: &run.modes[..switches],
+            events: &run.events,
+            motor_angle: true,
+        };
+        let sens = drive_sensitivities_along(p, 0.0, TS, &u, &along, None, &wanted).unwrap();
+        let plain = drive_sensitivities_of(p, 0.0, TS, &u, &x0[..n - 1], &wanted).unwrap();
+        let speeds = (0..m)
+            .map(|c| {
+                let col = |v: &[f64], n: usize, i: usize| -> Vec<f64> {
+                    (0..u.len()).map(|k| v[(k * n + i) * m + c]).collect()
+                };
+                let big = col(&plain.values, n - 1, 0)
+                    .iter()
+                    .fold(1e-300f64, |b, v| b.max(v.abs()));
+                (0..2)
+                    .flat_map(|i| {
+                        col(&sens, n, i)
+                            .into_iter()
+                            .zip(col(&plain.values, n - 1, i))
+                    })
+                    .fold(0.0f64, |w, (a, b)| w.max((a - b).abs() / big))
+            })
+            .fold(0.0f64, f64::max);
+        assert!(
+            speeds < 1e-9,
+            "speeds' columns {speeds:.2e} from the run without the angle"
+        );
+        let mut worst = 0.0f64;
+        for (c, &j) in wanted.iter().enumerate() {
+            let col = angles(&sens, n, Some((c, m)));
+            let big = col.iter().fold(0.0f64, |b, v| b.max(v.abs()));
+            let err = angle_difference_error(p, &u, &x0, j, &col, run.events.len());
+            worst = worst.max(err / big);
+        }
+        eprintln!(
+            "motor angle, {n} states, {} changes: largest error {worst:.2e}, speeds {speeds:.1e}",
+            run.events.len()
+        );
+        assert!(worst < RTOL, "largest error {worst:.2e}");
+    }
+}
+
+/// Each sample's motor angle and load angle, `phi_M - (phi - phi(0))`, from rows of
+/// `n` states (the angle last): of the states, or of column `c` of `m` sensitivities.
+fn angles(v: &[f64], n: usize, column: Option<(usize, usize)>) -> Vec<f64> {
+    let get = |k: usize, i: usize| column.map_or(v[k * n + i], |(c, m)| v[(k * n + i) * m + c]);
+    let samples = v.len() / n / column.map_or(1, |(_, m)| m);
+    (0..samples)
+        .flat_map(|k| [get(k, n - 1), get(k, n - 1) - (get(k, 2) - get(0, 2))])
+        .collect()
+}
+
+/// The largest distance of the angles' sensitivities `col` (as [`angles`]) to parameter
+/// `j` from central differences of the simulator's angles at `h` and `h / 2`,
+/// extrapolated (Richardson: their `h^2` terms cancel), the best step at each sample:
+/// the angles' differences carry the simulator's rounding, grown along the record
+/// (3e-8 of the twist's derivative at the end of paper A's record), which the small
+/// steps divide by `h`, while the steps large enough to drown it are off by their
+/// truncation at the ringing's changes. Every shifted run must keep the `changes`.
+fn angle_difference_error(
+    p: &[f64; N_PARAMS],
+    u: &[f64],
+    x0: &[f64],
+    j: usize,
+    col: &[f64],
+    changes: usize,
+) -> f64 {
+    let n = x0.len();
+    let difference = |h: f64| -> Vec<f64> {
+        let shifted = |sign: f64| {
+            let mut q = *p;
+            q[j] *= 1.0 + sign * h;
+            let run = simulate_tracking(&q, u, x0, true);
+            assert_eq!(run.events.len(), changes, "p{j} at {h}");
+            angles(&run.states, n, None)
+        };
+        let (hi, lo) = (shifted(1.0), shifted(-1.0));
+        hi.iter()
+            .zip(&lo)
+            .map(|(a, b)| (a - b) / (2.0 * h * p[j]))
+            .collect()
+    };
+    let mut err = vec![f64::INFINITY; col.len()];
+    for h in [1e-3, 3e-4, 1e-4, 3e-5, 1e-5] {
+        let (coarse, fine) = (difference(h), difference(h / 2.0));
+        let extrapolated = coarse.iter().zip(&fine).map(|(c, f)| (4.0 * f - c) / 3.0);
+        for ((e, d), s) in err.iter_mut().zip(extrapolated).zip(col) {
+            *e = e.min((d - s).abs());
+        }
+    }
+    err.into_iter().fold(0.0f64, f64::max)
+}
+
+#[test]
 fn a_breakaway_matches_central_differences() {
     // From rest under a torque below the motor's breakaway torque, then above it:
     // the motor breaks away, the guard a torque that depends on the parameters.
@@ -541,6 +673,7 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
             states: &run.states,
             first_modes: &run.modes[..switches],
             events: &run.events,
+            motor_angle: false,
         };
         let got = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
         assert!(got == want.values, "{wanted:?}");
@@ -577,6 +710,7 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
             states,
             first_modes,
             events,
+            motor_angle: false,
         };
         let out = drive_sensitivities_along(&COULOMB, 0.0, TS, &u, &along, None, &ALL);
         assert!(matches!(out, Err(Error::InvalidArgument(_))));
@@ -656,6 +790,7 @@ fn the_jacobian_rows_are_the_weighed_sensitivities_to_the_bit() {
             states: &run.states,
             first_modes: &run.modes[..switches],
             events: &run.events,
+            motor_angle: false,
         };
         let sens = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
         let factor: Vec<f64> = (0..m).map(|j| -0.3 - 0.7 * j as f64).collect();
@@ -738,6 +873,7 @@ fn the_end_alone_is_the_last_row_to_the_bit() {
             states: &run.states,
             first_modes: &run.modes[..switches],
             events: &run.events,
+            motor_angle: false,
         };
         let s0: Vec<f64> = (0..n_states * m).map(|i| 2e-3 * i as f64).collect();
         for s0 in [None, Some(&s0[..])] {
@@ -749,6 +885,7 @@ fn the_end_alone_is_the_last_row_to_the_bit() {
             states: &[],
             first_modes: &[],
             events: &[],
+            motor_angle: false,
         };
         let err = drive_sensitivity_at_end_along(p, 0.0, TS, &[], &none, None, &wanted);
         assert!(matches!(err, Err(Error::InvalidArgument(_))));
