@@ -138,11 +138,7 @@ def trajectory_and_sensitivities(
     names = check_scope(drive, params, actuator)
     p = _param_values(drive, actuator)
     t0, ts, u, x0 = _grid_and_start(t, torque, initial_state, state_count(p))
-    s0 = None if initial_sensitivity is None else v.finite_array(
-        "initial_sensitivity", initial_sensitivity, ndim=2)
-    if s0 is not None and s0.shape != (x0.size, len(names)):
-        raise InputError(f"initial_sensitivity must have shape ({x0.size}, {len(names)}) "
-                         f"(states by parameters), got {s0.shape}")
+    s0 = _checked_sensitivity(initial_sensitivity, x0.size, len(names))
     x, out, grazes = _core.drive_sensitivities(p, t0, ts, u, x0,
                                                [PARAMS.index(n) for n in names], s0)
     _warn_near_grazing(grazes)
@@ -155,6 +151,7 @@ def trajectory_and_information(
     torque: Sequence[float] | np.ndarray,
     *,
     initial_state: Sequence[float] | np.ndarray | None = None,
+    initial_sensitivity: np.ndarray | None = None,
     params: Sequence[str] | None = None,
     actuator: CurrentLoop | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -166,15 +163,16 @@ def trajectory_and_information(
     (``G_M / s_M^2 + G_L / s_L^2``), summed in the kernel as it walks: the
     sensitivities themselves are never written out. The same values as the products
     of :func:`trajectory_and_sensitivities`'s, to rounding (the order of the sums).
-    Arguments (from zero sensitivity), errors and warnings as :func:`sensitivities`.
+    Arguments, errors and warnings as :func:`sensitivities`.
     """
     from . import _core
 
     names = check_scope(drive, params, actuator)
     p = _param_values(drive, actuator)
     t0, ts, u, x0 = _grid_and_start(t, torque, initial_state, state_count(p))
+    s0 = _checked_sensitivity(initial_sensitivity, x0.size, len(names))
     x, gram, grazes = _core.drive_information(p, t0, ts, u, x0,
-                                              [PARAMS.index(n) for n in names])
+                                              [PARAMS.index(n) for n in names], s0)
     _warn_near_grazing(grazes)
     return x, gram
 
@@ -198,6 +196,18 @@ def _grid_and_start(t, torque, initial_state, n_states: int
         raise InputError(f"initial_state must hold the {n_states} states "
                          f"({', '.join(STATES[:n_states])}), got shape {x0.shape}")
     return float(t_arr[0]), ts, u, np.ascontiguousarray(x0)
+
+
+def _checked_sensitivity(initial_sensitivity, n_states: int, m: int) -> np.ndarray | None:
+    """The initial sensitivity ``(n_states, m)`` (states by parameters), checked; None:
+    zero."""
+    if initial_sensitivity is None:
+        return None
+    s0 = v.finite_array("initial_sensitivity", initial_sensitivity, ndim=2)
+    if s0.shape != (n_states, m):
+        raise InputError(f"initial_sensitivity must have shape ({n_states}, {m}) "
+                         f"(states by parameters), got {s0.shape}")
+    return np.ascontiguousarray(s0)
 
 
 def _param_values(drive: TwoMassDrive, actuator: CurrentLoop | None) -> np.ndarray:

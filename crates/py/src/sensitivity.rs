@@ -62,11 +62,12 @@ fn drive_sensitivities<'py>(
 
 /// The states `(len(u), n)` of a two-mass drive and the sums `sum_k s_c s_c^T` of the
 /// outer products of each speed's sensitivities `s_c` (motor, load), shape
-/// `(2, len(wanted), len(wanted))`, arguments as `drive_sensitivities` from zero
-/// sensitivity; and the run's near-grazing passes. The white-noise Fisher
-/// information without the sensitivities written out.
+/// `(2, len(wanted), len(wanted))`, arguments as `drive_sensitivities`; and the run's
+/// near-grazing passes. The white-noise Fisher information without the sensitivities
+/// written out.
 #[pyfunction]
-#[pyo3(signature = (params, t0, ts, u, x0, wanted))]
+#[pyo3(signature = (params, t0, ts, u, x0, wanted, s0=None))]
+#[allow(clippy::too_many_arguments)]
 fn drive_information<'py>(
     py: Python<'py>,
     params: PyReadonlyArray1<'py, f64>,
@@ -75,11 +76,13 @@ fn drive_information<'py>(
     u: PyReadonlyArray1<'py, f64>,
     x0: PyReadonlyArray1<'py, f64>,
     wanted: Vec<usize>,
+    s0: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<SensitivityOutput<'py>> {
     let p = param_array(&params)?;
     let (u, x0) = (u.as_slice()?, x0.as_slice()?);
+    let s0 = s0.as_ref().map(|s| s.as_slice()).transpose()?;
     let out = py
-        .detach(|| sensitivity::drive_information(&p, t0, ts, u, x0, &wanted))
+        .detach(|| sensitivity::drive_information(&p, t0, ts, u, x0, s0, &wanted))
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let shape_err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
     let m = wanted.len();

@@ -20,7 +20,14 @@ from .. import validate as v
 from ..actuator import CurrentLoop
 from ..errors import InputError, SensitivityWarning
 from ..plants import TwoMassDrive
-from ._model import LINEAR_PARAMS, drive_with, initial_states, packed_row, rel_std
+from ._model import (
+    LINEAR_PARAMS,
+    drive_with,
+    initial_states,
+    packed_row,
+    rel_std,
+    steady_sensitivity,
+)
 from .noise import innovation_ratio, whiten
 
 __all__ = ["CramerRaoBound", "cramer_rao_bound"]
@@ -126,9 +133,8 @@ def cramer_rao_bound(
 
     ``F = sum_c S_c^T S_c / s_c^2`` with ``S_c`` the sensitivity of speed ``c`` (motor,
     load) to the estimated parameters: exact, from the compiled kernel, where the model
-    is its (paper A's law, no current loop, Coulomb friction with no breakaway torque
-    of its own or none, a known start), else by
-    central differences; with autoregressive noise
+    is its (paper A's law, Coulomb friction with no breakaway torque of its own or none,
+    a current loop or none), else by central differences; with autoregressive noise
     (``noise_ar``) the sensitivities are whitened by ``A(q)`` first and ``s_c`` is the
     innovation's standard deviation (the likelihood of
     :class:`~backlashkit.identify.noise.ARNoise`, conditional on the first ``p`` samples).
@@ -282,11 +288,12 @@ def _exact(drive, names, tau_i, t, torque, law, initial_state):
 def _in_scope(drive, names, tau_i, law, initial_state) -> bool:
     """Whether the compiled sensitivities serve: paper A's law, breakaway torques tied
     to the Coulomb torques, a Coulomb torque estimated only where positive (``tau_i``
-    only behind a loop: refused before), a known start."""
+    only behind a loop: refused before), a known start or the steady one."""
     from .._sensitivity import COULOMB, PARAMS
 
+    other_start = isinstance(initial_state, str) and initial_state != "steady"
     return not (law != "paper" or drive.fs_M is not None or drive.fs_L is not None
-                or not set(names) <= set(PARAMS) or isinstance(initial_state, str)
+                or not set(names) <= set(PARAMS) or other_start
                 or any(getattr(drive, n) == 0 for n in names if n in COULOMB))
 
 
@@ -295,15 +302,25 @@ def _kernel(run, drive, names, tau_i, t, torque, initial_state):
     of time constant ``tau_i`` (0: none), quiet near grazing (as the differences are),
     its errors the bound's. The loop starts settled at the first torque where the
     start gives the drive's three states alone, as :func:`_speeds`'s (and the
-    sensitivities' own default start)."""
-    x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
+    sensitivities' own default start). The steady start moves with the parameters: it
+    starts with its sensitivity (:func:`~backlashkit.identify._model.steady_sensitivity`;
+    the loop's torque is the held level, whatever the parameters)."""
     loop = CurrentLoop(tau_i) if tau_i > 0 else None
-    if loop is not None and x0 is not None and x0.size == 3:
-        x0 = np.append(x0, np.ravel(torque)[:1])
+    start = {}
+    if isinstance(initial_state, str):  # "steady" (_in_scope)
+        level = float(np.ravel(torque)[0])
+        x0 = initial_states(packed_row(drive, tau_i)[np.newaxis, :], level)[0]
+        sens = steady_sensitivity(drive, level, names)
+        start["initial_sensitivity"] = np.vstack([sens, np.zeros((x0.size - 3, len(names)))])
+    else:
+        x0 = None if initial_state is None else np.asarray(initial_state, float).ravel()
+        if loop is not None and x0 is not None and x0.size == 3:
+            x0 = np.append(x0, np.ravel(torque)[:1])
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SensitivityWarning)
-            return run(drive, t, torque, initial_state=x0, params=names, actuator=loop)
+            return run(drive, t, torque, initial_state=x0, params=names, actuator=loop,
+                       **start)
     except ValueError as exc:
         raise InputError(f"cannot simulate the drive for the bound: {exc}") from exc
 

@@ -26,21 +26,23 @@ pub struct DriveInformation {
 }
 
 /// The sums [`DriveInformation::gram`] of the sensitivities of the two-mass drive
-/// from `x0` (zero sensitivity) on the grid `t0 + i ts` under the torques `u`, for the
-/// parameters `wanted` (as [`drive_sensitivities_of`](super::drive_sensitivities_of),
-/// whose values these are the products of), and the run's states.
+/// from `x0` with sensitivity `s0` (`None`: zero; a steady start's moves with the
+/// parameters) on the grid `t0 + i ts` under the torques `u`, for the parameters
+/// `wanted` (as [`drive_sensitivities_from`](super::drive_sensitivities_from), whose
+/// values these are the products of), and the run's states.
 ///
-/// Errors: as [`drive_sensitivities_of`](super::drive_sensitivities_of).
+/// Errors: as [`drive_sensitivities_from`](super::drive_sensitivities_from).
 pub fn drive_information(
     p: &[f64; N_PARAMS],
     t0: f64,
     ts: f64,
     u: &[f64],
     x0: &[f64],
+    s0: Option<&[f64]>,
     wanted: &[usize],
 ) -> Result<DriveInformation, Error> {
     let mut gram = Gram::new(wanted.len());
-    let (states, grazes) = simulate_and_walk(p, t0, ts, u, x0, None, wanted, &mut gram)?;
+    let (states, grazes) = simulate_and_walk(p, t0, ts, u, x0, s0, wanted, &mut gram)?;
     Ok(DriveInformation {
         gram: gram.sums(),
         states,

@@ -46,6 +46,18 @@ fn step_down(seconds: f64, level: f64) -> Vec<f64> {
         .collect()
 }
 
+/// From rest, 0.005 N m for 0.2 s (below the motor's breakaway torque with issue 20's
+/// Coulomb torques), 0.3 N m until 1 s (the motor breaks away), then 0 until 1.5 s.
+fn breakaway_record() -> Vec<f64> {
+    (0..1501)
+        .map(|i| match i {
+            0..=199 => 0.005,
+            200..=999 => 0.3,
+            _ => 0.0,
+        })
+        .collect()
+}
+
 fn simulate(p: &[f64; N_PARAMS], u: &[f64]) -> crate::chain::ChainOutput {
     simulate_from(p, u, &vec![0.0; state_count(p)])
 }
@@ -401,13 +413,7 @@ fn a_current_loop_matches_central_differences() {
     let err = worst_error_from(&LOOP, &u, &[0.0; 4], &wanted).expect("no step changes them");
     eprintln!("current loop, {n_events} changes: largest error {err:.2e}");
     assert!(err < RTOL, "largest error {err:.2e}");
-    let u: Vec<f64> = (0..1501)
-        .map(|i| match i {
-            0..=199 => 0.005,
-            200..=999 => 0.3,
-            _ => 0.0,
-        })
-        .collect();
+    let u = breakaway_record();
     let run = simulate(&COULOMB_LOOP, &u);
     let breakaways = run.events.iter().filter(|e| e.index > 0 && e.from == 0);
     assert!(breakaways.count() >= 1, "no breakaway");
@@ -427,13 +433,7 @@ fn the_motor_angle_matches_central_differences() {
     // angles; on paper A's drive, and with the Coulomb torques behind the loop (five
     // states), across their sticks and breakaways. The speeds' columns are those of the
     // run without the angle, to rounding (the flows' scaling sees one more row).
-    let hold: Vec<f64> = (0..1501)
-        .map(|i| match i {
-            0..=199 => 0.005,
-            200..=999 => 0.3,
-            _ => 0.0,
-        })
-        .collect();
+    let hold = breakaway_record();
     let cases: [(&[f64; N_PARAMS], Vec<f64>, Vec<usize>); 2] = [
         (&PAPER, step_down(3.0, LEVEL), (0..N_LINEAR).collect()),
         (&COULOMB_LOOP, hold, EVERY.to_vec()),
@@ -543,14 +543,7 @@ fn angle_difference_error(
 fn a_breakaway_matches_central_differences() {
     // From rest under a torque below the motor's breakaway torque, then above it:
     // the motor breaks away, the guard a torque that depends on the parameters.
-    let n = 1501;
-    let u: Vec<f64> = (0..n)
-        .map(|i| match i {
-            0..=199 => 0.005,
-            200..=999 => 0.3,
-            _ => 0.0,
-        })
-        .collect();
+    let u = breakaway_record();
     let run = simulate(&COULOMB, &u);
     let breakaways = run
         .events
@@ -735,7 +728,8 @@ fn products(values: &[f64], n: usize, m: usize) -> Vec<f64> {
 
 #[test]
 fn the_information_sums_the_written_sensitivities_products() {
-    // Groups of lanes from one to three, a lone column, and the columns out of order.
+    // Groups of lanes from one to three, a lone column, and the columns out of order;
+    // from zero sensitivity and from a given one (a steady start's).
     let u = step_down(4.0, LEVEL);
     let cases: [(&[f64; N_PARAMS], &[usize]); 5] = [
         (&PAPER, &[0, 1, 2, 3, 4, 5, 6]),
@@ -744,10 +738,12 @@ fn the_information_sums_the_written_sensitivities_products() {
         (&COULOMB, &[FC_L, THETA, J_M, F_M, 2]),
         (&COULOMB_LOOP, &[TAU, FC_L, THETA, J_M, F_M, 2]),
     ];
-    for (p, wanted) in cases {
+    for ((p, wanted), given) in cases.into_iter().flat_map(|c| [(c, false), (c, true)]) {
         let (m, x0) = (wanted.len(), vec![0.0; state_count(p)]);
-        let info = drive_information(p, 0.0, TS, &u, &x0, wanted).unwrap();
-        let sens = drive_sensitivities_of(p, 0.0, TS, &u, &x0, wanted).unwrap();
+        let s0: Vec<f64> = (0..x0.len() * m).map(|i| 1e-3 * i as f64).collect();
+        let s0 = given.then_some(&s0[..]);
+        let info = drive_information(p, 0.0, TS, &u, &x0, s0, wanted).unwrap();
+        let sens = drive_sensitivities_from(p, 0.0, TS, &u, &x0, s0, wanted).unwrap();
         assert_eq!(info.states, sens.states);
         let want = products(&sens.values, state_count(p), m);
         assert_eq!(info.gram.len(), want.len());
@@ -761,7 +757,7 @@ fn the_information_sums_the_written_sensitivities_products() {
             assert_eq!(got, info.gram[(c * m + b) * m + a], "symmetric");
         }
     }
-    let err = drive_information(&PAPER, 0.0, TS, &u, &[0.0; 3], &[THETA, THETA]).unwrap_err();
+    let err = drive_information(&PAPER, 0.0, TS, &u, &[0.0; 3], None, &[THETA, THETA]).unwrap_err();
     assert!(matches!(err, Error::InvalidArgument(_)));
 }
 
