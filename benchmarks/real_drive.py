@@ -578,7 +578,10 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
     rises = [r["rise"]["actuator"] for r in ok if "actuator" in r["rise"]]
     rise = statistics.median(rises) if rises else math.nan
     shifts = [r["shift"]["actuator"] for r in ok if "actuator" in r["shift"]]
-    shift = statistics.median(shifts) if shifts else math.nan
+    # nan where the fit without the loop stopped before converging (TermChoice.shift):
+    # the median of the others, the count of those below the row
+    known = [x for x in shifts if math.isfinite(x)]
+    shift = statistics.median(known) if known else math.nan
     floor = ERR_FLOOR if math.isnan(crb) else max(ERR_FLOOR, CRB_FACTOR * crb / theta)
     limit = 100 * floor
     beyond = [first + i for i, r in enumerate(res)
@@ -589,6 +592,10 @@ def _print_row(dname, ename, theta, res, crb, seconds, first=0) -> None:
           f"{cover:>6.1%} "
           f"{f'{0.95 - band:.1%}-{0.95 + band:.1%}':>14} {kept['friction']:>8.1%} "
           f"{kept['actuator']:>9.1%} {rise:>9.3g} {shift:>6.2f} {seconds:>6.0f}", flush=True)
+    if len(known) < len(shifts):
+        print(f"  the loop's shift of theta unknown in {len(shifts) - len(known)} fits (the "
+              "fit without it stopped before converging); its median is the others'",
+              flush=True)
     if err:  # the trial to rerun alone with --trial
         k = max(range(len(res)), key=lambda i: abs(res[i].get("theta", theta) / theta - 1))
         print(f"  largest error in trial {first + k}: {_trial_line(res[k], theta)}",

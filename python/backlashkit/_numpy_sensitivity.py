@@ -415,7 +415,8 @@ def saltation(p: np.ndarray, z: np.ndarray, u: float, before, after, dtau: np.nd
               ) -> np.ndarray:
     """``z`` after a change from mode ``before`` to ``after`` that moves by ``dtau`` per
     parameter: the sensitivities jump by ``(f_- - f_+) dtau/dp`` (the loop's torque's
-    row of the two fields is one, so its sensitivity does not jump)."""
+    row of the two fields is one, and so is the motor's angle's, so their
+    sensitivities do not jump)."""
     n = z.size // (1 + dtau.size)
     x = z[:n]
     sens = z[n:].reshape(-1, n).T  # (state, parameter)
