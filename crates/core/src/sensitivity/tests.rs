@@ -501,10 +501,10 @@ fn angles(v: &[f64], n: usize, column: Option<(usize, usize)>) -> Vec<f64> {
 /// The largest distance of the angles' sensitivities `col` (as [`angles`]) to parameter
 /// `j` from central differences of the simulator's angles at `h` and `h / 2`,
 /// extrapolated (Richardson: their `h^2` terms cancel), the best step at each sample:
-/// the angles' differences carry the simulator's rounding, grown along the record
-/// (3e-8 of the twist's derivative at the end of paper A's record), which the small
-/// steps divide by `h`, while the steps large enough to drown it are off by their
-/// truncation at the ringing's changes. Every shifted run must keep the `changes`.
+/// the angles' differences carry the simulator's rounding, grown along the record,
+/// which the small steps divide by `h`, while the steps large enough to drown it are
+/// off by their truncation at the ringing's changes. Every shifted run must keep the
+/// `changes`.
 fn angle_difference_error(
     p: &[f64; N_PARAMS],
     u: &[f64],
