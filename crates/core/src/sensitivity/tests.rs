@@ -46,6 +46,17 @@ fn step_down(seconds: f64, level: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The simulator's run of `samples` samples as the walk follows it (`motor_angle`:
+/// its states end with the motor's angle).
+fn along_run(run: &crate::chain::ChainOutput, samples: usize, motor_angle: bool) -> Along<'_> {
+    Along {
+        states: &run.states,
+        first_modes: &run.modes[..run.modes.len() / samples],
+        events: &run.events,
+        motor_angle,
+    }
+}
+
 /// From rest, 0.005 N m for 0.2 s (below the motor's breakaway torque with issue 20's
 /// Coulomb torques), 0.3 N m until 1 s (the motor breaks away), then 0 until 1.5 s.
 fn breakaway_record() -> Vec<f64> {
@@ -443,13 +454,7 @@ fn the_motor_angle_matches_central_differences() {
         let x0 = vec![0.0; n];
         let run = simulate_tracking(p, &u, &x0, true);
         assert!(run.events.len() >= 4, "{} changes", run.events.len());
-        let switches = run.modes.len() / u.len();
-        let along = Along {
-            states: &run.states,
-            first_modes: &run.modes[..switches],
-            events: &run.events,
-            motor_angle: true,
-        };
+        let along = along_run(&run, u.len(), true);
         let sens = drive_sensitivities_along(p, 0.0, TS, &u, &along, None, &wanted).unwrap();
         let plain = drive_sensitivities_of(p, 0.0, TS, &u, &x0[..n - 1], &wanted).unwrap();
         let speeds = (0..m)
@@ -661,13 +666,7 @@ fn along_the_simulators_run_the_same_values_to_the_bit() {
         let want = drive_sensitivities_from(p, 0.0, TS, &u, x0, Some(&s0), &wanted).unwrap();
         let run = simulate_from(p, &u, x0);
         assert!(run.events.len() >= 4, "{} changes", run.events.len());
-        let switches = run.modes.len() / u.len();
-        let along = Along {
-            states: &run.states,
-            first_modes: &run.modes[..switches],
-            events: &run.events,
-            motor_angle: false,
-        };
+        let along = along_run(&run, u.len(), false);
         let got = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
         assert!(got == want.values, "{wanted:?}");
         // into an array given (filled with NaN: every value must be written), twice
@@ -781,13 +780,7 @@ fn the_jacobian_rows_are_the_weighed_sensitivities_to_the_bit() {
         let x0 = &[0.3, 0.2, 0.01, 0.5][..n_states];
         let s0: Vec<f64> = (0..n_states * m).map(|i| 1e-3 * i as f64).collect();
         let run = simulate_from(p, &u, x0);
-        let switches = run.modes.len() / u.len();
-        let along = Along {
-            states: &run.states,
-            first_modes: &run.modes[..switches],
-            events: &run.events,
-            motor_angle: false,
-        };
+        let along = along_run(&run, u.len(), false);
         let sens = drive_sensitivities_along(p, 0.0, TS, &u, &along, Some(&s0), &wanted).unwrap();
         let factor: Vec<f64> = (0..m).map(|j| -0.3 - 0.7 * j as f64).collect();
         let level = [0.021, 0.0037];
@@ -864,13 +857,7 @@ fn the_end_alone_is_the_last_row_to_the_bit() {
     for (p, wanted) in cases {
         let (m, n_states) = (wanted.len(), state_count(p));
         let run = simulate(p, &u);
-        let switches = run.modes.len() / u.len();
-        let along = Along {
-            states: &run.states,
-            first_modes: &run.modes[..switches],
-            events: &run.events,
-            motor_angle: false,
-        };
+        let along = along_run(&run, u.len(), false);
         let s0: Vec<f64> = (0..n_states * m).map(|i| 2e-3 * i as f64).collect();
         for s0 in [None, Some(&s0[..])] {
             let all = drive_sensitivities_along(p, 0.0, TS, &u, &along, s0, &wanted).unwrap();
