@@ -277,3 +277,42 @@ def test_the_discrete_loop_names_an_argument_of_the_wrong_kind():
         with pytest.raises(InputError, match=said):
             loop(plant, args.pop("backlash"), args.pop("controller"), duration=0.1, **args)
     assert loop(plant, gap, ctrl, reference=ref, duration=0.1).t.size == 101  # both ends
+
+
+def test_a_record_s_time_grid_is_named_once_with_its_digits():
+    """The record's name leads the message once, its samples are ``t[i]`` (not
+    ``record: t[i]``), and times print without a difference's binary rounding."""
+    t = np.arange(100) * 1e-3
+    with pytest.raises(InputError, match=re.escape(
+            "exp.csv: t must be strictly increasing; t[1] = 0.098 follows t[0] = 0.099")):
+        bk.Record(t[::-1], t, t, t, name="exp.csv")
+    jitter = t.copy()
+    jitter[50] += 5e-4
+    with pytest.raises(InputError, match=re.escape(
+            "exp.csv: t must be uniformly sampled; step 49 is 0.0015 s but the mean step is "
+            "0.001 s;")):
+        bk.Record(jitter, t, t, t, name="exp.csv")
+
+
+def test_estimators_give_and_take_their_hyperparameters():
+    """scikit-learn's protocol: ``get_params`` gives the ``__init__`` arguments, from
+    which the same estimator is built again (what ``sklearn.base.clone`` does),
+    ``set_params`` sets them and returns the estimator, and a misspelled name is
+    refused with the one meant. The repr leaves out a drive's friction terms at their
+    defaults."""
+    prior = DRIVE.with_theta(None)
+    for cls in (bk.JointIdentifier, bk.TwoStepIdentifier, bk.RegressionIdentifier):
+        est = cls(prior, allow_far_from_prior=True)
+        params = est.get_params()
+        assert params["prior"] is prior and params["allow_far_from_prior"] is True
+        assert repr(cls(**params)) == repr(est)
+        assert est.set_params(allow_far_from_prior=False) is est
+        assert est.allow_far_from_prior is False
+        with pytest.raises(InputError, match=re.escape(
+                f"{cls.__name__} has no hyperparameter 'alow_far_from_prior' (did you mean "
+                "'allow_far_from_prior'?)")):
+            est.set_params(alow_far_from_prior=True)
+    assert repr(bk.JointIdentifier(prior)) == (
+        "JointIdentifier(TwoMassDrive(J_M=0.00488, J_L=0.068, k_sh=78.0, f_M=0.005, "
+        "f_L=0.005, f_sh=0.01575, theta=None))")
+    assert "fc_M=0.01" in repr(bk.TwoMassDrive(**P_TRUE, theta=THETA, fc_M=0.01))

@@ -79,8 +79,10 @@ def test_inverse_configuration_objects():
     assert SmoothRampInverse(beta_r=2, beta_l=1).params() == (2.0, 1.0)
     with pytest.raises(InputError, match="alpha must be > 0"):
         SmoothFilterInverse(alpha=-1)
-    with pytest.raises(InputError, match="inverse must be one of"):
+    with pytest.raises(InputError, match=r"inverse must be one of .*, got 'bogus'$"):
         inverse_from_name("bogus")
+    with pytest.raises(InputError, match=r"got 'exakt' \(did you mean 'exact'\?\)$"):
+        inverse_from_name("exakt")
 
 
 def test_nonfinite_input_rejected():

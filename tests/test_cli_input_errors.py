@@ -255,19 +255,21 @@ def test_time_in_ms_is_refused_for_every_method(exp_csv, tmp_path, capsys):
 
 
 def test_speeds_in_rpm_read_as_rad_per_s_are_refused(exp_csv, tmp_path, capsys):
-    """The fit moves J_M x0.1 (beyond 5x: refused; --allow-far-from-prior answers, with
-    the note beyond 3x); swapped speed columns move J_M and k_sh about x6."""
+    """The held speeds are 9.5 times the prior's, which names rpm: refused before the
+    fit; with --allow-far-from-prior the fit moves J_M x0.1 and answers with the note
+    beyond 3x. Swapped speed columns hold the prior's speeds and move J_M and k_sh about
+    x6: refused after the fit."""
     t, u, w_m, w_l = np.loadtxt(exp_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
     path = tmp_path / "rpm.csv"
     rpm = 60 / (2 * np.pi)
     write_csv(path, {"t": t, "torque": u, "w_motor": rpm * w_m, "w_load": rpm * w_l})
     err = _one_line_error(capsys, ["identify", str(path), "--drive", DRIVE_TOML,
                                    "--interval", "fisher"])
-    assert "the fit moved J_M x0.1" in err and "rpm read as rad/s?" in err
-    assert "pass --allow-far-from-prior" in err
     # the record whose held speeds are off is named, and the flag that reads rpm
-    assert "far from the prior's in " in err and "rpm.csv (x9.5" in err
+    assert "rpm.csv: under the torque held before the step-down" in err, err
+    assert "the speeds are 9.5" in err and "the fit moved" not in err, err
     assert "rpm read as rad/s? then give --speed-unit rpm" in err
+    assert "pass --allow-far-from-prior" in err
     assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
                  "--allow-far-from-prior"]) == 0
     out, _ = capsys.readouterr()
@@ -316,8 +318,9 @@ def test_the_library_warns_of_a_prior_mismatch(exp, steady):
     """The library refuses what ``identify`` refuses: speeds in rpm are 9.55 times the
     prior's held speed (beyond REFUSE_FROM_PRIOR); with ``allow_far_from_prior=True``
     it answers with a PriorMismatchWarning and says so in ``held_speed_gains_`` (on the
-    record started steady, as paper A's methods need). The joint fit moves J_M x0.1:
-    refused, or with ``allow_far_from_prior=True`` warned (``far_from_prior_``)."""
+    record started steady, as paper A's methods need). The joint fit refuses the same
+    held speeds before it fits; with ``allow_far_from_prior=True`` it moves J_M x0.1
+    and warns (``far_from_prior_``)."""
     from scipy.signal import lfilter
 
     from backlashkit import PriorMismatchWarning, RegressionIdentifier, TwoStepIdentifier
@@ -354,7 +357,8 @@ def test_the_library_warns_of_a_prior_mismatch(exp, steady):
             assert cls(prior).fit(steady).held_speed_gains_ == [
                 pytest.approx(steady_gain, rel=1e-9)]
     joint = JointIdentifier(prior, interval=FisherInterval())
-    with pytest.raises(InputError, match=r"^the fit moved J_M x0\.1.* in rpm\.csv \(x9\.5.*"
+    with pytest.raises(InputError, match=r"^rpm\.csv: under the torque held .* 9\.5\d* "
+                                         r"times the prior's.*"
                                          r"speed_unit='rpm' to read_records.*"
                                          r"allow_far_from_prior=True$"):
         joint.fit(bad)
@@ -696,6 +700,11 @@ def test_wrong_types_in_the_python_api_are_named(exp):
     with pytest.raises(InputError, match=r"got str \(a file\? read it with "
                                          r"backlashkit\.read_records\)"):
         JointIdentifier(prior).fit("exp.csv")
+    # a table of the four columns, which iterates as 100 records of one sample each
+    with pytest.raises(InputError, match=re.escape(
+            "got a (100, 4) array: for columns t, torque, w_motor, w_load give "
+            "Record(*array.T)")):
+        JointIdentifier(prior).fit(np.zeros((100, 4)))
     with pytest.raises(InputError, match="^final_horizon must be a real number, got '1'$"):
         JointIdentifier(prior, search=bk.JointSearch(final_horizon="1")).fit(exp)
     with pytest.raises(InputError, match="^J_M must be a real number, got '0.1'$"):
@@ -943,6 +952,13 @@ def test_a_misspelled_option_is_named_with_the_one_meant(exp_csv, capsys):
             "(see 'backlashkit identify --help')") in err
     err = _one_line_error(capsys, ["simulate", "--out", "x.csv", "--zzz"])
     assert "did you mean" not in err and "(see 'backlashkit simulate --help')" in err
+    # a subcommand or a value of a choice, misspelled
+    err = _one_line_error(capsys, ["identfy", "x.csv"])
+    assert "invalid choice: 'identfy'" in err and "; did you mean 'identify'?" in err, err
+    err = _one_line_error(capsys, ["simulate", DRIVE_TOML, "--experiment", "step-dwn",
+                                   "--out", "x.csv"])
+    assert "; did you mean 'step-down'?" in err, err
+    assert "did you mean" not in _one_line_error(capsys, ["zzz"])
 
 
 @pytest.mark.parametrize(("name", "speeds", "torque", "said", "remedy"), [
@@ -953,8 +969,9 @@ def test_a_misspelled_option_is_named_with_the_one_meant(exp_csv, capsys):
 def test_a_unit_mistake_is_named_from_the_held_speeds(steady_csv, tmp_path, capsys, name,
                                                       speeds, torque, said, remedy):
     """Both refusals name the unit mistake that the held speeds' ratio to the prior's
-    points to (not rpm for every one); speeds in deg/s are read with --speed-unit
-    deg/s, and answer as in rad/s."""
+    points to (not rpm for every one), the joint fit's before it fits (the QA pass's
+    torque in mN m was refused with a generic misfit after 12.7 s); speeds in deg/s
+    are read with --speed-unit deg/s, and answer as in rad/s."""
     t, u, w_m, w_l = np.loadtxt(steady_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
     path = tmp_path / f"{name}.csv"
     write_csv(path, {"t": t, "torque": torque * u, "w_motor": speeds * w_m,
@@ -965,6 +982,12 @@ def test_a_unit_mistake_is_named_from_the_held_speeds(steady_csv, tmp_path, caps
             argv += ["--interval", "fisher"]
         err = _one_line_error(capsys, argv)
         assert f"check the units: {said} {remedy} else the time's units" in err, err
+        # from the held speeds alone, not from a fit, where friction cannot slow them
+        # that far (step.FRICTION_SLOWS): rad/s read as rpm is refused after the fit
+        if method == "joint":
+            before = name != "radrpm"
+            assert ("under the torque held before the step-down" in err) == before, err
+            assert ("the fit moved" in err) != before, err
     if name == "degs":
         assert main(["identify", str(path), "--drive", DRIVE_TOML, "--method", "regression",
                      "--speed-unit", "deg/s", "--json"]) == 0
@@ -982,3 +1005,84 @@ def test_swapped_speeds_are_suspected_by_the_two_step_method(steady_csv, capsys)
                                    "--method", "two-step", "--columns",
                                    "w_motor=w_load,w_load=w_motor"])
     assert "no impact on the negative flank found (are w_motor and w_load swapped?" in err
+
+
+def test_common_scale_needs_every_parameter_moved_together():
+    """``common_scale`` is the estimates' common ratio to the prior where each lies
+    within SCALE_TOGETHER of it and it is beyond SCALE_NOTE; a prior's independent
+    errors, or a small common move, give None."""
+    from backlashkit.identify.step import SCALE_NOTE, SCALE_TOGETHER, common_scale
+
+    prior = read_drive_toml(DRIVE_TOML, require_theta=False)
+    names = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh")
+
+    def moved(*ratios):
+        return {n: r * getattr(prior, n) for n, r in zip(names, ratios, strict=True)}
+
+    assert common_scale(moved(0.5, 0.51, 0.49, 0.5, 0.52, 0.5), prior) == pytest.approx(
+        0.50324, rel=1e-4)
+    assert common_scale(moved(*[4.0] * 6), prior) == pytest.approx(4.0)
+    assert common_scale(moved(*[1 / (0.99 * SCALE_NOTE)] * 6), prior) is None
+    # one estimate outside the band about their mean (which it pulls): no common move
+    assert common_scale(moved(0.5, 0.5, 0.5, 0.5, 0.5, 0.5 * SCALE_TOGETHER ** 1.25),
+                        prior) is None
+    assert common_scale(moved(0.4, 0.7, 0.5, 1.3, 0.5, 0.6), prior) is None
+    assert common_scale({"J_M": 0.5 * prior.J_M, "k_sh": 0.5 * prior.k_sh}, prior) is None
+
+
+def test_speeds_twice_too_large_are_named_from_the_common_move(steady_csv, tmp_path, capsys):
+    """Speeds twice the drive's (a motor's electrical speed with two pole pairs) fit
+    exactly with every linear parameter halved and theta doubled: no parameter is
+    far (x3) from the prior, yet the note names the common move and the speeds' scale
+    (the QA pass's record answered with no note at all)."""
+    t, u, w_m, w_l = np.loadtxt(steady_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / "x2.csv"
+    write_csv(path, {"t": t, "torque": u, "w_motor": 2 * w_m, "w_load": 2 * w_l})
+    assert main(["identify", str(path), "--drive", DRIVE_TOML, "--interval", "fisher",
+                 "--json"]) == 0
+    (note,) = [n for n in json.loads(capsys.readouterr().out)["notes"]
+               if "every linear parameter moved" in n]
+    # the common ratio of a 4 s record at 30 dB lies near one half, not on it
+    assert re.search(r"moved by about x0\.(4[5-9]|5[0-5])\d* together, as speeds 2\.?\d* "
+                     "times too large", note), note
+    assert "pole pairs" in note and "--speed-unit" in note, note
+
+
+def test_a_file_of_the_other_measure_names_the_option_that_reads_it(tmp_path, capsys):
+    """A file of encoder angles read as speeds, or of speeds read as angles, names the
+    option that reads what it holds (the QA pass had the generic "map the file's names
+    with --columns"); counts read as rad name --counts-per-rev; a workbook is no CSV."""
+    t = np.arange(200) * 1e-3
+    counts = np.floor(np.linspace(0.0, 4e3, 200))
+    angles = tmp_path / "counts.csv"
+    write_csv(angles, {"t": t, "torque": np.ones(200), "phi_motor": counts,
+                       "phi_load": counts})
+    speeds = tmp_path / "speeds.csv"
+    write_csv(speeds, {"t": t, "torque": np.ones(200), "w_motor": np.ones(200),
+                       "w_load": np.ones(200)})
+    err = _one_line_error(capsys, ["identify", str(angles), "--drive", DRIVE_TOML])
+    assert "no column 'w_motor', 'w_load' but the encoders' angles" in err, err
+    assert "--angles (in rad) or --counts-per-rev N (in counts)" in err, err
+    err = _one_line_error(capsys, ["identify", str(speeds), "--drive", DRIVE_TOML, "--angles"])
+    assert "no column 'phi_motor', 'phi_load' but the speeds" in err, err
+    assert "leave out --angles and --counts-per-rev" in err, err
+    err = _one_line_error(capsys, ["identify", str(angles), "--drive", DRIVE_TOML, "--angles"])
+    assert "hold whole numbers only (a travel of up to 4000)" in err, err
+    assert "encoder counts read as rad? give --counts-per-rev N" in err, err
+    book = tmp_path / "data.xlsx"
+    book.write_bytes(b"PK\x03\x04" + bytes(60))
+    err = _one_line_error(capsys, ["identify", str(book), "--drive", DRIVE_TOML])
+    assert "is a zip archive (an Excel .xlsx workbook?), not CSV text" in err, err
+
+
+def test_speeds_against_the_torque_are_refused_before_the_fit(steady_csv, tmp_path, capsys):
+    """Speeds negated (a sign counted the other way) hold -1 times the prior's held
+    speed: refused before the fit with that cause, where the fit refused them only as a
+    generic misfit (the QA pass: fit -172 %)."""
+    t, u, w_m, w_l = np.loadtxt(steady_csv, delimiter=",", skiprows=1, usecols=(0, 1, 2, 3)).T
+    path = tmp_path / "signflip.csv"
+    write_csv(path, {"t": t, "torque": u, "w_motor": -w_m, "w_load": -w_l})
+    err = _one_line_error(capsys, ["identify", str(path), "--drive", DRIVE_TOML])
+    assert re.search(r"signflip\.csv: under the torque held before the step-down at t = 2 s "
+                     r"the speeds are -1(\.0\d*)? times the prior's: they turn against the "
+                     r"torque; negate the speeds \(or the torque\)", err), err

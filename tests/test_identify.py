@@ -512,7 +512,8 @@ def test_cli_final_records(experiment_csv, tmp_path, capsys):
     assert lo <= doc["theta"] <= hi
     code, out, err = cli(["identify", str(experiment_csv), "--final", str(step2), "--drive",
                           DRIVE_TOML, "--method", "regression"], capsys)
-    assert code == 2 and "--final only applies with --method two-step" in err
+    assert code == 2
+    assert "--final only applies with --method two-step or joint (the default)" in err
 
 
 def test_cli_reader_options_give_the_same_answer(experiment_csv, tmp_path, capsys):

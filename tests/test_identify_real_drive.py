@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 
 import numpy as np
@@ -239,10 +240,11 @@ def test_known_current_loop_is_not_fitted():
 @pytest.mark.parametrize(("kw", "match"), [
     ({"friction": "dry"}, "friction must be one of 'auto', 'viscous', 'coulomb', got 'dry'"),
     ({"actuator": "on"}, "actuator must be 'auto', None or a CurrentLoop, got 'on'"),
-    ({"actuator": 1e-3}, "actuator must be 'auto', None or a CurrentLoop, got float"),
+    ({"actuator": 1e-3}, "actuator must be 'auto', None or a CurrentLoop, got float 0.001 "
+                         "(a loop of that time constant: CurrentLoop(tau_i=0.001))"),
 ])
 def test_bad_terms_refused(coulomb, kw, match):
-    with pytest.raises(InputError, match=match):
+    with pytest.raises(InputError, match=re.escape(match)):
         _fit(coulomb, P_TRUE, **kw)
 
 
@@ -719,6 +721,12 @@ def test_cli_reads_encoder_counts(tmp_path, capsys):
     # the interval is the quantisation's, narrower than white noise's here
     assert out["interval"] == "quantisation"
     assert 0.3 * out["std_fisher"] < out["std"] < out["std_fisher"]
+    # asked for the Fisher interval, which assumes white noise: told it is replaced
+    assert cli_main(["identify", *paths, "--drive", str(prior), "--counts-per-rev",
+                     str(COUNTS), "--interval", "fisher"]) == 0
+    out = capsys.readouterr().out
+    assert "fit % (phi_M, phi_L) = " in out, out
+    assert "not the one asked for (FisherInterval())" in out, out
     assert cli_main(["identify", *paths, "--drive", str(prior), "--json"]) == 2
     assert "no column 'w_motor'" in capsys.readouterr().err
     # the refusal names the flags, not the library's parameters (the QA pass's finding)
@@ -777,6 +785,40 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     assert unconverged.kept and "moves by" not in unconverged.reason()
     assert "stopped before converging" in unconverged.reason()
     assert not TermChoice.decide("friction", 5.0, 9.21, math.nan).kept
+
+
+class _LinearRows:
+    """A residual that is linear in its parameters, ``r = a z - b``, for
+    :func:`backlashkit.identify._score.linearise`."""
+
+    def __init__(self, a, b):
+        self.a, self.b = a, b
+
+    def at(self, z):
+        return self.a @ z - self.b
+
+    def jacobian(self, z, r):
+        return self.a
+
+
+def test_a_term_on_its_floor_leaves_theta_s_move_measured():
+    """A nuisance whose column is zero (a Coulomb torque on its floor, the QA pass's
+    filtered encoder speeds) makes the information singular: every ``std`` is inf,
+    and the tests' shift of theta, measured in it, printed "moves by 0" beside a fall
+    of 588. ``theta_std`` holds that direction instead: theta's standard error in the
+    model without the column, and the same as ``std[0]`` where nothing is singular."""
+    from backlashkit.identify._score import linearise
+
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(50, 3))
+    b = rng.normal(size=50)
+    seen = linearise(_LinearRows(a, b), np.zeros(3))
+    assert seen.theta_std == seen.std[0] == math.sqrt(np.linalg.inv(a.T @ a)[0, 0])
+    floored = linearise(_LinearRows(np.column_stack([a, np.zeros(50)]), b), np.zeros(4))
+    assert floored.cov is None and np.all(np.isinf(floored.std))
+    assert floored.theta_std == pytest.approx(seen.theta_std, rel=1e-12)
+    blind = linearise(_LinearRows(np.column_stack([np.zeros(50), a[:, 1:]]), b), np.zeros(3))
+    assert blind.theta_std == math.inf  # theta itself unseen: no measure
 
 
 def _loop_fitted_and_scored(recs, monkeypatch):

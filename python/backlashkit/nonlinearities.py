@@ -20,6 +20,7 @@ the backlash input ``v``: (2.4)/(2.7), (2.6)/(2.8), (2.5)/(2.8), ``v = u_d`` and
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -464,5 +465,8 @@ def inverse_from_name(name: str, **params: float) -> InverseKind:
     try:
         cls = _BY_NAME[name]
     except KeyError:
-        raise InputError(f"inverse must be one of {sorted(_BY_NAME)}, got {name!r}") from None
+        close = difflib.get_close_matches(str(name), list(_BY_NAME), n=1)
+        meant = f" (did you mean {close[0]!r}?)" if close else ""
+        raise InputError(f"inverse must be one of {sorted(_BY_NAME)}, got {name!r}{meant}"
+                         ) from None
     return cls(**params)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -245,6 +245,11 @@ class DriveChain(_Simulates):
         phi = phi + torques / np.asarray(self.k)
         return np.concatenate([np.full(self.n_inertias, w), phi])
 
+
+#: What a drive's ``repr`` always shows; the friction terms only where not their default.
+_LINEAR_AND_THETA = ("J_M", "J_L", "k_sh", "f_M", "f_L", "f_sh", "theta")
+
+
 @dataclass(frozen=True)
 class TwoMassDrive(_Simulates):
     """Motor and load joined by an elastic shaft with backlash (paper A, eq. 2).
@@ -299,6 +304,12 @@ class TwoMassDrive(_Simulates):
     fc_L: float = 0.0
     fs_M: float | None = None
     fs_L: float | None = None
+
+    def __repr__(self) -> str:
+        # the friction terms only where given: most drives have none of them
+        shown = [f.name for f in fields(self)
+                 if f.name in _LINEAR_AND_THETA or getattr(self, f.name) != f.default]
+        return f"TwoMassDrive({', '.join(f'{n}={getattr(self, n)!r}' for n in shown)})"
 
     def __post_init__(self) -> None:
         for name in ("J_M", "J_L", "k_sh"):

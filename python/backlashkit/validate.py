@@ -107,6 +107,12 @@ def uniform_tolerance(t: np.ndarray, ts: float) -> float:
     return max(UNIFORM_RTOL * ts, resolution)
 
 
+#: Significant digits of times in messages: enough to tell two samples of a long record
+#: apart, few enough to leave out the binary rounding of a difference (0.0015 s, not
+#: 0.0015000000000000013 s).
+TIME_DIGITS = 12
+
+
 def time_grid(
     t: Sequence[float] | np.ndarray, *, name: str = "t", min_samples: int = 2
 ) -> tuple[np.ndarray, float]:
@@ -120,18 +126,19 @@ def time_grid(
     lo, hi = dt.min(), dt.max()
     if lo > 0 and hi - ts <= tol and ts - lo <= tol:
         return arr, float(ts)
+    var = name.rsplit(": ", 1)[-1]  # "exp.csv: t" names its samples t[i]
     if not (dt > 0).all():
         i = int(np.argmax(~(dt > 0)))
         raise InputError(
-            f"{name} must be strictly increasing; {name}[{i + 1}] = {float(arr[i + 1])!r} "
-            f"follows {name}[{i}] = {float(arr[i])!r}"
+            f"{name} must be strictly increasing; {var}[{i + 1}] = {arr[i + 1]:.{TIME_DIGITS}g} "
+            f"follows {var}[{i}] = {arr[i]:.{TIME_DIGITS}g}"
         )
     dev = np.abs(dt - ts)
     if dev.max() > tol:
         i = int(np.argmax(dev))
         raise InputError(
-            f"{name} must be uniformly sampled; step {i} is {float(dt[i])!r} s but the mean "
-            f"step is {float(ts)!r} s; resample the data onto a uniform grid first"
+            f"{name} must be uniformly sampled; step {i} is {dt[i]:.{TIME_DIGITS}g} s but the "
+            f"mean step is {ts:.{TIME_DIGITS}g} s; resample the data onto a uniform grid first"
         )
     return arr, float(ts)
 

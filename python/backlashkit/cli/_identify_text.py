@@ -128,5 +128,6 @@ def print_result(args: argparse.Namespace, est: Any, out: dict[str, Any], notes:
         # speeds recognised as an encoder's differenced counts are fitted as its angles
         counts = "; its speeds are differenced encoder counts" if (
             angles and not rec.has_positions) else ""
-        print(f"{rec.name[-30:]:<30} fit % (w_M, w_L) = ({a:.1f}, {b:.1f}); noise std = "
+        channels = "phi_M, phi_L" if angles else "w_M, w_L"
+        print(f"{rec.name[-30:]:<30} fit % ({channels}) = ({a:.1f}, {b:.1f}); noise std = "
               f"({sm:.3g}, {sl:.3g}) {unit}{counts}")

@@ -295,7 +295,7 @@ FLAGS = {
     "allow_far_from_prior": "--allow-far-from-prior",
     "method": "--method", "torque_levels": "--torque-levels", "noise_model": _noise_model_flag,
     "force": "--force", "friction": "--friction", "actuator": "--current-loop",
-    "speed_unit": "--speed-unit", "counts_per_rev": "--counts-per-rev",
+    "speed_unit": "--speed-unit", "counts_per_rev": "--counts-per-rev", "angles": "--angles",
 }
 
 #: Warnings of the library that ``identify`` says as notes (printed after theta, and
@@ -369,7 +369,7 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.jobs is not None and args.bootstrap is None:
         raise InputError("--jobs only applies with --bootstrap (the processes of its refits)")
     if args.final and args.method == "regression":
-        raise InputError("--final only applies with --method two-step")
+        raise InputError("--final only applies with --method two-step or joint (the default)")
     if args.bootstrap is not None and args.interval is not None:
         raise InputError("give --interval or --bootstrap, not both")
     if args.noise_order is not None and args.noise == "white":

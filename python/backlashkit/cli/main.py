@@ -17,6 +17,7 @@ import argparse
 import difflib
 import importlib
 import os
+import re
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -49,7 +50,7 @@ class _Parser(argparse.ArgumentParser):
         return parsed, extra
 
     def error(self, message: str):  # one line, status 2, as argparse does, without usage spam
-        self.exit(2, f"backlashkit: error: {message}{self._meant()} "
+        self.exit(2, f"backlashkit: error: {message}{_meant_choice(message)}{self._meant()} "
                      f"(see '{self.prog} --help')\n")
 
     def _meant(self) -> str:
@@ -66,6 +67,21 @@ class _Parser(argparse.ArgumentParser):
             if close:
                 hints.append(f"{flag}: did you mean {close[0]}?")
         return "".join(f"; {h}" for h in hints)
+
+
+#: argparse's words for a value outside an argument's choices (a subcommand's too).
+_INVALID_CHOICE = re.compile(r"invalid choice: '([^']*)' \(choose from (.*)\)")
+
+
+def _meant_choice(message: str) -> str:
+    """``; did you mean 'identify'?`` where ``message`` is argparse's refusal of a
+    value close to one of its choices."""
+    found = _INVALID_CHOICE.search(message)
+    if found is None:
+        return ""
+    choices = re.findall(r"'([^']*)'", found.group(2))
+    close = difflib.get_close_matches(found.group(1), choices, n=1)
+    return f"; did you mean '{close[0]}'?" if close else ""
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -46,9 +46,38 @@ MAP_COLUMNS = Option("columns", ("t", "w_motor"), python="columns={...}")
 # (name of the record, raw channels (t may be absent), label of sample i, time precision)
 _Raw = tuple[str, dict[str, np.ndarray], Callable[[int], str], float]
 
+#: The speeds' and the encoders' angles' columns, by our names.
+_SPEEDS, _ANGLES = ("w_motor", "w_load"), ("phi_motor", "phi_load")
+#: Leading bytes of files that are no text, with what they likely are.
+_BINARY_HEADS = ((b"PK\x03\x04", "a zip archive (an Excel .xlsx workbook?)"),
+                 (b"\xd0\xcf\x11\xe0", "an Excel .xls workbook"))
+
+
+def _refuse_other_measure(name: str, header: list[str], header_no: int, need: list[str],
+                          missing: list[str]) -> None:
+    """Refuse a file that lacks the speeds but holds the encoders' angles (or the
+    reverse), with the option that reads what it holds; ``need`` and ``missing`` (the
+    channels without a column) by our names."""
+    if set(_SPEEDS) <= set(need) and set(_SPEEDS) & set(missing) and set(_ANGLES) <= set(header):
+        raise InputError(
+            f"{name}: no column 'w_motor', 'w_load' but the encoders' angles 'phi_motor', "
+            f"'phi_load' (line {header_no}): read them with ", Option("angles", True),
+            " (in rad) or ", Option("counts_per_rev", None), " N (in counts)")
+    if set(_ANGLES) <= set(need) and set(_ANGLES) & set(missing) and set(_SPEEDS) <= set(header):
+        raise InputError(
+            f"{name}: no column 'phi_motor', 'phi_load' but the speeds 'w_motor', "
+            f"'w_load' (line {header_no}): leave out ", Option("angles", None), " and ",
+            Option("counts_per_rev", None), " to read the speeds")
+
+
 def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, decimal) -> _Raw:
     with open(name, "rb") as fh:
-        head = fh.read(2)
+        head = fh.read(4)
+    for magic, what in _BINARY_HEADS:
+        if head.startswith(magic):
+            raise InputError(f"{name}: is {what}, not CSV text; export the sheet as CSV "
+                             "(or save the data as .mat or .npz)")
+    head = head[:2]
     # Excel's "Unicode text" export is UTF-16 with a byte-order mark
     encoding = "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
     if encoding != "utf-16" and b"\x00" in head:
@@ -107,6 +136,8 @@ def _from_csv(name: str, mapping: dict[str, str], need: list[str], delimiter, de
             f"{sep[others[0]]} in it: the columns are separated by {sep[others[0]]}, not "
             f"{sep[delimiter]}; pass ", Option("delimiter", others[0])
         )
+    _refuse_other_measure(name, header, header_no, need,
+                          [f for f in need if mapping[f] not in header])
     if missing:
         sep = {"\t": "tab", ",": "','", ";": "';'"}[delimiter]
         raise InputError(

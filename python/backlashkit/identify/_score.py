@@ -51,12 +51,18 @@ class Linearised:
         The inverse of ``jac.T @ jac``; None where it is singular.
     std : numpy.ndarray
         The standard errors of the estimated values (inf where singular).
+    theta_std : float
+        The standard error of ``log theta`` with the directions the data do not see
+        held (the pseudo-inverse's, as the fit's own uncertainty takes it): finite
+        where a nuisance term sits on its floor and its column is zero, which makes
+        ``std`` inf. What a term's test measures ``theta``'s move in.
     """
 
     r: np.ndarray
     jac: np.ndarray
     cov: np.ndarray | None
     std: np.ndarray
+    theta_std: float
 
 
 def linearise(rows: Residual, z: np.ndarray) -> Linearised:
@@ -65,12 +71,21 @@ def linearise(rows: Residual, z: np.ndarray) -> Linearised:
     (:meth:`Residual.jacobian`)."""
     r = rows.at(z)
     jac = rows.jacobian(z, r)
+    info = jac.T @ jac
     try:
-        cov = np.linalg.inv(jac.T @ jac)
+        cov = np.linalg.inv(info)
     except np.linalg.LinAlgError:
-        return Linearised(r, jac, None, np.full(z.size, math.inf))
-    return Linearised(r, jac, cov,
-                      np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf))
+        return Linearised(r, jac, None, np.full(z.size, math.inf), _held_theta_std(info))
+    std = np.where(np.diag(cov) > 0, np.sqrt(np.abs(np.diag(cov))), math.inf)
+    return Linearised(r, jac, cov, std,
+                      float(std[0]) if math.isfinite(std[0]) else _held_theta_std(info))
+
+
+def _held_theta_std(info: np.ndarray) -> float:
+    """:attr:`Linearised.theta_std` from a singular information ``info``; inf where
+    ``theta`` itself is not seen."""
+    var = float(np.linalg.pinv(info)[0, 0])
+    return math.sqrt(var) if var > 0 else math.inf
 
 
 @dataclass(frozen=True)

@@ -575,9 +575,9 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             res = other.residual(other.final_spans(final_h), final_h, sig)
             st = other.refine(res, best.z[keep], max_iter)
             (small, st_small), st_big = (other, st), best
-            std_small = linearised(seen, small, st_small, sig, final_h).std
-            if not st.done:  # stopped far from its optimum: its theta says nothing
-                std_small = np.r_[math.nan, std_small[1:]]
+            # stopped far from its optimum, its theta says nothing: no shift
+            theta_std = (linearised(seen, small, st_small, sig, final_h).theta_std
+                         if st.done else math.nan)
         else:
             other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
             res = other.residual(other.final_spans(final_h), final_h, sig)
@@ -589,14 +589,14 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
                 continue
             st = added_term_fit(other, res, best.z, best.cost, term, recs, max_iter)
             (small, st_small), st_big = (pb, best), st
-            std_small = score.std
+            theta_std = linearised(seen, pb, best, sig, final_h).theta_std
         rise = st_small.cost - st_big.cost
         big = pb if term.searched else other
         std_big = linearised(seen, big, st_big, sig, final_h).std
         choice = TermChoice.decide(
-            term.name, rise, term.threshold, abs(st_big.z[0] - st_small.z[0]) / std_small[0],
+            term.name, rise, term.threshold, abs(st_big.z[0] - st_small.z[0]) / theta_std,
             determined(big, st_big.z, std_big, [big.names.index(n) for n in term.params]),
-            (fisher_ci95(st_big.z, std_big), fisher_ci95(st_small.z, std_small)))
+            (fisher_ci95(st_big.z, std_big), fisher_ci95(st_small.z, np.r_[theta_std])))
         choices.append(choice)
         if choice.kept != term.searched:  # the other model wins
             pb, best = other, st

@@ -134,7 +134,7 @@ from ._model import (
     rel_std,
 )
 from ._problem import Problem, build_problem
-from .hyper import _learned_attribute, init_repr
+from .hyper import _learned_attribute, get_params, init_repr, set_params
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -149,7 +149,13 @@ from .noise import (
 )
 from .record import as_records, check_prior
 from .search import JointSearch
-from .step import check_fit_near_prior, check_step_downs, held_speed_gain, too_far
+from .step import (
+    check_fit_near_prior,
+    check_held_units,
+    check_step_downs,
+    held_speed_gain,
+    too_far,
+)
 from .terms import (
     KEEP_LEVEL,
     PRIOR_PARAMS,
@@ -251,6 +257,8 @@ class JointIdentifier:
     method = "joint"
 
     __getattr__ = _learned_attribute
+    get_params = get_params
+    set_params = set_params
 
     def __init__(
         self,
@@ -340,6 +348,7 @@ class JointIdentifier:
         prior = self.prior.with_theta(None)
         records = as_records(records, prior=prior)
         check_step_downs(records, prior)
+        check_held_units(records, prior, allow_far_from_prior=self.allow_far_from_prior)
         quanta = [(0.0, 0.0) if r.has_positions  # fitted as the angles they hold
                   else r.speed_quanta for r in records]
         records = [encoder_angles(r, quanta=q) for r, q in zip(records, quanta, strict=True)]
@@ -365,6 +374,12 @@ class JointIdentifier:
             warnings.warn(CorrelatedResidualsWarning(*parts), stacklevel=2)
         self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
         _warn_quantised(records, quanta)
+        if self.interval != _PROFILE and self.interval_ == "quantisation":
+            warnings.warn(QuantisedSpeedsWarning(
+                "the records are encoder angles: the 95 % interval is the spread of theta "
+                "over the encoders' offsets within a count, not the one asked for "
+                f"({self.interval!r}), which assumes a white noise that quantisation is "
+                "not"), stacklevel=2)
         if self.noise is not None:
             _warn_noise_given(self.noise, self.residuals_, records)
         return self
@@ -397,7 +412,8 @@ class JointIdentifier:
             linear, self.prior, allow_far_from_prior=self.allow_far_from_prior,
             stacklevel=3,
             held_gains=[held_speed_gain(r, prior) for r in records],
-            missing=self._missing_terms(), names=[r.name for r in records])
+            missing=self._missing_terms(), names=[r.name for r in records],
+            angles=any(r.has_positions for r in records))
 
     def _refuse_far(self, records, prior, linear: dict[str, float]) -> None:
         """Refuse the search's point now where :meth:`_far_from_prior` would refuse its

@@ -20,7 +20,7 @@ from functools import cached_property
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError
+from ..errors import InputError, Option
 from ..plants import TwoMassDrive
 from .clipping import check_not_clipped
 from .quantum import speed_quantum
@@ -144,6 +144,12 @@ class Record:
         quantum = 0.0
         phi = [v.finite_array(f"{name}: {c}", x)
                for c, x in (("phi_motor", phi_motor), ("phi_load", phi_load))]
+        if counts_per_rev is None and all(_counts_like(x) for x in phi):
+            raise InputError(
+                f"{name}: phi_motor and phi_load hold whole numbers only (a travel of up "
+                f"to {max(float(np.ptp(x)) for x in phi):.6g}): encoder counts read as "
+                "rad? give ", Option("counts_per_rev", None), " N (the encoders' counts per "
+                "revolution)")
         if counts_per_rev is not None:
             cpr = v.positive("counts_per_rev", counts_per_rev)
             quantum = 2 * math.pi / cpr
@@ -176,6 +182,16 @@ class Record:
         phi = [np.r_[0.0, np.cumsum(w[1:]) * ts] for w in (self.w_motor, self.w_load)]
         return Record(self.t, self.torque, self.w_motor, self.w_load, self.name,
                       phi[0], phi[1], quantum)
+
+
+#: Angles in rad that are whole numbers over at least this travel (16 turns) are
+#: counts: an angle in rad is a whole number by chance alone at most at a few samples.
+COUNTS_LIKE_TRAVEL = 100.0
+
+
+def _counts_like(phi: np.ndarray) -> bool:
+    """Whether angles look like encoder counts read as rad (:data:`COUNTS_LIKE_TRAVEL`)."""
+    return bool(np.ptp(phi) >= COUNTS_LIKE_TRAVEL and np.all(phi == np.round(phi)))
 
 
 def _as_record(rec: Record | Sequence[ArrayLike], i: int) -> Record:
@@ -353,6 +369,10 @@ def as_records(records, what: str = "records", *, prior=None) -> list[Record]:
             f"{what} must be a Record or a sequence of Records, got "
             f"{type(records).__name__}{hint}"
         )
+    if isinstance(records, np.ndarray):
+        raise InputError(
+            f"{what} must be a Record or a sequence of Records, got a {records.shape} "
+            "array: for columns t, torque, w_motor, w_load give Record(*array.T)")
     if isinstance(records, Record) or (
         isinstance(records, tuple)
         and len(records) == 4

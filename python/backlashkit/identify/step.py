@@ -30,8 +30,10 @@ __all__ = [
     "check_fit_near_prior",
     "check_held_speeds",
     "check_held_steady",
+    "check_held_units",
     "check_step_down",
     "check_step_downs",
+    "common_scale",
     "find_step_down",
     "held_speed_gain",
     "held_unsteady_share",
@@ -66,6 +68,20 @@ SEPARATE_DROP = 0.1
 #: What to check when the data sit far from the prior.
 CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
                "columns (w_motor and w_load swapped?) and the prior")
+
+#: Every estimated linear parameter within this factor of their common ratio to the
+#: prior counts as one move of them all (:func:`common_scale`). The model's equations
+#: are homogeneous: speeds (or angles) ``c`` times too large are fitted exactly by
+#: inertias, frictions and stiffness ``1 / c`` times the drive's and ``theta`` ``c``
+#: times, and a torque ``c`` times too large by all six ``c`` times; a prior's own
+#: errors, independent from parameter to parameter, rarely line up this closely.
+SCALE_TOGETHER = 1.15
+#: A common ratio this far off 1 (either way) is said (:func:`common_scale`): half the
+#: "far" factor of :data:`FAR_FROM_PRIOR`, so that speeds twice too large (a motor's
+#: electrical speed with two pole pairs) are said where no parameter alone is far.
+SCALE_NOTE = 1.5
+#: The fewest estimated linear parameters a common ratio is judged on.
+SCALE_MIN_PARAMS = 4
 
 #: The remedy for speeds logged in rpm (a reader's option; the command line's flag).
 SPEED_IN_RPM = Option("speed_unit", "rpm", python="speed_unit='rpm' to read_records")
@@ -455,6 +471,60 @@ def check_held_speeds(records: Sequence[Record], prior: TwoMassDrive, *,
     return gains
 
 
+#: :func:`check_held_units` names a unit mistake of held speeds below the prior's only
+#: beneath this share: Coulomb friction slows a held drive to ``1 - fc / torque`` of
+#: the viscous prior's speed, so rad/s read as rpm (x0.105) may be a torque 10 % above
+#: the friction, and is left to the fit; a torque in mN m (x0.001) would be one within
+#: 0.1 % of it.
+FRICTION_SLOWS = 0.01
+
+
+def check_held_units(records: Sequence[Record], prior: TwoMassDrive, *,
+                     allow_far_from_prior: bool = False) -> None:
+    """Refuse, before any fit, a record whose held speeds name a unit mistake.
+
+    Where a record's :func:`held_speed_gain` is beyond :data:`REFUSE_FROM_PRIOR` and
+    matches one of :data:`UNIT_MISTAKES` (below 1, only beneath
+    :data:`FRICTION_SLOWS`), the joint fit would end far from the prior
+    (refused) or explain nothing (refused with a misfit), in either case after a fit
+    of up to a minute; a gain that far off that names no mistake is left to the fit,
+    which estimates the frictions it depends on. A gain below ``-1 /``
+    :data:`FAR_FROM_PRIOR` is speeds turning against the held torque: their sign is
+    counted the other way (a drive held stuck by friction reads a gain near 0, of
+    either sign).
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The experiments.
+    prior : TwoMassDrive
+        The prior drive.
+    allow_far_from_prior : bool, optional
+        Refuse nothing (default False).
+
+    Raises
+    ------
+    InputError
+        If such a record, or one whose speeds turn against the torque, is found and
+        ``allow_far_from_prior`` is False; the message names the record, the mistake
+        and its remedy.
+    """
+    if allow_far_from_prior:
+        return
+    for rec in records:
+        gain = held_speed_gain(rec, prior)
+        what = (f"{rec.name}: under the torque held before the step-down at t = "
+                f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
+        if gain < -1.0 / FAR_FROM_PRIOR:
+            raise InputError(f"{what}: they turn against the torque; negate the speeds (or "
+                             "the torque) where their signs are counted the other way")
+        slow = gain < FRICTION_SLOWS  # else friction may hold it back that far
+        if is_far(gain, REFUSE_FROM_PRIOR) and unit_mistake(gain) is not None and (
+                gain > 1.0 or slow):
+            raise InputError(f"{what}: ", *_units_advice(gain),
+                             "; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
+
+
 def check_held_steady(records: Sequence[Record], prior: TwoMassDrive) -> None:
     """Refuse a record whose drive is still speeding up at its step-down.
 
@@ -528,18 +598,67 @@ def too_far(params: Mapping[str, float], prior: TwoMassDrive) -> dict[str, float
     return {n: x for n, x in params.items() if is_far(x / getattr(prior, n), REFUSE_FROM_PRIOR)}
 
 
+def common_scale(params: Mapping[str, float], prior: TwoMassDrive) -> float | None:
+    """The factor by which the fitted linear parameters all moved from the prior, where
+    they moved together by more than :data:`SCALE_NOTE`; else None.
+
+    Each of at least :data:`SCALE_MIN_PARAMS` parameters lies within
+    :data:`SCALE_TOGETHER` of the ratios' geometric mean: the signature of speeds or
+    a torque in another scale (:data:`SCALE_TOGETHER` says why).
+
+    Parameters
+    ----------
+    params : mapping of str to float
+        The estimated linear parameters by name (``J_M``, ``k_sh``, ...).
+    prior : TwoMassDrive
+        The prior drive.
+
+    Returns
+    -------
+    float or None
+        The geometric mean of the estimates over the prior's values, or None.
+    """
+    logs = [math.log(x / getattr(prior, n)) for n, x in params.items()
+            if x > 0 and getattr(prior, n) > 0]
+    if len(logs) < max(SCALE_MIN_PARAMS, len(params)):
+        return None
+    mean = sum(logs) / len(logs)
+    if abs(mean) <= math.log(SCALE_NOTE):
+        return None
+    if max(abs(x - mean) for x in logs) > math.log(SCALE_TOGETHER):
+        return None
+    return math.exp(mean)
+
+
+def _scale_cause(scale: float, angles: bool) -> tuple[str | Option, ...]:
+    """What a common move of every linear parameter by ``scale`` points to."""
+    measured = "angles" if angles else "speeds"
+    where = (("the encoders' counts per revolution (a quadrature encoder counts 4 per "
+              "line: ", Option("counts_per_rev", None), ")") if angles else
+             ("a motor's electrical speed (divide by its pole pairs), a gear ratio, the "
+              "speed unit (", Option("speed_unit", None), ")"))
+    return (f"every linear parameter moved by about x{scale:.3g} together, as {measured} "
+            f"{1.0 / scale:.3g} times too large would move them (theta would then be "
+            f"{1.0 / scale:.3g} times too large too), or a torque {scale:.3g} times too "
+            "large; check ", *where, " and the torque's unit; else the prior is off by "
+            "that factor")
+
+
 def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
                          allow_far_from_prior: bool = False, stacklevel: int = 2,
                          held_gains: Sequence[float] = (),
                          missing: Sequence[str | Option] = (),
-                         names: Sequence[str] = ()) -> list[str]:
+                         names: Sequence[str] = (), angles: bool = False) -> list[str]:
     """Refuse or warn about fitted linear parameters far from the prior.
 
     The message names the likely cause. Where the speeds held before the step-downs
     match the prior's (``held_gains`` within :data:`FAR_FROM_PRIOR` of 1), the units
     and columns are right, so the model lacks what the drive has (``missing``: the
     terms the caller left out) or the prior is wrong; otherwise a unit or column
-    mistake is likelier.
+    mistake is likelier. Where every parameter moved by one factor
+    (:func:`common_scale`), the speeds' or the torque's scale is named, and said
+    even where no parameter alone is far, unless the held speeds name a unit mistake
+    of their own.
 
     Parameters
     ----------
@@ -559,6 +678,9 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     names : sequence of str, optional
         The records' names, in the order of ``held_gains``: the message names those
         whose held speeds are far from the prior's.
+    angles : bool, optional
+        Whether the records hold encoder angles (the advice then names their counts
+        per revolution); default False.
 
     Returns
     -------
@@ -578,16 +700,20 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     """
     ratio = {n: x / getattr(prior, n) for n, x in params.items()}
     very_far = too_far(params, prior)
-    cause = _far_fit_cause(held_gains, missing, names)
+    scale = common_scale(params, prior)
+    named = any(unit_mistake(g) is not None and is_far(g) for g in held_gains)
+    cause = (_scale_cause(scale, angles) if scale is not None and not named
+             else _far_fit_cause(held_gains, missing, names))
     if very_far and not allow_far_from_prior:
         raise InputError(
             f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: ", *cause,
             "; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
     far = [n for n in params if is_far(ratio[n])]
-    if far:
+    if far or (scale is not None and not named):
+        moved = {n: params[n] for n in (far or params)}
         warnings.warn(PriorMismatchWarning(
-            f"the fit moved {ratios_to_prior({n: params[n] for n in far}, prior)} from the "
-            "prior: ", *cause), stacklevel=stacklevel + 1)
+            f"the fit moved {ratios_to_prior(moved, prior)} from the prior: ", *cause),
+            stacklevel=stacklevel + 1)
     return far
 
 
@@ -641,8 +767,9 @@ def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option],
     if any(is_far(g) for g in known):
         return (CHECK_UNITS,)
     spread = max(max(g, 1.0 / g) for g in known)
-    said = (f"the speeds held before the step-downs match the prior's to within x"
-            f"{spread:.2g}, so the units are likely right: check the columns (w_motor and "
+    plural = "s" if len(known) > 1 else ""
+    said = (f"the speeds held before the step-down{plural} match the prior's to within x"
+            f"{spread:.3g}, so the units are likely right: check the columns (w_motor and "
             "w_load swapped?); else ")
     if missing:
         return (said, "the model likely lacks what the drive has, or fixes it wrongly (try ",

@@ -517,8 +517,11 @@ def actuator_term(actuator, prior_std: float | None = None) -> Term:
     if actuator is None:
         return Term("actuator", ("tau_i",), "off")
     if not isinstance(actuator, CurrentLoop):
+        hint = (f" (a loop of that time constant: CurrentLoop(tau_i={actuator!r}))"
+                if isinstance(actuator, (int, float)) and not isinstance(actuator, bool)
+                else "")
         raise InputError("actuator must be 'auto', None or a CurrentLoop, got "
-                         f"{type(actuator).__name__}")
+                         f"{type(actuator).__name__} {actuator!r}{hint}")
     if actuator.exact:
         return Term("actuator", ("tau_i",), "off")
     mode = "prior" if prior_std else "fixed"

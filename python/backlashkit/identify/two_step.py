@@ -123,7 +123,7 @@ from .decay import (
     search_edges,
     viscous_fit,
 )
-from .hyper import _learned_attribute, init_repr
+from .hyper import _learned_attribute, get_params, init_repr, set_params
 from .record import as_records, check_prior, check_sampling
 from .step import check_held_speeds, check_held_steady, check_step_downs, find_step_down
 
@@ -295,6 +295,8 @@ class TwoStepIdentifier:
     method = "two-step"
 
     __getattr__ = _learned_attribute
+    get_params = get_params
+    set_params = set_params
 
     def __init__(
         self,
@@ -535,6 +537,8 @@ class RegressionIdentifier:
     method = "regression"
 
     __getattr__ = _learned_attribute
+    get_params = get_params
+    set_params = set_params
 
     def __init__(
         self,
