@@ -473,3 +473,28 @@ def test_plot_formats_are_the_same_for_simulate_and_control(tmp_path, capsys):
         assert err.count("\n") == 1
         assert "f.gif: the file name must end in .png, .svg, .pdf or .jpg" in err
     assert not (tmp_path / "f.gif").exists()
+
+
+def test_the_plot_shows_the_speeds_as_written(tmp_path, monkeypatch):
+    """With noise (or an encoder) the CSV holds speeds that differ from the simulated
+    ones: the plot draws both, the simulated ones labelled noise-free (a QA pass found
+    only the clean curves beside a noisy file); without, the simulated speeds alone."""
+    import matplotlib.figure
+
+    saved = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda fig, *args, **kw: saved.append(fig))
+    step = ["simulate", DRIVE, "--experiment", "step", "--amplitude", "0.1", "--duration",
+            "0.5", "--plot", str(tmp_path / "p.png")]
+    assert main([*step, "--out", str(tmp_path / "clean.csv")]) == 0
+    assert main([*step, "--out", str(tmp_path / "noisy.csv"), "--snr-motor", "30",
+                 "--snr-load", "30", "--seed", "1", "--force"]) == 0
+    assert main([*step, "--out", str(tmp_path / "enc.csv"), "--encoder", "1000",
+                 "--force"]) == 0
+    labels = [[ln.get_label() for ln in fig.axes[0].get_lines()] for fig in saved]
+    assert labels[0] == ["motor", "load"]
+    noisy = np.loadtxt(tmp_path / "noisy.csv", delimiter=",", skiprows=1)
+    for lines in labels[1:]:
+        assert lines == ["motor (noise-free)", "motor as measured", "load (noise-free)",
+                         "load as measured"]
+    np.testing.assert_array_equal(saved[1].axes[0].get_lines()[1].get_ydata(), noisy[:, 2])

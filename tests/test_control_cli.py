@@ -49,6 +49,8 @@ def test_control_json_trace_plot(tmp_path, capsys):
         (("frequency = [1.3]  # rad/s", "frequency = [1.3, 2.0]"), "same length"),
         (("c_l = -0.5", "c_l = 0.5"), "[backlash] c_l must be <= 0"),
         (("ts = 0.01", "tss = 0.01"), "unknown key"),
+        (("gamma = 5.0", "gama = 5.0"), "[adaptation] has unknown key(s) gama (did you mean "
+                                        "gamma?)"),
         (('kind = "exact"', 'kind = "magic"'), "[inverse] kind must be one of"),
         (("[plant]", "[plant\n"), "not valid TOML"),
         (("theta_b0 = [1.51, 0.2, -0.55]", "theta_b0 = [1.51, 0.2, -0.55, 1.0]"),
@@ -87,3 +89,41 @@ def test_reproduce_runner(tmp_path, capsys):
     capsys.readouterr()
     assert main(["reproduce", "tao1995", "--json-out", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def test_a_reference_file_is_refused_where_it_cannot_drive_the_run(tmp_path, capsys):
+    """A reference file shorter than the run (held at its last value, the error then
+    measured against a constant), one of three columns, or one separated by ';' (read
+    as one column) is refused, naming the file (a QA pass found all three answered or
+    refused in general words)."""
+    text = EXAMPLE.read_text()
+    start = text.index("[reference]")
+    end = text.index("\n[", start + 1)
+    scenario = text[:start] + '[reference]\nfile = "ref.csv"\n' + text[end:]
+    bad = tmp_path / "bad.toml"
+    bad.write_text(scenario)
+    t = np.linspace(0.0, 10.0, 101)
+    rows = "".join(f"{a:.17g},{b:.17g}\n" for a, b in zip(t, np.sin(t), strict=True))
+    cases = (("t,r\n" + rows,
+              "[reference] file: the reference table ends at t = 10 s, before the run's end "
+              "at duration = 60 s"),
+             ("t,r,x\n0,0,0\n60,1,0\n", "has 3 columns; give two, t and r"),
+             ("t;r\n0;0\n60;1\n", "its first line holds ';': the columns are separated by "
+                                  "',' here"))
+    for body, needle in cases:
+        (tmp_path / "ref.csv").write_text(body)
+        assert main(["control", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("backlashkit: error:"), err
+        assert needle in err, err
+
+
+def test_a_run_refused_by_the_library_names_the_scenario_and_its_keys(tmp_path, capsys):
+    """What the library refuses at run time names the scenario file and the tables'
+    keys to change (a QA pass: "give step <= ...", no file, no table)."""
+    bad = tmp_path / "fast.toml"
+    bad.write_text(EXAMPLE.read_text().replace("alpha = 6.0", "alpha = 5000.0", 1))
+    assert main(["control", str(bad), "--inverse", "smooth-filter"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("backlashkit: error: fast.toml: SmoothFilterInverse(alpha=5000.0)"), err
+    assert "give [simulation] step <= 0.000557 s or a smaller [inverse] alpha" in err, err

@@ -1,5 +1,7 @@
 """Closed loop of paper B (Section IV, Figs. 5-6) and beyond."""
 
+import re
+
 import control  # a test dependency: paper B's checks fail, not skip, without it
 import numpy as np
 import pytest
@@ -9,6 +11,7 @@ from backlashkit import (
     Backlash,
     ExactInverse,
     GainOnlyInverse,
+    InputError,
     NoInverse,
     SmoothFilterInverse,
     SmoothRampInverse,
@@ -211,6 +214,11 @@ def test_table_reference_and_plot():
 
     ax = Figure().add_subplot()
     assert r.plot(ax=ax) is ax.figure
+    # a table shorter than the run would be held at its last value: refused (a QA pass)
+    with pytest.raises(InputError, match=re.escape(
+            "the reference table ends at t = 40 s, before the run's end at duration = 60 s "
+            "(it would hold its last value there)")):
+        simulate_closed_loop(PLANT, TRUE_B, reference=ref, duration=60, adaptation=LAW)
 
 
 def test_bad_arguments():

@@ -74,6 +74,12 @@ def test_reproduce_json_is_stdout_and_json_out_a_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"--json-out {target} already exists; pass --force" in err
     assert main(["reproduce", "tao1995", "--json-out", "/dev/null"]) == 0  # no user's file
+    capsys.readouterr()
+    # a directory is refused before the study runs (the QA pass: after it)
+    assert main(["reproduce", "tao1995", "--json-out", str(tmp_path)]) == 2
+    out, err = capsys.readouterr()
+    assert f"--json-out {tmp_path} is a directory; give a file name in it" in err
+    assert "MET" not in out + err
 
 
 def _interval_inputs():

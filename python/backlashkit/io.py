@@ -56,6 +56,7 @@ else:  # pragma: no cover - Python 3.10
 
 __all__ = [
     "DRIVE_KEYS",
+    "did_you_mean",
     "load_toml",
     "read_actuator_toml",
     "read_drive_toml",
@@ -92,9 +93,24 @@ def _fmt_keys(keys: Sequence[str]) -> str:
     return ", ".join(keys)
 
 
-def _did_you_mean(unknown: Sequence[str], allowed: Sequence[str], *,
-                  brackets: bool = False) -> str:
-    """`` (did you mean k_sh?)`` for the unknown keys that look like an allowed one."""
+def did_you_mean(unknown: Sequence[str], allowed: Sequence[str], *,
+                 brackets: bool = False) -> str:
+    """`` (did you mean k_sh?)`` for the unknown keys that look like an allowed one.
+
+    Parameters
+    ----------
+    unknown : sequence of str
+        The keys given that are not allowed.
+    allowed : sequence of str
+        The keys allowed (matched without regard to case).
+    brackets : bool, optional
+        Say the guesses as tables, ``[drive]`` (default False).
+
+    Returns
+    -------
+    str
+        The suggestion, with a leading space; empty where none is close.
+    """
     import difflib
 
     by_lower = {a.lower(): a for a in allowed}
@@ -153,7 +169,7 @@ def _check_top_level(doc: Mapping[str, Any], path: PathLike) -> None:
             header = " (the drive's parameters belong under a [drive] line)"
         raise InputError(
             f"{path}: unknown top-level key(s) {_fmt_keys(unknown)}"
-            f"{'' if header else _did_you_mean(unknown, TOP_LEVEL_TABLES, brackets=True)}; "
+            f"{'' if header else did_you_mean(unknown, TOP_LEVEL_TABLES, brackets=True)}; "
             f"allowed tables: [{'], ['.join(TOP_LEVEL_TABLES)}]{header}"
         )
 
@@ -220,7 +236,7 @@ def read_drive_toml(path: PathLike, *, require_theta: bool = True) -> TwoMassDri
     if unknown:
         raise InputError(
             f"{path}: unknown key(s) {_fmt_keys(unknown)} in [drive]"
-            f"{_did_you_mean(unknown, DRIVE_KEYS + FRICTION_KEYS)}; allowed keys: "
+            f"{did_you_mean(unknown, DRIVE_KEYS + FRICTION_KEYS)}; allowed keys: "
             f"{_fmt_keys(DRIVE_KEYS + FRICTION_KEYS)}"
         )
     required = DRIVE_KEYS if require_theta else DRIVE_KEYS[:-1]
@@ -278,7 +294,7 @@ def read_actuator_toml(path: PathLike) -> CurrentLoop | None:
         raise InputError(
             f"{path}: [actuator] takes exactly the key(s) {_fmt_keys(ACTUATOR_KEYS)} "
             f"(tau_i: current-loop time constant in s); got {_fmt_keys(list(table))}"
-            f"{_did_you_mean(unknown, ACTUATOR_KEYS)}"
+            f"{did_you_mean(unknown, ACTUATOR_KEYS)}"
         )
     tau_i = _number(path, "actuator", "tau_i", table["tau_i"])
     try:
@@ -337,7 +353,7 @@ def read_uncertainty_toml(path: PathLike) -> dict[str, float]:
     if unknown:
         raise InputError(
             f"{path}: unknown key(s) {_fmt_keys(unknown)} in [uncertainty]"
-            f"{_did_you_mean(unknown, allowed)}; allowed keys: {_fmt_keys(allowed)}"
+            f"{did_you_mean(unknown, allowed)}; allowed keys: {_fmt_keys(allowed)}"
         )
     out = {}
     for key, value in table.items():

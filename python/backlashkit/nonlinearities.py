@@ -40,6 +40,7 @@ __all__ = [
     "SmoothRampInverse",
     "backlash_inverse",
     "inverse_from_name",
+    "inverse_kind_error",
 ]
 
 
@@ -445,6 +446,27 @@ _BY_NAME: dict[str, type[InverseKind]] = {
     "smooth-ramp": SmoothRampInverse,
     "gain-only": GainOnlyInverse,
 }
+
+
+def inverse_kind_error(value: object) -> InputError:
+    """The refusal of ``inverse=value`` that is no :class:`InverseKind`, naming the
+    classes and, for a name, :func:`inverse_from_name`.
+
+    Parameters
+    ----------
+    value : object
+        What was given.
+
+    Returns
+    -------
+    InputError
+        The error to raise.
+    """
+    named = (f"; for a name, inverse_from_name({value!r})" if isinstance(value, str) else "")
+    return InputError(
+        "inverse must be an InverseKind (ExactInverse(), SmoothFilterInverse(alpha), "
+        "SmoothRampInverse(beta_r, beta_l), NoInverse() or GainOnlyInverse()), got "
+        f"{type(value).__name__} {value!r}{named}")
 
 
 def inverse_from_name(name: str, **params: float) -> InverseKind:

@@ -86,7 +86,8 @@ def axes_of(ax, n: int, *, figsize: tuple[float, float] | None = None, columns: 
 
 
 def plot_drive_response(
-    response: DriveResponse, *, ax: Sequence[matplotlib.axes.Axes] | None = None
+    response: DriveResponse, *, ax: Sequence[matplotlib.axes.Axes] | None = None,
+    measured: Sequence[np.ndarray] | None = None,
 ) -> matplotlib.figure.Figure:
     """Plot speeds, torques (applied and in the shafts) and twists against time.
 
@@ -101,6 +102,9 @@ def plot_drive_response(
         A simulation result.
     ax : sequence of three matplotlib Axes, optional
         Axes for the speeds, the torques and the twists; new ones when omitted.
+    measured : sequence of numpy.ndarray, optional
+        The speeds as measured (noisy, or an encoder's), one per inertia in rad/s:
+        drawn faintly behind the simulated ones, which are then labelled noise-free.
 
     Returns
     -------
@@ -114,7 +118,11 @@ def plot_drive_response(
     n = response.n_inertias
     names = ["motor", "load"] if n == 2 else [f"inertia {i + 1}" for i in range(n)]
     for i in range(n):
-        ax_w.plot(t, response.speeds[:, i], label=names[i], lw=1)
+        line = ax_w.plot(t, response.speeds[:, i], lw=1, zorder=3,
+                         label=names[i] if measured is None else f"{names[i]} (noise-free)")[0]
+        if measured is not None:
+            ax_w.plot(t, measured[i], lw=0.5, alpha=0.45, color=line.get_color(), zorder=2,
+                      label=f"{names[i]} as measured")
     ax_w.set_ylabel("speed [rad/s]")
     ax_t.plot(t, response.torque, color="k", lw=1.2, drawstyle="steps-post", zorder=3,
               label="applied (motor)")

@@ -311,7 +311,8 @@ class DriveResponse(StateColumns):
         return (f"DriveResponse({self.t.size} samples, t = {self.t[0]:g} to {self.t[-1]:g} s, "
                 f"{len(self.contact_events)} contact changes, law {law!r})")
 
-    def plot(self, ax: Sequence[matplotlib.axes.Axes] | None = None) -> matplotlib.figure.Figure:
+    def plot(self, ax: Sequence[matplotlib.axes.Axes] | None = None, *,
+             measured: Sequence[np.ndarray] | None = None) -> matplotlib.figure.Figure:
         """Plot speeds, torques (applied and shaft) and twist against time, with the
         contact changes (:func:`backlashkit.report.plot_drive_response`).
 
@@ -322,6 +323,9 @@ class DriveResponse(StateColumns):
             serves). New ones are created when omitted, in a figure that pyplot does
             not manage: save it (``fig.savefig("run.png")``), or pass pyplot's axes to
             show it with ``plt.show()``.
+        measured : sequence of numpy.ndarray, optional
+            The speeds as measured (with noise, or an encoder's), one per inertia in
+            rad/s, drawn faintly behind the simulated ones.
 
         Returns
         -------
@@ -330,7 +334,7 @@ class DriveResponse(StateColumns):
         """
         from .report import plot_drive_response
 
-        return plot_drive_response(self, ax=ax)
+        return plot_drive_response(self, ax=ax, measured=measured)
 
     def to_pandas(self) -> pandas.DataFrame:
         """The response as a :class:`pandas.DataFrame` indexed by ``t``.

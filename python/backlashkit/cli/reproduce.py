@@ -96,6 +96,9 @@ def check_reproduce_outputs(json_out: str | None, report: str | None,
 
     if json_out is not None:
         path = Path(json_out)
+        if path.is_dir():
+            raise InputError(f"--json-out {json_out} is a directory; give a file name in it "
+                             f"(e.g. {path / 'results.json'})")
         if path.is_file() and not force:
             raise InputError(f"--json-out {json_out} already exists; pass --force to "
                              "overwrite it")

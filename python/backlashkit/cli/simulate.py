@@ -443,7 +443,10 @@ def run(args: argparse.Namespace) -> int:
     columns, noise = _columns(args, response, seed, encoder)
     write_csv(out, columns, force=args.force)
     if args.plot is not None:
-        response.plot().savefig(args.plot)
+        # the speeds as written, where noise or an encoder made them differ
+        written = (columns["w_motor"], columns["w_load"])
+        measured = written if noise is not None or encoder is not None else None
+        response.plot(measured=measured).savefig(args.plot)
         _note(f"wrote {args.plot}")
     _note_sampling(drive, response)
     n = int(response.t.size)

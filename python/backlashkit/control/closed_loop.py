@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..nonlinearities import Backlash, ExactInverse, InverseKind
+from ..nonlinearities import Backlash, ExactInverse, InverseKind, inverse_kind_error
 from .adaptive import AdaptiveLaw
 from .design import design_mrc
 from .problem import build_problem, run_problem
@@ -103,7 +103,7 @@ def simulate_closed_loop(
         raise InputError(f"backlash must be a Backlash, got {type(backlash).__name__}")
     inverse = ExactInverse() if inverse is None else inverse
     if not isinstance(inverse, InverseKind):
-        raise InputError(f"inverse must be an InverseKind object, got {type(inverse).__name__}")
+        raise inverse_kind_error(inverse)
     adaptation = AdaptiveLaw() if adaptation is None else adaptation
     if not isinstance(adaptation, AdaptiveLaw):
         raise InputError(f"adaptation must be an AdaptiveLaw, got {type(adaptation).__name__}")

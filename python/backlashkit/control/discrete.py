@@ -27,7 +27,13 @@ import numpy as np
 from .. import validate as v
 from ..errors import InputError
 from ..lti import as_state_space, zoh_discretize
-from ..nonlinearities import Backlash, ExactInverse, InverseKind, InverseMemory
+from ..nonlinearities import (
+    Backlash,
+    ExactInverse,
+    InverseKind,
+    InverseMemory,
+    inverse_kind_error,
+)
 from .adaptive import AdaptiveLaw, adaptive_rate
 from .design import MRCDesign, companion, design_mrc
 from .problem import check_rows
@@ -75,7 +81,7 @@ class DiscreteAdaptiveController:
         self.ts = v.positive("ts", ts)
         self.inverse = ExactInverse() if inverse is None else inverse
         if not isinstance(self.inverse, InverseKind):
-            raise InputError(f"inverse must be an InverseKind, got {type(self.inverse).__name__}")
+            raise inverse_kind_error(self.inverse)
         self.adaptation = AdaptiveLaw() if adaptation is None else adaptation
         if not isinstance(self.adaptation, AdaptiveLaw):
             raise InputError(f"adaptation must be an AdaptiveLaw, got "
@@ -196,6 +202,13 @@ class DiscreteAdaptiveController:
         return float(out)
 
 
+#: A sampled loop whose plant output exceeds this many times the reference's largest
+#: value has diverged: paper B's transients stay within tens of it, and a sample time
+#: too long for an unstable plant grows the output to 1e44 and beyond while every value
+#: stays finite (a QA pass: a silent answer with an error of 2.7e56).
+RUNAWAY = 1e6
+
+
 def simulate_discrete_loop(
     plant: Any,
     backlash: Backlash,
@@ -230,7 +243,9 @@ def simulate_discrete_loop(
     Raises
     ------
     InputError
-        If an argument is not of its kind, or the plant has a direct feedthrough.
+        If an argument is not of its kind, the plant has a direct feedthrough, or the
+        loop diverges (a non-finite value, or an output beyond :data:`RUNAWAY` times
+        the reference's largest value).
     """
     use_r_dot = v.flag("use_r_dot", use_r_dot)
     if not isinstance(controller, DiscreteAdaptiveController):
@@ -244,6 +259,9 @@ def simulate_discrete_loop(
     controller.reset()
     ts = controller.ts
     n = _n_samples(duration, ts)
+    check_covers = getattr(reference, "check_covers", None)  # a user's own reference: none
+    if check_covers is not None:
+        check_covers(duration)
     a, b, c, dd = as_state_space(plant)
     if dd != 0.0:
         raise InputError("plant must be strictly proper (no direct feedthrough)")
@@ -256,6 +274,9 @@ def simulate_discrete_loop(
     x = np.zeros(a.shape[0])
     u = 0.0
     m, c_r, c_l = backlash.m, backlash.c_r, backlash.c_l
+    # the loop starts at rest, so a plant output this far beyond the reference is a
+    # runaway however the adaptive law's transient goes (refused where it appears)
+    runaway = RUNAWAY * float(np.max(np.abs(r), initial=0.0))
     # an overflow ends in a non-finite output or input, refused where it appears
     with np.errstate(over="ignore", invalid="ignore"):
         for k in range(n):
@@ -263,10 +284,13 @@ def simulate_discrete_loop(
             if math.isfinite(y):
                 thb[k] = controller.theta_b
                 vk = controller.step(y, r[k], rd[k] if use_r_dot else None)
-            if not (math.isfinite(y) and math.isfinite(vk)):
+            if not (math.isfinite(y) and math.isfinite(vk)) or abs(y) > runaway:
                 which = "controller output v" if math.isfinite(y) else "plant output y"
+                what = (f"the plant output reached {y:.3g}, over {RUNAWAY:g} times the "
+                        "reference's largest value" if math.isfinite(y) and math.isfinite(vk)
+                        else f"non-finite {which}")
                 raise InputError(
-                    f"the simulation diverged (non-finite {which}) at t = {t[k]:.6g} s; the "
+                    f"the simulation diverged ({what}) at t = {t[k]:.6g} s; the "
                     f"controller's sample time ts = {ts:g} s may be too long for the plant, "
                     "or check the parameters' units and magnitudes")
             u = min(max(u, m * (vk - c_r)), m * (vk - c_l))

@@ -259,6 +259,7 @@ def build_problem(
         "dist": dist,
     }
     prob.update(_reference(reference))
+    reference.check_covers(duration)
     return {
         k: (np.ascontiguousarray(val, dtype=float) if isinstance(val, np.ndarray) else val)
         for k, val in prob.items()

@@ -17,6 +17,11 @@ from ..errors import InputError
 
 __all__ = ["Reference", "SumOfSines", "TableReference"]
 
+#: Relative slack on a table's last time against the run's duration: the rounding of
+#: times written as text.
+COVER_SLACK = 1e-9
+
+
 @dataclass(frozen=True)
 class SumOfSines:
     """Reference ``r(t) = sum_i amplitude_i sin(frequency_i t + phase_i)``.
@@ -74,6 +79,15 @@ class SumOfSines:
         return np.sum(
             self.amplitude * np.sin(np.multiply.outer(t, self.frequency) + self.phase), axis=-1
         )
+
+    def check_covers(self, duration: float) -> None:
+        """Sines are defined at every time: nothing to refuse.
+
+        Parameters
+        ----------
+        duration : float
+            Length of the run in s.
+        """
 
     def derivative(self, t: np.ndarray) -> np.ndarray:
         """Evaluate ``dr/dt`` at times ``t``.
@@ -157,6 +171,27 @@ class TableReference:
             Interpolated reference.
         """
         return np.interp(t, self.t, self.r)
+
+    def check_covers(self, duration: float) -> None:
+        """Refuse a run longer than the table: past its last row the reference would be
+        held at its last value, and the tracking error measured against a constant.
+
+        Parameters
+        ----------
+        duration : float
+            Length of the run in s.
+
+        Raises
+        ------
+        InputError
+            If the table ends before ``duration``.
+        """
+        end = float(self.t[-1])
+        if end < duration * (1.0 - COVER_SLACK):
+            raise InputError(
+                f"the reference table ends at t = {end:.6g} s, before the run's end at "
+                f"duration = {duration:.6g} s (it would hold its last value there): extend "
+                "the table or shorten the duration")
 
     def derivative(self, t: np.ndarray) -> np.ndarray:
         """Slope of the interpolant at times ``t`` (0 outside the table).

@@ -21,6 +21,7 @@ Every error is one line naming the table, the key and the constraint.
 from __future__ import annotations
 
 import math
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from ..io import did_you_mean
 from ..nonlinearities import Backlash, InverseKind, inverse_from_name
 from .adaptive import AdaptiveLaw
 from .closed_loop import simulate_closed_loop
@@ -132,20 +134,31 @@ class ControlScenario:
         -------
         ClosedLoopResponse
             The trace at ``ts``.
+
+        Raises
+        ------
+        InputError
+            What the library refuses of the run, named with the scenario's file, and
+            with its tables' keys where the message advises a step or an ``alpha``.
         """
-        return simulate_closed_loop(
-            self.plant,
-            self.backlash,
-            reference=self.reference,
-            duration=self.duration,
-            ts=self.ts,
-            step=self.step,
-            inverse=inverse or self.inverse,
-            adaptation=self.adaptation,
-            reference_model=self.reference_model,
-            filter=self.filter,
-            backend=backend,
-        )
+        try:
+            return simulate_closed_loop(
+                self.plant,
+                self.backlash,
+                reference=self.reference,
+                duration=self.duration,
+                ts=self.ts,
+                step=self.step,
+                inverse=inverse or self.inverse,
+                adaptation=self.adaptation,
+                reference_model=self.reference_model,
+                filter=self.filter,
+                backend=backend,
+            )
+        except InputError as exc:
+            text = re.sub(r"\b(give|give a larger|a smaller) step\b", r"\1 [simulation] step",
+                          str(exc)).replace("a smaller alpha", "a smaller [inverse] alpha")
+            raise InputError(f"{self.source}: {text}") from None
 
 
 def _inverse(name: str, params: dict, src: str) -> InverseKind:
@@ -199,14 +212,22 @@ def _read_table_file(src: str, base: Path, name: Any) -> TableReference:
         raise InputError(f"{src}: [reference] file {path}: {exc}") from None
     if data.ndim == 2 and np.isnan(data[0]).all():
         data = data[1:]  # header row
+    if data.ndim == 2 and data.shape[1] > 2:
+        raise InputError(f"{src}: [reference] file {path} has {data.shape[1]} columns; give "
+                         "two, t and r")
     if (
         data.ndim != 2
         or data.shape[1] < 2
         or data.shape[0] < 2
         or not np.isfinite(data[:, :2]).all()
     ):
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            first = fh.readline()
+        other = next((f" (its first line holds {sep!r}: the columns are separated by "
+                      "',' here)" for sep in (";", "\t") if sep in first), "")
         raise InputError(
             f"{src}: [reference] file {path} must have >= 2 rows of two numeric columns t, r"
+            f"{other}"
         )
     try:
         return TableReference(data[:, 0], data[:, 1])
@@ -262,14 +283,16 @@ def _check_tables(doc: dict, src: str) -> None:
     """Only known tables and keys, and every required table."""
     for table, val in doc.items():
         if table not in _ALLOWED:
-            raise InputError(f"{src}: unknown table [{table}]; expected one of "
-                             f"{', '.join(f'[{t}]' for t in sorted(_ALLOWED))}")
+            raise InputError(f"{src}: unknown table [{table}]"
+                             f"{did_you_mean([table], list(_ALLOWED), brackets=True)}; "
+                             f"expected one of {', '.join(f'[{t}]' for t in sorted(_ALLOWED))}")
         if not isinstance(val, dict):
             raise InputError(f"{src}: [{table}] must be a table")
         extra = set(val) - _ALLOWED[table]
         if extra:
             raise InputError(
-                f"{src}: [{table}] has unknown key(s) {', '.join(sorted(extra))}; "
+                f"{src}: [{table}] has unknown key(s) {', '.join(sorted(extra))}"
+                f"{did_you_mean(sorted(extra), sorted(_ALLOWED[table]))}; "
                 f"allowed: {', '.join(sorted(_ALLOWED[table]))}"
             )
     for table in _REQUIRED_TABLES:
@@ -394,6 +417,10 @@ def _simulation(doc: dict, src: str,
         check_rows(duration, ts)  # the library's rule, said with the file's name
     except InputError as exc:
         raise InputError(f"{src}: [simulation] {exc}") from None
+    try:
+        reference.check_covers(duration)
+    except InputError as exc:
+        raise InputError(f"{src}: [reference] file: {exc}") from None
     step = sim.get("step")
     step = None if step is None else _num(src, "simulation", "step", step, cond=">0")
     if isinstance(reference, SumOfSines):  # the integrator would alias it silently

@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import validate as v
 from ..errors import InputError
+from ..io import did_you_mean
 
 __all__ = ["DelaySystem", "read_delay_system"]
 
@@ -316,8 +317,8 @@ def read_delay_system(path: str | Path) -> DelaySystem:
                          "a delay system file holds only [delay_system]")
     unknown = sorted(set(table) - {"A0", "A", "B"})
     if unknown:
-        raise InputError(f"{path}: [delay_system] has unknown key(s) {', '.join(unknown)}; "
-                         f"allowed: A0, A, B")
+        raise InputError(f"{path}: [delay_system] has unknown key(s) {', '.join(unknown)}"
+                         f"{did_you_mean(unknown, ['A0', 'A', 'B'])}; allowed: A0, A, B")
     for key in ("A0", "A"):
         if key not in table:
             raise InputError(f"{path}: [delay_system] needs {key}")

@@ -105,7 +105,8 @@ def identify_fleet(
     out : str or pathlib.Path
         The results CSV (:mod:`backlashkit.fleet.results`). If it exists and holds
         results of this manifest, the tests in it are skipped and the file is
-        completed: an interrupted run loses only the fits in flight.
+        completed: an interrupted run loses only the fits in flight. Tests it refused
+        are tried again.
     executor : concurrent.futures.Executor or dask.distributed.Client, optional
         Where the fits run (:mod:`backlashkit.parallel`); default serially here.
     jobs : int, optional

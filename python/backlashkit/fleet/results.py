@@ -83,7 +83,7 @@ def read_results(path: str | Path) -> tuple[str, list[dict[str, Any]]]:
     first, _, rest = text.partition("\n")
     if not first.startswith(_MAGIC) or "sha256 " not in first:
         raise InputError(f"{path} is not a backlashkit fleet results file (its first line "
-                         f"is not '{_MAGIC}; ...'); give another --out or pass --force")
+                         f"is not '{_MAGIC}; ...')")
     sha = first.split("sha256 ", 1)[1].split(";", 1)[0].strip()
     if not rest.endswith("\n"):  # killed while writing a row: that test is not done
         rest = rest[: rest.rfind("\n") + 1]
@@ -115,7 +115,8 @@ class ResultsFile:
     Attributes
     ----------
     done : dict
-        ``(drive, ISO date) -> row`` of the tests already in the file.
+        ``(drive, ISO date) -> row`` of the tests already in the file, but those it
+        refused: a rerun tries them again (a missing record file restored since).
 
     Raises
     ------
@@ -135,13 +136,17 @@ class ResultsFile:
             raise InputError(f"--out {self.path} is a directory; give a file name")
         self.done: dict[tuple[str, str], dict[str, Any]] = {}
         if self.path.exists() and not force:
-            sha, rows = read_results(self.path)
+            try:
+                sha, rows = read_results(self.path)
+            except InputError as exc:  # the run's output, not the user's file to read
+                raise InputError(f"--out {exc}; give another --out or pass --force") from None
             if sha != sha256:
                 raise InputError(
                     f"{self.path} holds results of another manifest (sha256 {sha[:12]}..., "
                     f"this one {sha256[:12]}...); give another --out, or pass --force to "
                     "overwrite it")
-            self.done = {(r["drive"], r["date"]): r for r in rows}
+            # a refused test is tried again: its file may have been restored since
+            self.done = {(r["drive"], r["date"]): r for r in rows if r["status"] != "refused"}
             self._rewrite(list(self.done.values()))  # drops a row cut short
         else:
             self._rewrite([])

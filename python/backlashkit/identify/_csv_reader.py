@@ -40,8 +40,6 @@ def map_columns(names) -> Option:
                   python="columns={" + ", ".join(f"{f!r}: ..." for f in names) + "}")
 
 
-#: The advice to map names, without listing them.
-MAP_COLUMNS = Option("columns", ("t", "w_motor"), python="columns={...}")
 
 # (name of the record, raw channels (t may be absent), label of sample i, time precision)
 _Raw = tuple[str, dict[str, np.ndarray], Callable[[int], str], float]

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ._csv_reader import MAP_COLUMNS, PASS_SAMPLE_TIME, _precision, _Raw
+from ._csv_reader import PASS_SAMPLE_TIME, _precision, _Raw, map_columns
 
 _SUFFIX = re.compile(r"^(.*)_(\d+)$")
 
@@ -72,7 +72,7 @@ def _from_variables(name: str, variables: Mapping[str, Any], mapping: dict[str, 
             f"{name}: no {what} {', '.join(map(repr, missing))} (found: "
             f"{', '.join(map(repr, sorted(variables))) or 'none'}); name them "
             f"{', '.join(mapping[f] for f in need)} (or with suffixes _1, _2, ...), or map "
-            "them with ", MAP_COLUMNS,
+            "them with ", map_columns([f for f in need if mapping[f] not in variables]),
             *((" (or pass ", PASS_SAMPLE_TIME, " if there is no time)") if "t" in need else ())
         )
     out = []
@@ -161,7 +161,7 @@ def _refuse_partial_struct(name: str, structs: dict[str, set[str]], flat, mappin
             raise InputError(
                 f"{name}: struct {var!r} has no field {', '.join(map(repr, missing))} (it has "
                 f"{', '.join(map(repr, sorted(fields)))}); add the channel or map the names "
-                "with ", MAP_COLUMNS
+                "with ", map_columns([f for f in need if mapping[f] not in fields])
             )
 
 def _from_mat73(name: str, mapping: dict[str, str], need: list[str]) -> list[_Raw]:
