@@ -168,6 +168,10 @@ def test_noise_on_one_channel_only_and_fresh_seed_is_reported(tmp_path, capsys):
     assert run([DRIVE, *PAPER_EXPERIMENT, "--duration", "45", "--snr-load", "30", "--seed",
                 str(seed), "--out", str(again)], capsys)[0] == 0
     assert again.read_bytes() == out.read_bytes()
+    # a seed where nothing is random is said to do nothing (a QA pass)
+    code, _, err = run([DRIVE, *PAPER_EXPERIMENT, "--duration", "45", "--seed", "3",
+                        "--out", str(tmp_path / "clean.csv")], capsys)
+    assert code == 0 and "note: --seed has no effect: nothing random is drawn" in err
 
 
 @pytest.mark.parametrize(

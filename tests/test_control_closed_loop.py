@@ -214,6 +214,12 @@ def test_table_reference_and_plot():
 
     ax = Figure().add_subplot()
     assert r.plot(ax=ax) is ax.figure
+    # five Axes take the five panels, as the drive's response takes its three
+    five = Figure().subplots(5, 1)
+    assert r.plot(ax=five) is five[0].figure
+    assert [a.get_ylabel() for a in five][:2] == ["output", "error e = y - y_m"]
+    with pytest.raises(InputError, match="ax must be 5 Axes"):
+        r.plot(ax=Figure().subplots(2, 1))
     # a table shorter than the run would be held at its last value: refused (a QA pass)
     with pytest.raises(InputError, match=re.escape(
             "the reference table ends at t = 40 s, before the run's end at duration = 60 s "

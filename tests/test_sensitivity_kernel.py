@@ -68,8 +68,10 @@ LOOP = bk.CurrentLoop(1e-3)
 TAUS = st.floats(3e-4, 3e-3)
 #: Random drives behind a loop, each kind's draws and least count checked away from
 #: grazing (``-s`` prints the counts: the Coulomb kind comes near grazing more often,
-#: 20 of 80 at its first draws).
-LOOP_KINDS = {"viscous": (st.just((0.0, 0.0)), 40, 25), "coulomb": (FRICTIONS, 150, 30)}
+#: 20 of 80 at its first draws). A clean-clone CI run at 7067943 checked 29 of the
+#: Coulomb kind's 150 draws, where the same test alone checks 41 (why was not traced):
+#: 200 draws leave that margin.
+LOOP_KINDS = {"viscous": (st.just((0.0, 0.0)), 40, 25), "coulomb": (FRICTIONS, 200, 30)}
 
 
 def _loop_error(drive, t, u, loop, **start) -> float:

@@ -435,6 +435,9 @@ def run(args: argparse.Namespace) -> int:
         source = {"experiment": source}
     if seed.fresh:  # after the options are checked: a refused run has no seed to repeat
         _note(f"note: no --seed given; using --seed {seed.value}")
+    elif args.seed is not None and not seed.children:
+        _note("note: --seed has no effect: nothing random is drawn without --snr-motor, "
+              "--snr-load or --experiment prbs")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SensitivityWarning)

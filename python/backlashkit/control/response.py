@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
@@ -146,33 +147,32 @@ class ClosedLoopResponse:
             [self.t, self.r, self.y, self.y_m, self.e, self.u_d, self.v, self.u, self.theta_b]
         )
 
-    def plot(self, ax: matplotlib.axes.Axes | None = None) -> matplotlib.figure.Figure:
+    def plot(self, ax: matplotlib.axes.Axes | Sequence[matplotlib.axes.Axes] | None = None
+             ) -> matplotlib.figure.Figure:
         """Plot the run as paper B's Figs. 5/6 do.
 
         Parameters
         ----------
-        ax : matplotlib.axes.Axes, optional
-            If given, only ``y`` and ``y_m`` are drawn into it. Otherwise a new figure
-            with five panels (``y`` and ``y_m``; ``e``; ``v``; ``u``; the estimates).
+        ax : matplotlib Axes, or a sequence or array of five, optional
+            One Axes: only ``y`` and ``y_m`` are drawn into it. Five (what
+            ``plt.subplots(5, 1)[1]`` returns): the five panels, ``y`` and ``y_m``;
+            ``e``; ``v``; ``u``; the estimates. None: those five in a new figure that
+            pyplot does not manage.
 
         Returns
         -------
         matplotlib.figure.Figure
             The figure.
         """
-        from matplotlib.figure import Figure
-
         from ..report import axes_of, legend_outside
 
-        if ax is not None:
-            _, (ax,) = axes_of(ax, 1)
+        if ax is not None and hasattr(ax, "plot"):  # one Axes: the outputs alone
             ax.plot(self.t, self.y, label="y")
             ax.plot(self.t, self.y_m, "--", label="y_m")
             ax.set_xlabel("t [s]")
             legend_outside(ax)
             return ax.figure
-        fig = Figure(figsize=(8, 10), layout="constrained")
-        axs = fig.subplots(5, 1, sharex=True)
+        fig, axs = axes_of(ax, 5, figsize=(8, 10))
         axs[0].plot(self.t, self.y, label="y, plant output")
         axs[0].plot(self.t, self.y_m, "--", label="y_m, reference model")
         axs[0].set_ylabel("output")

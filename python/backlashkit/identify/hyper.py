@@ -1,72 +1,15 @@
-"""An estimator's hyperparameters: its short ``repr``, ``get_params`` and ``set_params``.
+"""The short ``repr`` of an estimator: its class and the hyperparameters it was given.
 
-scikit-learn's conventions: ``Name(prior, key=value, ...)`` with the prior first and
-only the keyword options that differ from their defaults; the ``__init__`` arguments
-read and set by name (so that ``sklearn.base.clone`` and its searches work). The
-estimators take the two methods as class attributes, not from a base class (which
-would lengthen their ``help()``).
+scikit-learn's convention: ``Name(prior, key=value, ...)`` with the prior first and only
+the keyword options that differ from their defaults.
 """
 
 from __future__ import annotations
 
-import difflib
 import inspect
 from typing import Any
 
-from ..errors import InputError
-
-__all__ = ["get_params", "init_repr", "set_params"]
-
-
-def _init_names(cls: type) -> list[str]:
-    """The names of ``cls.__init__``'s arguments, ``self`` left out."""
-    return [n for n in inspect.signature(cls.__init__).parameters if n != "self"]
-
-
-def get_params(self: Any, deep: bool = True) -> dict[str, Any]:
-    """The estimator's hyperparameters: its ``__init__`` arguments by name.
-
-    Parameters
-    ----------
-    deep : bool, optional
-        Accepted for scikit-learn's protocol; the values are returned as they are
-        (configuration objects are immutable).
-
-    Returns
-    -------
-    dict of str to object
-        Each ``__init__`` argument's current value.
-    """
-    return {name: getattr(self, name) for name in _init_names(type(self))}
-
-
-def set_params(self: Any, **params: Any) -> Any:
-    """Set hyperparameters by name; checked, as the others, when ``fit`` runs.
-
-    Parameters
-    ----------
-    **params : object
-        New values of ``__init__`` arguments.
-
-    Returns
-    -------
-    object
-        The estimator itself.
-
-    Raises
-    ------
-    InputError
-        If a name is not an ``__init__`` argument.
-    """
-    names = _init_names(type(self))
-    for name, value in params.items():
-        if name not in names:
-            close = difflib.get_close_matches(name, names, n=1)
-            meant = f" (did you mean {close[0]!r}?)" if close else ""
-            raise InputError(f"{type(self).__name__} has no hyperparameter {name!r}{meant}; "
-                             f"it has {', '.join(names)}")
-        setattr(self, name, value)
-    return self
+__all__ = ["init_repr"]
 
 
 def init_repr(estimator: Any) -> str:

@@ -134,7 +134,7 @@ from ._model import (
     rel_std,
 )
 from ._problem import Problem, build_problem
-from .hyper import _learned_attribute, get_params, init_repr, set_params
+from .hyper import _learned_attribute, init_repr
 from .intervals import FisherInterval, ParametricBootstrap, ProfileLikelihood, check_interval
 from .noise import (
     ARNoise,
@@ -257,8 +257,6 @@ class JointIdentifier:
     method = "joint"
 
     __getattr__ = _learned_attribute
-    get_params = get_params
-    set_params = set_params
 
     def __init__(
         self,

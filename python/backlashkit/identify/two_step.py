@@ -123,7 +123,7 @@ from .decay import (
     search_edges,
     viscous_fit,
 )
-from .hyper import _learned_attribute, get_params, init_repr, set_params
+from .hyper import _learned_attribute, init_repr
 from .record import as_records, check_prior, check_sampling
 from .step import check_held_speeds, check_held_steady, check_step_downs, find_step_down
 
@@ -295,8 +295,6 @@ class TwoStepIdentifier:
     method = "two-step"
 
     __getattr__ = _learned_attribute
-    get_params = get_params
-    set_params = set_params
 
     def __init__(
         self,
@@ -537,8 +535,6 @@ class RegressionIdentifier:
     method = "regression"
 
     __getattr__ = _learned_attribute
-    get_params = get_params
-    set_params = set_params
 
     def __init__(
         self,
