@@ -166,7 +166,9 @@ class ClosedLoopResponse:
         """
         from ..report import axes_of, legend_outside
 
-        if ax is not None and hasattr(ax, "plot"):  # one Axes: the outputs alone
+        if ax is not None and np.size(np.asarray(ax, dtype=object)) == 1:
+            # one Axes (or an array of one): the outputs alone
+            _, (ax,) = axes_of(ax, 1)
             ax.plot(self.t, self.y, label="y")
             ax.plot(self.t, self.y_m, "--", label="y_m")
             ax.set_xlabel("t [s]")
