@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .. import validate as v
-from ..errors import InputError
+from ..errors import InputError, Option
 from ..lti import as_state_space
 from ..nonlinearities import Backlash, InverseKind
 from .adaptive import AdaptiveLaw
@@ -43,6 +43,9 @@ MAX_STEPS = 2e7
 #: (``tests/test_qa_control_delay_fleet.py``: a smooth filter's ``alpha`` of 2 700 runs
 #: at 1 ms; 2 900 diverged).
 RK4_REAL_STABILITY = 2.785
+#: The integration step as the messages advise it (a scenario file words it as its
+#: ``[simulation] step``).
+STEP = Option("step", None)
 #: Parameters of the kernels' compiled entry point that are integers, and matrices.
 _KERNEL_INTS = {"kind", "n_steps", "n_sub"}
 _KERNEL_MATRICES = {"ap", "al", "am", "ah"}
@@ -60,8 +63,8 @@ def _steps(duration: float, ts: float, step: float | None) -> tuple[float, int, 
         which = "the default, min(ts, 1 ms)" if step is None else "given"
         raise InputError(
             f"duration / step gives {duration / h_max:.3g} integration steps (step "
-            f"{h_max:.3g} s, {which}), more than {MAX_STEPS:,.0f}: give a larger step (at "
-            "most ts) or a shorter duration")
+            f"{h_max:.3g} s, {which}), more than {MAX_STEPS:,.0f}: give a larger ", STEP,
+            " (at most ts) or a shorter ", Option("duration", None))
     n_sub = max(1, int(np.ceil(ts / h_max - ROUND_SLACK)))
     h = ts / n_sub
     return h, n_sub, n_out * n_sub
@@ -233,8 +236,9 @@ def build_problem(
         raise InputError(
             f"{inverse!r} with the integration step {h:.3g} s: alpha * step = "
             f"{inverse.rate * h:.3g} is beyond the integration's stability (classical "
-            f"Runge-Kutta, {RK4_REAL_STABILITY:g}); give step <= "
-            f"{RK4_REAL_STABILITY / inverse.rate:.3g} s or a smaller alpha")
+            f"Runge-Kutta, {RK4_REAL_STABILITY:g}); give ", STEP,
+            f" <= {RK4_REAL_STABILITY / inverse.rate:.3g} s or a smaller ",
+            Option("alpha", None))
     plant_arrays = _plant(plant, initial_state)
     controller = _controller(design)
     adaptive = _adaptation(adaptation, inverse)
@@ -266,14 +270,14 @@ def build_problem(
     }
 
 
-def _diverged_advice(message: str, h: float) -> str:
+def _diverged_advice(message: str, h: float) -> tuple[str | Option, ...]:
     """The kernel's ``message``, with the integration step's part where it diverged: an
     explicit step far above a fast time constant diverges as wrong units would."""
     if not message.startswith("the simulation diverged"):
-        return message
-    return (f"{message}, or give a smaller step (now {h:.3g} s): a fast part (a plant "
-            "pole, the filter, a smooth inverse's alpha) needs a step well under its time "
-            "constant")
+        return (message,)
+    return (f"{message}, or give a smaller ", STEP, f" (now {h:.3g} s): a fast part (a "
+            "plant pole, the filter, a smooth inverse's alpha) needs a step well under its "
+            "time constant")
 
 
 def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.ndarray]:
@@ -312,7 +316,7 @@ def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.
     try:
         raw = _core.simulate_adaptive(args)
     except ValueError as exc:
-        raise InputError(_diverged_advice(str(exc), prob["h"])) from None
+        raise InputError(*_diverged_advice(str(exc), prob["h"])) from None
     out = {k: np.asarray(val) for k, val in raw.items()}
     out["thb"] = out["thb"].reshape(-1, 3)
     out["xp"] = out["xp"].reshape(out["thb"].shape[0], -1)

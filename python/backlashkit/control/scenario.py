@@ -21,7 +21,6 @@ Every error is one line naming the table, the key and the constraint.
 from __future__ import annotations
 
 import math
-import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,6 +56,9 @@ _ALLOWED: dict[str, set[str]] = {
     "simulation": {"duration", "ts", "step"},
 }
 _REQUIRED_TABLES = ("plant", "backlash", "reference", "simulation")
+#: The library's options a run's messages advise, as the scenario file's keys.
+_KEYS = {"step": "[simulation] step", "duration": "[simulation] duration",
+         "alpha": "[inverse] alpha"}
 
 
 @dataclass
@@ -156,8 +158,7 @@ class ControlScenario:
                 backend=backend,
             )
         except InputError as exc:
-            text = re.sub(r"\b(give|give a larger|a smaller) step\b", r"\1 [simulation] step",
-                          str(exc)).replace("a smaller alpha", "a smaller [inverse] alpha")
+            text = exc.worded(lambda option: _KEYS.get(option.name))
             raise InputError(f"{self.source}: {text}") from None
 
 

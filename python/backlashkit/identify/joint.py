@@ -346,7 +346,8 @@ class JointIdentifier:
         prior = self.prior.with_theta(None)
         records = as_records(records, prior=prior)
         check_step_downs(records, prior)
-        check_held_units(records, prior, allow_far_from_prior=self.allow_far_from_prior)
+        gains = check_held_units(records, prior,
+                                 allow_far_from_prior=self.allow_far_from_prior)
         quanta = [(0.0, 0.0) if r.has_positions  # fitted as the angles they hold
                   else r.speed_quanta for r in records]
         records = [encoder_angles(r, quanta=q) for r, q in zip(records, quanta, strict=True)]
@@ -361,7 +362,7 @@ class JointIdentifier:
             labels = (*_search.STAGE_NAMES, *(f"{n}, again" for n in _search.STAGE_NAMES))
             with reporter(self.progress, "identify", unit="stage", labels=labels) as bar:
                 fitted, restarted, won = self._fit_and_restart(records, bar)
-        far = self._far_from_prior(_linear(fitted), records, prior)
+        far = self._far_from_prior(_linear(fitted), records, gains)
         _warn_prior_conflicts(fitted["prior_pull_"],
                               rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
         _warn_fixed_loop(fitted["fixed_tests_"], self._terms()[1])
@@ -403,13 +404,13 @@ class JointIdentifier:
             fitted = again if won else fitted
         return fitted, restarted, won
 
-    def _far_from_prior(self, linear: dict[str, float], records, prior):
+    def _far_from_prior(self, linear: dict[str, float], records, gains: list[float]):
         """Refuse the fitted linear parameters ``linear`` beyond REFUSE_FROM_PRIOR before
-        the estimator holds the answer; warn of those beyond FAR_FROM_PRIOR."""
+        the estimator holds the answer; warn of those beyond FAR_FROM_PRIOR (``gains``:
+        the records' :func:`held_speed_gain`)."""
         return check_fit_near_prior(
             linear, self.prior, allow_far_from_prior=self.allow_far_from_prior,
-            stacklevel=3,
-            held_gains=[held_speed_gain(r, prior) for r in records],
+            stacklevel=3, held_gains=gains,
             missing=self._missing_terms(), names=[r.name for r in records],
             angles=any(r.has_positions for r in records))
 
@@ -421,7 +422,8 @@ class JointIdentifier:
         towards 0, where the simulations chatter); warn of nothing (the answer's check
         does)."""
         if not self.allow_far_from_prior and too_far(linear, self.prior):
-            self._far_from_prior(linear, records, prior)
+            self._far_from_prior(linear, records,
+                                 [held_speed_gain(r, prior) for r in records])
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.

@@ -457,8 +457,7 @@ def check_held_speeds(records: Sequence[Record], prior: TwoMassDrive, *,
     for rec, gain in zip(records, gains, strict=True):
         if not math.isfinite(gain):
             continue
-        what = (f"{rec.name}: under the torque held before the step-down at t = "
-                f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
+        what = _held_what(rec, gain)
         if is_far(gain, REFUSE_FROM_PRIOR) and not allow_far_from_prior:
             raise InputError(
                 f"{what} (this method simulates the prior from them): ",
@@ -480,7 +479,7 @@ FRICTION_SLOWS = 0.01
 
 
 def check_held_units(records: Sequence[Record], prior: TwoMassDrive, *,
-                     allow_far_from_prior: bool = False) -> None:
+                     allow_far_from_prior: bool = False) -> list[float]:
     """Refuse, before any fit, a record whose held speeds name a unit mistake.
 
     Where a record's :func:`held_speed_gain` is beyond :data:`REFUSE_FROM_PRIOR` and
@@ -502,6 +501,12 @@ def check_held_units(records: Sequence[Record], prior: TwoMassDrive, *,
     allow_far_from_prior : bool, optional
         Refuse nothing (default False).
 
+    Returns
+    -------
+    list of float
+        The records' :func:`held_speed_gain` (NaN where too few samples precede the
+        step-down to tell), for the fit's own check of its answer.
+
     Raises
     ------
     InputError
@@ -509,20 +514,26 @@ def check_held_units(records: Sequence[Record], prior: TwoMassDrive, *,
         ``allow_far_from_prior`` is False; the message names the record, the mistake
         and its remedy.
     """
+    gains = [held_speed_gain(rec, prior) for rec in records]
     if allow_far_from_prior:
-        return
-    for rec in records:
-        gain = held_speed_gain(rec, prior)
-        what = (f"{rec.name}: under the torque held before the step-down at t = "
-                f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
+        return gains
+    for rec, gain in zip(records, gains, strict=True):
         if gain < -1.0 / FAR_FROM_PRIOR:
-            raise InputError(f"{what}: they turn against the torque; negate the speeds (or "
-                             "the torque) where their signs are counted the other way")
+            raise InputError(f"{_held_what(rec, gain)}: they turn against the torque; negate "
+                             "the speeds (or the torque) where their signs are counted the "
+                             "other way")
         slow = gain < FRICTION_SLOWS  # else friction may hold it back that far
         if is_far(gain, REFUSE_FROM_PRIOR) and unit_mistake(gain) is not None and (
                 gain > 1.0 or slow):
-            raise InputError(f"{what}: ", *_units_advice(gain),
+            raise InputError(f"{_held_what(rec, gain)}: ", *_units_advice(gain),
                              "; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
+    return gains
+
+
+def _held_what(rec: Record, gain: float) -> str:
+    """What a refusal of a record's held speed starts with: the record, where, how far."""
+    return (f"{rec.name}: under the torque held before the step-down at t = "
+            f"{find_step_down(rec)[1]:.6g} s the speeds are {gain:.3g} times the prior's")
 
 
 def check_held_steady(records: Sequence[Record], prior: TwoMassDrive) -> None:
