@@ -57,6 +57,21 @@ def test_the_discrete_loops_length_and_divergence_are_said():
             simulate_discrete_loop(G, GAP, ctrl, reference=REF, duration=duration)
 
 
+@pytest.mark.parametrize("backend", ["rust", "numpy"])
+def test_a_continuous_loop_that_runs_away_with_finite_values_is_refused(backend):
+    """An adaptation gain of 1e4 grows the output past 1e7 (the reference's largest
+    value is 10) while every value stays finite: it was answered without a word."""
+    with pytest.raises(InputError, match=r"the simulation diverged \(the plant output "
+                                         r"reached \S+, over 1e\+06 times the reference's "
+                                         r"largest value\) at t = \d+(\.\d+)? s; check .* "
+                                         r"gamma among them\), or give a smaller step"):
+        bk.simulate_closed_loop(G, GAP, reference=REF, duration=60.0, backend=backend,
+                                adaptation=bk.AdaptiveLaw(gamma=1e4))
+    # a disturbance that grows the output 2.5e5 times the reference is no runaway
+    bk.simulate_closed_loop(G, GAP, reference=REF, duration=60.0, backend=backend,
+                            input_disturbance=lambda t: 1e4 * t)
+
+
 def test_a_smooth_filter_faster_than_the_step_is_refused_before_the_run():
     """alpha = 5000 with the default 1 ms step diverged and was blamed on the units.
     The filter is a first-order lag integrated by classical Runge-Kutta, stable up to

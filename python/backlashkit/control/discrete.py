@@ -36,7 +36,7 @@ from ..nonlinearities import (
 )
 from .adaptive import AdaptiveLaw, adaptive_rate
 from .design import MRCDesign, companion, design_mrc
-from .problem import check_rows
+from .problem import RUNAWAY, check_rows
 from .response import ClosedLoopResponse
 
 __all__ = ["DiscreteAdaptiveController", "simulate_discrete_loop"]
@@ -201,12 +201,6 @@ class DiscreteAdaptiveController:
         self.y_m = y_m
         return float(out)
 
-
-#: A sampled loop whose plant output exceeds this many times the reference's largest
-#: value has diverged: paper B's transients stay within tens of it, and a sample time
-#: too long for an unstable plant grows the output to 1e44 and beyond while every value
-#: stays finite (a QA pass: a silent answer with an error of 2.7e56).
-RUNAWAY = 1e6
 
 
 def simulate_discrete_loop(

@@ -43,6 +43,12 @@ MAX_STEPS = 2e7
 #: (``tests/test_qa_control_delay_fleet.py``: a smooth filter's ``alpha`` of 2 700 runs
 #: at 1 ms; 2 900 diverged).
 RK4_REAL_STABILITY = 2.785
+#: A loop whose plant output exceeds this many times the reference's largest value
+#: (or the output it starts from) has diverged: paper B's transients stay within tens
+#: of it, and a sample time too long for an unstable plant grows the output to 1e44
+#: and beyond while every value stays finite (a QA pass: a silent answer with an error
+#: of 2.7e56).
+RUNAWAY = 1e6
 #: The integration step as the messages advise it (a scenario file words it as its
 #: ``[simulation] step``).
 STEP = Option("step", None)
@@ -294,11 +300,19 @@ def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.
     -------
     dict
         Raw output arrays (``t, r, y, ym, ud, v, u, thb, n_switches``).
+
+    Raises
+    ------
+    InputError
+        If the run diverges: a non-finite value, or a plant output beyond
+        :data:`RUNAWAY` times the reference's largest value (or its first output).
     """
     if backend == "numpy":
         from .._numpy_control import simulate_adaptive
 
-        return simulate_adaptive(prob)
+        out = simulate_adaptive(prob)
+        _check_runaway(out, prob["h"])
+        return out
     if backend != "rust":
         raise InputError(f"backend must be 'rust' or 'numpy', got {backend!r}")
     from .. import _core
@@ -320,4 +334,21 @@ def run_problem(prob: dict[str, Any], *, backend: str = "rust") -> dict[str, np.
     out = {k: np.asarray(val) for k, val in raw.items()}
     out["thb"] = out["thb"].reshape(-1, 3)
     out["xp"] = out["xp"].reshape(out["thb"].shape[0], -1)
+    _check_runaway(out, prob["h"])
     return out
+
+
+def _check_runaway(out: dict[str, np.ndarray], h: float) -> None:
+    """Refuse a run whose plant output grew past :data:`RUNAWAY` times the larger of
+    the reference's largest value and the output it starts from, every value finite."""
+    y = out["y"]
+    scale = max(float(np.max(np.abs(out["r"]), initial=0.0)), abs(float(y[0])))
+    beyond = np.flatnonzero(np.abs(y) > RUNAWAY * scale) if scale > 0 else []
+    if len(beyond):
+        i = int(beyond[0])
+        raise InputError(
+            f"the simulation diverged (the plant output reached {y[i]:.3g}, over "
+            f"{RUNAWAY:g} times the reference's largest value) at t = {out['t'][i]:.6g} s; "
+            "check the parameters' units and magnitudes (the adaptation's gamma among "
+            "them), or give a smaller ", STEP,
+            f" (now {h:.3g} s)")
