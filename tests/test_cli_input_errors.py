@@ -961,6 +961,16 @@ def test_a_misspelled_option_is_named_with_the_one_meant(exp_csv, capsys):
     assert "did you mean" not in _one_line_error(capsys, ["zzz"])
 
 
+def test_a_value_that_starts_with_a_dash_is_shown_after_an_equals_sign(capsys):
+    """argparse takes ``-1,5`` for an option (it is no plain negative number) and says
+    only that --h-range expects an argument."""
+    err = _one_line_error(capsys, ["delay-margin", "paper-ex1", "--h-range", "-1,5"])
+    assert ("argument --h-range: expected one argument; a value that starts with '-' goes "
+            "after '=': --h-range=-1,5 (see 'backlashkit delay-margin --help')") in err, err
+    err = _one_line_error(capsys, ["delay-margin", "paper-ex1", "--h-range"])
+    assert "goes after '='" not in err, err
+
+
 @pytest.mark.parametrize(("name", "speeds", "torque", "said", "remedy"), [
     ("degs", 180 / np.pi, 1.0, "deg/s read as rad/s?", "then give --speed-unit deg/s;"),
     ("mNm", 1.0, 1e3, "a torque in mN m read as N m?", "then give the torque in N m;"),

@@ -38,6 +38,22 @@ def test_control_json_trace_plot(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["rms_error_last"] >= 0.5
 
 
+def test_a_gain_of_zero_is_printed_without_its_sign(tmp_path, capsys):
+    """A first-order plant whose pole is the reference model's solves theta_2 = -0.0,
+    which the summary printed as ``[-0]`` (a QA pass)."""
+    text = EXAMPLE.read_text()
+    for old, new in (("den = [1.0, -0.5, -1.5]", "den = [1.0, 5.0]"),
+                     ("den = [1.0, 5.0, 6.0]", "den = [1.0, 5.0]"),
+                     ("den = [1.0, 4.0, 4.0]", "den = [1.0, 4.0]")):
+        assert old in text
+        text = text.replace(old, new)
+    scenario = tmp_path / "first_order.toml"
+    scenario.write_text(text)
+    assert main(["control", str(scenario)]) == 0
+    out = capsys.readouterr().out
+    assert "theta_1 = [0], theta_2 = [0], theta_3 = 1" in out, out
+
+
 @pytest.mark.parametrize(
     "edit, needle",
     [

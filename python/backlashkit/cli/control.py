@@ -127,5 +127,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _vector(values) -> str:
-    """A gain vector to 6 significant digits (``-5.5``, not its rounding error)."""
-    return "[" + ", ".join(f"{x:.6g}" for x in values) + "]"
+    """A gain vector to 6 significant digits (``-5.5``, not its rounding error; ``0``,
+    not ``-0``)."""
+    return "[" + ", ".join(f"{x + 0.0:.6g}" for x in values) + "]"

@@ -50,8 +50,21 @@ class _Parser(argparse.ArgumentParser):
         return parsed, extra
 
     def error(self, message: str):  # one line, status 2, as argparse does, without usage spam
-        self.exit(2, f"backlashkit: error: {message}{_meant_choice(message)}{self._meant()} "
-                     f"(see '{self.prog} --help')\n")
+        self.exit(2, f"backlashkit: error: {message}{_meant_choice(message)}{self._meant()}"
+                     f"{self._dash_value(message)} (see '{self.prog} --help')\n")
+
+    def _dash_value(self, message: str) -> str:
+        """``; a value that starts with '-' goes after '=': --h-range=-1,5`` where
+        argparse took such a value for an option and found the flag before it bare."""
+        found = _EXPECTED_ONE.search(message)
+        given = getattr(self, "_given", [])
+        if found is None:
+            return ""
+        flags = found.group(1).split("/")
+        for flag, value in zip(given, given[1:]):
+            if flag in flags and value.startswith("-"):
+                return f"; a value that starts with '-' goes after '=': {flag}={value}"
+        return ""
 
     def _meant(self) -> str:
         """``; --drvie: did you mean --drive?`` for each given option this parser does
@@ -69,6 +82,8 @@ class _Parser(argparse.ArgumentParser):
         return "".join(f"; {h}" for h in hints)
 
 
+#: argparse's words for an option given without its value.
+_EXPECTED_ONE = re.compile(r"argument (\S+): expected one argument")
 #: argparse's words for a value outside an argument's choices (a subcommand's too).
 _INVALID_CHOICE = re.compile(r"invalid choice: '([^']*)' \(choose from (.*)\)")
 
