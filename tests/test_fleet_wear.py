@@ -70,6 +70,20 @@ def test_flags_and_small_samples():
     assert not big["fast"].flagged
 
 
+def test_the_rates_legend_promises_an_interval_only_where_one_is_drawn():
+    """Drives of too few tests have a slope and no interval: the legend said
+    "Sen's 95 % interval" beside markers without bars (a QA pass)."""
+    from backlashkit.fleet.report import plot_rates
+
+    few = wear_trends(_rows("few", 0.05, 4, seed=3) + _rows("some", 0.01, 3, seed=4))
+    assert all(math.isnan(t.ci95_low) for t in few)
+    labels = [t.get_text() for t in plot_rates(few).axes[0].get_legend().get_texts()]
+    assert labels and all(label.endswith("(Theil-Sen)") for label in labels), labels
+    many = wear_trends(_rows("many", 0.05, 10, seed=1))
+    labels = [t.get_text() for t in plot_rates(many).axes[0].get_legend().get_texts()]
+    assert labels == ["flagged drive (Theil-Sen, Sen's 95 % interval)"], labels
+
+
 class _Links(HTMLParser):
     def __init__(self):
         super().__init__()

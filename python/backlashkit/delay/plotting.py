@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from matplotlib.ticker import LogFormatter
 
 from ..report import axes_of
 from .chen import SweepData, _grid, _track, frequency_bound, unit_circle_eigenvalues
@@ -63,11 +64,16 @@ def plot_margin(result, *, ax=None, h_range=(0.0, 1.0), n_h: int = 60):
     if sweep is not None:
         mod = sweep.moduli()
         mod = np.where(np.isfinite(mod), mod, np.nan)
-        ax1.semilogx(sweep.omega, mod, lw=1)
+        lines = ax1.semilogx(sweep.omega, mod, lw=1, color="C0")
+        lines[0].set_label("moduli |z_i| (one line each)")
     ax1.axhline(1.0, color="k", ls="--", lw=0.8, label="unit circle")
-    for c in result.crossings:
-        ax1.plot(c.omega, 1.0, "o", mfc="none", color="C3")
+    for k, c in enumerate(result.crossings):
+        ax1.plot(c.omega, 1.0, "o", mfc="none", color="C3",
+                 label="crossing" if k == 0 else None)
     ax1.set_yscale("log")
+    # plain numbers (2, 3, 4), not 2 x 10^0, on the narrow ranges of the moduli
+    ax1.yaxis.set_major_formatter(LogFormatter())
+    ax1.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
     if sweep is not None:  # the log-spaced floor of the grid says nothing worth a decade each
         ax1.set_xlim(left=1e-3 * sweep.omega.max())
     ax1.set_xlabel("frequency omega (rad/s)")
@@ -80,8 +86,8 @@ def plot_margin(result, *, ax=None, h_range=(0.0, 1.0), n_h: int = 60):
     if math.isfinite(result.h_max) and result.h_max > 0:
         ax2.axvline(result.h_max, color="C3", ls="--", lw=1,
                     label=f"h_max = {result.h_max:.6g} s")
-    for a, b in result.stability_windows(h_range):
-        ax2.axvspan(a, b, color="C2", alpha=0.12)
+    for k, (a, b) in enumerate(result.stability_windows(h_range)):
+        ax2.axvspan(a, b, color="C2", alpha=0.12, label="stable" if k == 0 else None)
     ax2.set_xlabel("delay h (s)")
     ax2.set_ylabel("max Re s (1/s)")
     ax2.set_title("rightmost characteristic root")

@@ -104,9 +104,11 @@ def plot_rates(trends: Sequence[DriveTrend], *, ax=None):
         s = np.array([shown[i].slope for i in idx]) * 1e3
         lo = np.array([shown[i].ci95_low for i in idx]) * 1e3
         hi = np.array([shown[i].ci95_high for i in idx]) * 1e3
-        err = np.nan_to_num(np.vstack([s - lo, hi - s]))
-        ax.errorbar(s, y[idx], xerr=err, fmt="o", ms=4, color=colour, capsize=2,
-                    label=f"{label} (Theil-Sen, Sen's 95 % interval)")
+        err = np.vstack([s - lo, hi - s])
+        # too few tests give no interval: the legend then promises none
+        said = "Theil-Sen, Sen's 95 % interval" if np.isfinite(err).any() else "Theil-Sen"
+        ax.errorbar(s, y[idx], xerr=np.nan_to_num(err), fmt="o", ms=4, color=colour,
+                    capsize=2, label=f"{label} ({said})")
     ax.axvline(0.0, color="0.5", lw=0.8)
     ax.set_yticks(y, [t.drive for t in shown], fontsize=7 if len(shown) > 30 else 9)
     ax.set_xlabel("growth of the backlash half-width theta (mrad per year)")
