@@ -218,6 +218,66 @@ def test_results_of_another_manifest_are_refused(fleet, serial, tmp_path, capsys
     assert read_results(out)[0] == read_manifest(other).sha256
 
 
+def _first_weeks(fleet, path: Path) -> Path:
+    """A manifest of the fleet's tests but its last week's, beside the fleet's."""
+    lines = fleet.manifest.read_text(encoding="utf-8").splitlines(keepends=True)
+    last = fleet.dates[-1].isoformat()
+    path.write_text("".join(x for x in lines if f",{last}," not in x), encoding="utf-8")
+    return path
+
+
+def test_a_manifest_grown_by_a_week_completes_its_results(fleet, serial, tmp_path, capsys):
+    """A fleet adds a week of tests to its manifest: the results of the earlier weeks
+    are kept and only the new week is fitted (the whole manifest's fingerprint used to
+    refuse the file, and --force fitted every week again)."""
+    short = read_manifest(_first_weeks(fleet, fleet.manifest.with_name("FIRST.csv")))
+    lines = serial[0].read_text(encoding="utf-8").splitlines(keepends=True)
+    last = fleet.dates[-1].isoformat()
+    out = tmp_path / "RESULTS.csv"  # the results of the shorter manifest, as it wrote them
+    out.write_text(lines[0].replace(read_manifest(fleet.manifest).sha256, short.sha256)
+                   + "".join(x for x in lines[1:] if f",{last}," not in x), encoding="utf-8")
+    calls = []
+    rows = identify_fleet(fleet.manifest, out=out, progress=lambda d, n: calls.append(d))
+    assert calls == list(range(N_DRIVES * (N_WEEKS - 1), N_DRIVES * N_WEEKS + 1))
+    assert rows == serial[1]
+    assert out.read_bytes() == serial[0].read_bytes()
+    # the other way, a manifest that dropped tests, would lose results: refused
+    _one_line_error(capsys, ["fleet", str(short.path), "--out", str(out)],
+                    "another manifest", f"drive-001 on {last} and {N_DRIVES - 1} more are "
+                    "not in this one or had other files", "--force")
+    assert out.read_bytes() == serial[0].read_bytes()
+
+
+def test_a_test_whose_files_changed_is_not_kept(fleet, serial, tmp_path, capsys):
+    """A results row is kept for a test only with the files it was fitted from."""
+    text = fleet.manifest.read_text(encoding="utf-8")
+    first = text.splitlines()[1]
+    drive, date, records, prior = first.split(",")
+    changed = fleet.manifest.with_name("CHANGED.csv")
+    changed.write_text(text.replace(first, ",".join(
+        (drive, date, "|".join(reversed(records.split("|"))), prior))), encoding="utf-8")
+    out = tmp_path / "RESULTS.csv"
+    out.write_bytes(serial[0].read_bytes())
+    _one_line_error(capsys, ["fleet", str(changed), "--out", str(out)],
+                    f"{drive} on {date} is not in this one or had other files")
+    assert out.read_bytes() == serial[0].read_bytes()
+
+
+def test_results_written_before_the_tests_fingerprints_complete_their_manifest(
+        fleet, serial, tmp_path):
+    """A file without the ``inputs`` column (an earlier version's) is completed for
+    the manifest it was written for, and written again with the column."""
+    lines = serial[0].read_text(encoding="utf-8").splitlines(keepends=True)
+    out = tmp_path / "RESULTS.csv"
+    out.write_text(lines[0] + "".join(x.rstrip("\n").rsplit(",", 1)[0] + "\n"
+                                      for x in lines[1:]), encoding="utf-8")
+    assert read_results(out)[1][0]["inputs"] == ""
+    calls = []
+    rows = identify_fleet(fleet.manifest, out=out, progress=lambda d, n: calls.append(d))
+    assert calls == [N_DRIVES * N_WEEKS] and rows == serial[1]
+    assert out.read_bytes() == serial[0].read_bytes()
+
+
 def test_a_file_that_is_no_results_file_is_refused(fleet, tmp_path, capsys):
     """As ``--out`` the advice names the flags; read from Python, no flag (a QA pass
     found the command line's words in ``read_results``)."""

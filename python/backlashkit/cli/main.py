@@ -61,7 +61,7 @@ class _Parser(argparse.ArgumentParser):
         if found is None:
             return ""
         flags = found.group(1).split("/")
-        for flag, value in zip(given, given[1:]):
+        for flag, value in zip(given, given[1:], strict=False):
             if flag in flags and value.startswith("-"):
                 return f"; a value that starts with '-' goes after '=': {flag}={value}"
         return ""

@@ -104,9 +104,10 @@ def identify_fleet(
         The ``MANIFEST.csv`` (:func:`backlashkit.fleet.read_manifest`).
     out : str or pathlib.Path
         The results CSV (:mod:`backlashkit.fleet.results`). If it exists and holds
-        results of this manifest, the tests in it are skipped and the file is
-        completed: an interrupted run loses only the fits in flight. Tests it refused
-        are tried again.
+        results of this manifest's tests, with the same files, those tests are skipped
+        and the file is completed: an interrupted run loses only the fits in flight,
+        and a manifest grown by new tests fits only those. Tests it refused are tried
+        again.
     executor : concurrent.futures.Executor or dask.distributed.Client, optional
         Where the fits run (:mod:`backlashkit.parallel`); default serially here.
     jobs : int, optional
@@ -127,13 +128,14 @@ def identify_fleet(
     Raises
     ------
     InputError
-        If the manifest is malformed or repeats a (drive, date), ``out`` belongs to
-        another manifest (without ``force``) or cannot be written, or ``executor`` /
+        If the manifest is malformed or repeats a (drive, date), ``out`` holds a test
+        this manifest does not have or gives other files (without ``force``) or cannot
+        be written, or ``executor`` /
         ``jobs`` are invalid; all before any fit.
     """
     man = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
     folder = man.path.parent
-    results = ResultsFile(out, man.sha256, len(man.tests), force=force)
+    results = ResultsFile(out, man, force=force)
     keys = [(t.drive, t.date.isoformat()) for t in man.tests]
     tasks = [(t.drive, t.date.isoformat(), *t.paths(folder)) for t in man.tests]
     skip = [i for i, key in enumerate(keys) if key in results.done]

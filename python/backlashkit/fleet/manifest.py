@@ -11,8 +11,10 @@ test only).
 
 Every manifest has a fingerprint (:attr:`Manifest.sha256`): the SHA-256 of its rows as
 read (drive, ISO date, record and prior names, in order), whatever the file's spacing or
-line endings. A results file carries it, so that results are never completed from
-another manifest.
+line endings; and every test one of its own row (:attr:`FleetTest.fingerprint`). A
+results file carries both, so that a result is never kept for a test whose files the
+manifest has changed, while a manifest that grows by a week of tests completes the
+results of its earlier weeks.
 """
 
 from __future__ import annotations
@@ -29,6 +31,9 @@ __all__ = ["FleetTest", "MANIFEST_COLUMNS", "Manifest", "read_manifest"]
 
 #: The manifest's required columns.
 MANIFEST_COLUMNS = ("drive", "date", "records", "prior")
+#: Hex digits of a test's fingerprint: 64 bits, so that two rows of one fleet share one
+#: by chance with a probability of about n^2 / 2^65 (1e-13 for 2 000 tests).
+FINGERPRINT_DIGITS = 16
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,12 @@ class FleetTest:
     records: tuple[str, ...]
     prior: str
     line: int
+
+    @property
+    def fingerprint(self) -> str:
+        """The first 16 hex digits of the SHA-256 of the test's row as read (drive, ISO
+        date, record and prior names): what a results row was fitted from."""
+        return hashlib.sha256(_row_text(self)).hexdigest()[:FINGERPRINT_DIGITS]
 
     def paths(self, folder: Path) -> tuple[list[str], str]:
         """The record and prior files as absolute paths.
@@ -168,6 +179,11 @@ def read_manifest(path: str | Path) -> Manifest:
         seen[key] = test.line
     digest = hashlib.sha256()
     for test in tests:
-        digest.update("\x1f".join((test.drive, test.date.isoformat(), "|".join(test.records),
-                                   test.prior)).encode() + b"\n")
+        digest.update(_row_text(test) + b"\n")
     return Manifest(path, tests, digest.hexdigest())
+
+
+def _row_text(test: FleetTest) -> bytes:
+    """A test's row as the fingerprints read it."""
+    return "\x1f".join((test.drive, test.date.isoformat(), "|".join(test.records),
+                        test.prior)).encode()
