@@ -202,7 +202,6 @@ class DiscreteAdaptiveController:
         return float(out)
 
 
-
 def simulate_discrete_loop(
     plant: Any,
     backlash: Backlash,

@@ -130,8 +130,7 @@ def identify_fleet(
     InputError
         If the manifest is malformed or repeats a (drive, date), ``out`` holds a test
         this manifest does not have or gives other files (without ``force``) or cannot
-        be written, or ``executor`` /
-        ``jobs`` are invalid; all before any fit.
+        be written, or ``executor`` / ``jobs`` are invalid; all before any fit.
     """
     man = manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
     folder = man.path.parent

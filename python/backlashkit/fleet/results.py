@@ -7,11 +7,11 @@ piece, with the fingerprint of the test's manifest row
 (:attr:`backlashkit.fleet.FleetTest.fingerprint`). A rerun keeps the rows whose test is
 still in the manifest with the same files: an interrupted run, or a manifest grown by
 new tests, is completed; one that dropped a test or changed its files is refused
-without ``force``. Numbers are written with Python's ``repr`` (the shortest text that reads back to
-the same float), so two runs that computed the same fits write the same bytes. When
-every test of the manifest is in the file, it is rewritten in the manifest's order
-(through a temporary file and an atomic rename): the finished file does not depend on
-the executor, the number of workers, or on interruptions.
+without ``force``. Numbers are written with Python's ``repr`` (the shortest text that
+reads back to the same float), so two runs that computed the same fits write the same
+bytes. When every test of the manifest is in the file, it is rewritten in the
+manifest's order (through a temporary file and an atomic rename): the finished file
+does not depend on the executor, the number of workers, or on interruptions.
 """
 
 from __future__ import annotations
