@@ -24,7 +24,7 @@ from ..errors import InputError, Option
 from ..plants import TwoMassDrive
 from .clipping import check_not_clipped
 from .quantum import speed_quantum
-from .torque import check_torque_noise
+from .torque import check_torque_noise, torque_noise_std
 
 __all__ = [
     "Record",
@@ -110,6 +110,14 @@ class Record:
         0 for a speed that is not quantised). Found once per record: it sorts each
         speed, and the record's checks and the fit each ask."""
         return speed_quantum(self.w_motor), speed_quantum(self.w_load)
+
+    @cached_property
+    def torque_noise(self) -> float:
+        """The torque's noise std in N m
+        (:func:`~backlashkit.identify.torque.torque_noise_std`). Found once per record:
+        its checks and the step-down's location each ask, and it takes medians over
+        the whole record."""
+        return torque_noise_std(self.torque)
 
     @property
     def has_positions(self) -> bool:

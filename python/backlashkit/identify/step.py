@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError, Option, PriorMismatchWarning, StepDownWarning
 from ..plants import TwoMassDrive
 from .record import Record, check_prior
-from .torque import JUMP_THRESHOLD, torque_noise_std
+from .torque import JUMP_THRESHOLD
 
 __all__ = [
     "ALLOW_FAR_FROM_PRIOR",
@@ -151,7 +151,7 @@ def find_step_down(record: Record) -> tuple[int, float, float, float]:
             + ("; this one rises from a negative level: negate the torque and both speeds "
                "(the mirror experiment)" if mirror else "")
         )
-    noise = torque_noise_std(u)
+    noise = record.torque_noise
     if -du[k] <= JUMP_THRESHOLD * math.sqrt(2.0) * noise:
         raise InputError(
             f"{record.name}: the torque has no step-down beyond its noise (largest drop "
@@ -351,7 +351,7 @@ def check_step_down(record: Record, prior: TwoMassDrive) -> int:
         )
     n = int(round(need / record.ts))
     u = record.torque
-    noise = torque_noise_std(u)
+    noise = record.torque_noise
     before = u[max(0, i_s - 2 * n) : i_s]
     if before.size > n:  # some n samples within the 2n before the drop must be a level
         drop = float(u[max(0, i_s - n)] - u[min(u.size - 1, i_s + n)])

@@ -116,7 +116,7 @@ def check_torque_noise(rec: Record) -> None:
         magnitude.
     """
     scale = float(np.max(np.abs(rec.torque)))
-    noise = torque_noise_std(rec.torque)
+    noise = rec.torque_noise
     if scale > 0 and noise > TORQUE_NOISE_LIMIT * scale:
         raise InputError(
             f"{rec.name}: the torque is noisy (std about {noise:.3g} N m, "
