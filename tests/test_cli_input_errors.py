@@ -801,6 +801,38 @@ def test_no_glitch_in_the_robustness_drives(j_l):
                                     signals.add_noise(r.w_load, snr, rng=rng)))
 
 
+@pytest.mark.parametrize("counts_per_rev", [4096.0, None])
+def test_encoder_angles_of_a_slow_drive_are_no_glitches(counts_per_rev):
+    """A 4096-count encoder on a drive held at 0.3 N m: its speeds, differenced from the
+    angles, step by one count (1.53 rad/s) in a range of 6 rad/s. Read as counts or as
+    angles in rad (whose differences also differ by 1e-14 where the counts are equal),
+    1814 of those steps were refused as "single-sample spikes" (a QA pass)."""
+    import backlashkit as bk
+    from backlashkit import signals
+    from backlashkit.identify.record import check_spikes
+
+    p = read_drive_toml(DRIVE_TOML, require_theta=False)
+    drive = bk.TwoMassDrive(J_M=p.J_M, J_L=p.J_L, k_sh=p.k_sh, f_M=p.f_M, f_L=p.f_L,
+                            f_sh=p.f_sh, theta=0.03, fc_M=0.02, fc_L=0.04)
+    t = signals.time_grid(5.0, 1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", bk.SensitivityWarning)
+        r = drive.simulate(t, signals.step_down(t, 0.3, t_s=2.0))
+    enc = bk.Encoder(4096)
+    counts = [enc.counts(r.phi_motor), enc.counts(r.phi_load)]
+    if counts_per_rev is None:
+        phi = [c * enc.resolution for c in counts]
+        rec = Record.from_positions(t, r.torque, *phi)
+    else:
+        rec = Record.from_positions(t, r.torque, *counts, counts_per_rev=counts_per_rev)
+    assert np.ptp(rec.w_load) < 5 * enc.resolution / 1e-3  # a few counts a sample
+    check_spikes(rec)
+    w = rec.w_load.copy()
+    w[3000] += 50 * enc.resolution / 1e-3  # a glitch of 50 counts still is one
+    with pytest.raises(InputError, match="single-sample spike"):
+        check_spikes(Record(t, r.torque, rec.w_motor, w))
+
+
 def test_a_closed_stdout_stops_quietly(steady_csv):
     """``backlashkit identify ... --json | head -c 10``: no error message when the reader
     closes the pipe before the answer is written."""

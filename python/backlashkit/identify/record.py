@@ -236,10 +236,14 @@ def check_speeds_vary(rec: Record) -> None:
 
 #: A speed sample farther than this many noise std (and than SPIKE_RANGE of the
 #: speed's range) from the median of itself and its two neighbours is a spike.
-
 SPIKE_SIGMAS = 30.0
-
 SPIKE_RANGE = 0.2
+
+
+#: Steps of a speed below this share of its largest value are rounding, not a quantum:
+#: speeds differenced from angles in rad (counts times ``2 pi / N``) differ by about
+#: 1e-14 of their size where the counts are the same.
+ROUNDING_STEP = 1e-9
 
 
 def check_spikes(rec: Record) -> None:
@@ -273,12 +277,14 @@ def check_spikes(rec: Record) -> None:
             # speeds (an encoder's counts) have their quantum as the floor
             moving = ~((a == b) & (b == c))
             sigma = 1.4826 * float(np.median(off[moving])) if moving.any() else 0.0
-            steps = np.abs(np.diff(w))
-            moves = steps[steps > 0]
-            quantum = float(moves.min()) if moves.size else 0.0
-            sigma = max(sigma, quantum)
             lo, hi = np.percentile(w, [0.1, 99.9])
             span = float(hi - lo)
+            steps = np.abs(np.diff(w))
+            # speeds differenced from angles in rad differ by rounding where the counts
+            # are equal: the quantum is the smallest step above that, or the angles'
+            moves = steps[steps > ROUNDING_STEP * max(abs(float(lo)), abs(float(hi)))]
+            quantum = max(float(moves.min()) if moves.size else 0.0, rec.quantum / rec.ts)
+            sigma = max(sigma, quantum)
             bad = (off > SPIKE_SIGMAS * sigma) & (off > SPIKE_RANGE * span)
         if bad.any():
             k = int(np.argmax(off)) + 1
