@@ -13,6 +13,7 @@ import json
 import math
 import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -737,9 +738,10 @@ def test_one_quantised_speed_is_noted(encoder, coulomb):
     assert fit.measured_ == ["speeds", "speeds"]
 
 
-def test_cli_reads_encoder_counts(tmp_path, capsys):
-    """``identify --counts-per-rev N`` reads the angles phi_motor, phi_load as counts
-    and fits them."""
+def _encoder_files(tmp_path, scale: float | None = None) -> tuple[list[str], Path]:
+    """Paper A's two records as 16 384-count encoder counts (scipy reference), and a
+    prior file of the true linear parameters; with ``scale``, the angles in rad times
+    ``scale`` instead of the counts."""
     drive = bk.TwoMassDrive(**P_TRUE, theta=THETA)
     t = bk.signals.time_grid(T_END, TS)
     enc = bk.Encoder(COUNTS)
@@ -750,10 +752,41 @@ def test_cli_reads_encoder_counts(tmp_path, capsys):
         path = tmp_path / f"enc_{a:.3g}.csv"
         counts = [enc.counts(p + off * enc.resolution) for p, off in zip(phi, (0.3, 0.7),
                                                                           strict=True)]
+        if scale is not None:
+            counts = [c * enc.resolution * scale for c in counts]
         write_csv(path, {"t": t, "torque": u, "phi_motor": counts[0], "phi_load": counts[1]})
         paths.append(str(path))
     prior = tmp_path / "prior.toml"
     prior.write_text("[drive]\n" + "".join(f"{k} = {x!r}\n" for k, x in P_TRUE.items()))
+    return paths, prior
+
+
+def test_angle_unit_mistakes_are_named_as_such(tmp_path, capsys):
+    """Angles in degrees were refused with "deg/s read as rad/s? then give --speed-unit
+    deg/s", an option refused for angles; a quadrature encoder's lines given for its
+    counts answer theta 4 times too large (the angles' scale), where the note said
+    "check the units of the speeds (rpm read as rad/s?)" (a QA pass)."""
+    (tmp_path / "deg").mkdir()
+    paths, prior = _encoder_files(tmp_path / "deg", scale=180.0 / math.pi)
+    assert cli_main(["identify", *paths, "--drive", str(prior), "--angles"]) == 2
+    err = capsys.readouterr().err
+    assert ("check the units: angles in deg read as rad? then give the angles in rad; else "
+            "the time's units, the columns (phi_motor and phi_load swapped?)") in err, err
+    paths, prior = _encoder_files(tmp_path)
+    assert cli_main(["identify", *paths, "--drive", str(prior), "--counts-per-rev",
+                     str(COUNTS // 4), "--interval", "fisher", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    notes = out["notes"]
+    assert out["theta"] == pytest.approx(4 * THETA, rel=THETA_RTOL)  # the angles' scale
+    assert any("the encoders' lines given for their counts (a quadrature encoder counts 4 "
+               "per line)? then give --counts-per-rev 4 times larger" in n
+               for n in notes), notes
+
+
+def test_cli_reads_encoder_counts(tmp_path, capsys):
+    """``identify --counts-per-rev N`` reads the angles phi_motor, phi_load as counts
+    and fits them."""
+    paths, prior = _encoder_files(tmp_path)
     assert cli_main(["identify", *paths, "--drive", str(prior), "--counts-per-rev",
                      str(COUNTS), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -68,6 +68,12 @@ SEPARATE_DROP = 0.1
 #: What to check when the data sit far from the prior.
 CHECK_UNITS = ("check the units of the speeds (rpm read as rad/s?) and of the time, the "
                "columns (w_motor and w_load swapped?) and the prior")
+#: The same for records of encoder angles, whose units come from the counts per
+#: revolution or the angles' unit (the speed unit does not apply to them).
+CHECK_ANGLE_UNITS = ("check the units of the angles (deg read as rad?), the encoders' "
+                     "counts per revolution (", Option("counts_per_rev", None), ") and the "
+                     "time's unit, the columns (phi_motor and phi_load swapped?) and the "
+                     "prior")
 
 #: Every estimated linear parameter within this factor of their common ratio to the
 #: prior counts as one move of them all (:func:`common_scale`). The model's equations
@@ -91,12 +97,23 @@ SPEED_IN_RPM = Option("speed_unit", "rpm", python="speed_unit='rpm' to read_reco
 #: their remedy: speeds in rpm or deg/s read as rad/s, speeds in rad/s read as rpm,
 #: a torque in mN m read as N m.
 UNIT_MISTAKES = (
-    (60.0 / (2.0 * math.pi), "rpm read as rad/s", SPEED_IN_RPM),
+    (60.0 / (2.0 * math.pi), "rpm read as rad/s", (SPEED_IN_RPM,)),
     (180.0 / math.pi, "deg/s read as rad/s",
-     Option("speed_unit", "deg/s", python="speed_unit='deg/s' to read_records")),
+     (Option("speed_unit", "deg/s", python="speed_unit='deg/s' to read_records"),)),
     (2.0 * math.pi / 60.0, "rad/s read as rpm",
-     Option("speed_unit", "rad/s", python="speed_unit='rad/s' to read_records")),
-    (1e-3, "a torque in mN m read as N m", "the torque in N m"),
+     (Option("speed_unit", "rad/s", python="speed_unit='rad/s' to read_records"),)),
+    (1e-3, "a torque in mN m read as N m", ("the torque in N m",)),
+)
+#: The same for records of encoder angles: angles in deg or revolutions read as rad,
+#: and counts per revolution 4 times off (a quadrature encoder counts 4 per line, and
+#: its lines are often given for its counts).
+ANGLE_MISTAKES = (
+    (180.0 / math.pi, "angles in deg read as rad", ("the angles in rad",)),
+    (1.0 / (2.0 * math.pi), "angles in revolutions read as rad", ("the angles in rad",)),
+    (4.0, "the encoders' lines given for their counts (a quadrature encoder counts 4 per "
+          "line)", (Option("counts_per_rev", None), " 4 times larger")),
+    (0.25, "counts per revolution 4 times too many", (Option("counts_per_rev", None),
+                                                       " 4 times smaller")),
 )
 #: A held speed gain names one of :data:`UNIT_MISTAKES` within this factor of its own
 #: (either way): a prior's frictions 50 % off move the gain as much.
@@ -461,11 +478,13 @@ def check_held_speeds(records: Sequence[Record], prior: TwoMassDrive, *,
         if is_far(gain, REFUSE_FROM_PRIOR) and not allow_far_from_prior:
             raise InputError(
                 f"{what} (this method simulates the prior from them): ",
-                *_units_advice(gain), "; if the prior's frictions are that far off, use ",
+                *_units_advice(gain, rec.has_positions), "; if the prior's frictions are "
+                "that far off, use ",
                 Option("method", "joint", python="JointIdentifier"),
                 " (it estimates them) or pass ", ALLOW_FAR_FROM_PRIOR)
         if is_far(gain):
-            warnings.warn(PriorMismatchWarning(f"{what}: ", *_units_advice(gain)),
+            warnings.warn(PriorMismatchWarning(f"{what}: ",
+                                               *_units_advice(gain, rec.has_positions)),
                           stacklevel=stacklevel + 1)
     return gains
 
@@ -523,9 +542,10 @@ def check_held_units(records: Sequence[Record], prior: TwoMassDrive, *,
                              "the speeds (or the torque) where their signs are counted the "
                              "other way")
         slow = gain < FRICTION_SLOWS  # else friction may hold it back that far
-        if is_far(gain, REFUSE_FROM_PRIOR) and unit_mistake(gain) is not None and (
-                gain > 1.0 or slow):
-            raise InputError(f"{_held_what(rec, gain)}: ", *_units_advice(gain),
+        angles = rec.has_positions
+        if is_far(gain, REFUSE_FROM_PRIOR) and unit_mistake(gain, angles=angles) is not None \
+                and (gain > 1.0 or slow):
+            raise InputError(f"{_held_what(rec, gain)}: ", *_units_advice(gain, angles),
                              "; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
     return gains
 
@@ -712,9 +732,10 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     ratio = {n: x / getattr(prior, n) for n, x in params.items()}
     very_far = too_far(params, prior)
     scale = common_scale(params, prior)
-    named = any(unit_mistake(g) is not None and is_far(g) for g in held_gains)
+    named = any(unit_mistake(g, angles=angles) is not None and is_far(g)
+                for g in held_gains)
     cause = (_scale_cause(scale, angles) if scale is not None and not named
-             else _far_fit_cause(held_gains, missing, names))
+             else _far_fit_cause(held_gains, missing, names, angles))
     if very_far and not allow_far_from_prior:
         raise InputError(
             f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: ", *cause,
@@ -728,15 +749,17 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     return far
 
 
-def unit_mistake(gain: float) -> tuple[str | Option, ...] | None:
-    """The unit mistake (:data:`UNIT_MISTAKES`) that a held speed gain points to, as
-    message parts ``"rpm read as rad/s? then give ", option``; None where none is within
-    :data:`UNIT_MATCH` of it.
+def unit_mistake(gain: float, *, angles: bool = False) -> tuple[str | Option, ...] | None:
+    """The unit mistake (:data:`UNIT_MISTAKES`, or :data:`ANGLE_MISTAKES` for encoder
+    angles) that a held speed gain points to, as message parts ``"rpm read as rad/s?
+    then give ", option``; None where none is within :data:`UNIT_MATCH` of it.
 
     Parameters
     ----------
     gain : float
         A record's :func:`held_speed_gain`.
+    angles : bool, optional
+        Whether the record holds encoder angles (default False: speeds).
 
     Returns
     -------
@@ -745,43 +768,49 @@ def unit_mistake(gain: float) -> tuple[str | Option, ...] | None:
     """
     if not (math.isfinite(gain) and gain > 0):
         return None
-    factor, said, remedy = min(UNIT_MISTAKES, key=lambda m: abs(math.log(gain / m[0])))
+    factor, said, remedy = min(ANGLE_MISTAKES if angles else UNIT_MISTAKES,
+                               key=lambda m: abs(math.log(gain / m[0])))
     if abs(math.log(gain / factor)) > math.log(UNIT_MATCH):
         return None
-    return (f"{said}? then give ", remedy)
+    return (f"{said}? then give ", *remedy)
 
 
-def _units_advice(gain: float) -> tuple[str | Option, ...]:
+def _units_advice(gain: float, angles: bool = False) -> tuple[str | Option, ...]:
     """What to check where a record's held speeds are ``gain`` times the prior's: the
-    unit mistake it points to first, else every usual cause."""
-    mistake = unit_mistake(gain)
+    unit mistake it points to first, else every usual cause (of encoder ``angles``)."""
+    mistake = unit_mistake(gain, angles=angles)
     if mistake is None:
-        return (CHECK_UNITS,)
-    return ("check the units: ", *mistake, "; else the time's units, the columns (w_motor "
-            "and w_load swapped?) and the prior")
+        return CHECK_ANGLE_UNITS if angles else (CHECK_UNITS,)
+    columns = "phi_motor and phi_load" if angles else "w_motor and w_load"
+    return ("check the units: ", *mistake, f"; else the time's units, the columns ({columns} "
+            "swapped?) and the prior")
 
 
 def _far_fit_cause(held_gains: Sequence[float], missing: Sequence[str | Option],
-                   names: Sequence[str] = ()) -> tuple[str | Option, ...]:
-    """The likely cause of a fit far from the prior, as message parts."""
+                   names: Sequence[str] = (), angles: bool = False
+                   ) -> tuple[str | Option, ...]:
+    """The likely cause of a fit far from the prior, as message parts (of records of
+    encoder ``angles``: their units and counts)."""
+    check = CHECK_ANGLE_UNITS if angles else (CHECK_UNITS,)
     known = [g for g in held_gains if math.isfinite(g)]
     if not known:
-        return (CHECK_UNITS,)
+        return check
     far = [(name, g) for name, g in zip(names, held_gains, strict=False)
            if math.isfinite(g) and is_far(g)]
     if far:  # the records whose units are suspect, by name
         said = ", ".join(f"{name} (x{g:.3g})" for name, g in far)
         # one mistake named where every far record points to the same; else them all
-        one = len({unit_mistake(g) for _, g in far}) == 1
+        one = len({unit_mistake(g, angles=angles) for _, g in far}) == 1
         return (f"the speeds held before the step-down are far from the prior's in {said}: ",
-                *(_units_advice(far[0][1]) if one else (CHECK_UNITS,)))
+                *(_units_advice(far[0][1], angles) if one else check))
     if any(is_far(g) for g in known):
-        return (CHECK_UNITS,)
+        return check
     spread = max(max(g, 1.0 / g) for g in known)
     plural = "s" if len(known) > 1 else ""
+    columns = "phi_motor and phi_load" if angles else "w_motor and w_load"
     said = (f"the speeds held before the step-down{plural} match the prior's to within x"
-            f"{spread:.3g}, so the units are likely right: check the columns (w_motor and "
-            "w_load swapped?); else ")
+            f"{spread:.3g}, so the units are likely right: check the columns ({columns} "
+            "swapped?); else ")
     if missing:
         return (said, "the model likely lacks what the drive has, or fixes it wrongly (try ",
                 *missing, "), or the prior is wrong")
