@@ -202,6 +202,10 @@ def test_missing_column_is_one_line(tmp_path, capsys):
     path.write_text("drive,day,records,prior\nd1,2026-01-05,a.csv,p.toml\n", encoding="utf-8")
     _one_line_error(capsys, ["fleet", str(path), "--out", str(tmp_path / "R.csv")],
                     "missing column(s) date")
+    path.write_text("drive;date;records;prior\nd1;2026-01-05;a.csv;p.toml\n", encoding="utf-8")
+    _one_line_error(capsys, ["fleet", str(path), "--out", str(tmp_path / "R.csv")],
+                    "a manifest has drive,date,records,prior, separated by commas (this one "
+                    "uses ';')")
 
 
 def test_results_of_another_manifest_are_refused(fleet, serial, tmp_path, capsys):
@@ -311,7 +315,9 @@ def test_progress_is_silent_when_stderr_is_no_terminal(fleet, serial, tmp_path):
         capture_output=True, text=True, env={**os.environ, "COLUMNS": "80"}, check=False)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
-    assert "6 tests: 6 identified, 0 refused" in proc.stdout
+    # what was in --out is said apart from what ran (a QA pass read "6 identified" after
+    # a rerun that fitted only a new week)
+    assert f"6 tests (6 kept from {out}, 0 run now): 6 identified, 0 refused" in proc.stdout
 
 
 def test_truth_table_holds_plain_numbers(fleet):

@@ -95,15 +95,24 @@ def run(args: argparse.Namespace) -> int:
     client = (dask_client(n_workers=args.dask_local) if args.dask_local is not None
               else dask_client(address=args.scheduler) if args.scheduler is not None
               else nullcontext())
+    kept: list[int] = []  # the tests already in --out: the first call's count
+
+    def progress(done: int, total: int) -> None:
+        if not kept:
+            kept.append(done)
+        bar(done, total)
+
     try:
         with client as executor:
             rows = identify_fleet(manifest, out=args.out, executor=executor, jobs=args.jobs,
-                                  force=args.force, progress=bar)
+                                  force=args.force, progress=progress)
     finally:
         bar.close()
     refused = [r for r in rows if r["status"] != "ok"]
-    print(f"{len(rows)} tests: {len(rows) - len(refused)} identified, {len(refused)} "
-          f"refused; results in {args.out}")
+    reused = f" ({kept[0]} kept from {args.out}, {len(rows) - kept[0]} run now)" \
+        if kept and kept[0] else ""
+    print(f"{len(rows)} tests{reused}: {len(rows) - len(refused)} identified, "
+          f"{len(refused)} refused; results in {args.out}")
     if report is not None:
         print(f"backlashkit: wrote {write_wear_report(rows, report, **thresholds)}",
               file=sys.stderr)

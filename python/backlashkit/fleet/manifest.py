@@ -162,7 +162,8 @@ def read_manifest(path: str | Path) -> Manifest:
             missing = [c for c in MANIFEST_COLUMNS if c not in header]
             if missing:
                 raise InputError(f"{path}: missing column(s) {', '.join(missing)} in the "
-                                 f"header line; a manifest has {','.join(MANIFEST_COLUMNS)}")
+                                 f"header line; a manifest has {','.join(MANIFEST_COLUMNS)}"
+                                 + _other_separator(header))
             reader.fieldnames = header
             tests = [_row(path, reader.line_num, row) for row in reader
                      if any((v or "").strip() for v in row.values() if isinstance(v, str))]
@@ -181,6 +182,17 @@ def read_manifest(path: str | Path) -> Manifest:
     for test in tests:
         digest.update(_row_text(test) + b"\n")
     return Manifest(path, tests, digest.hexdigest())
+
+
+def _other_separator(header: list[str]) -> str:
+    """``, separated by commas (this one uses ';')`` where the header is one field that
+    another separator splits into the columns; else nothing."""
+    if len(header) != 1:
+        return ""
+    for sep in (";", "\t", "|"):
+        if set(MANIFEST_COLUMNS) <= {h.strip() for h in header[0].split(sep)}:
+            return f", separated by commas (this one uses {sep!r})"
+    return ""
 
 
 def _row_text(test: FleetTest) -> bytes:
