@@ -14,13 +14,13 @@ it in its own terms (the command line says ``--allow-far-from-prior``):
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["CorrelatedResidualsWarning", "Diagnostic", "InputError", "NoiseLevelWarning",
            "Option", "PriorMismatchWarning", "QuantisedSpeedsWarning", "SearchEdgeWarning",
-           "SensitivityWarning", "StepDownWarning"]
+           "SensitivityWarning", "StepDownWarning", "word_parts"]
 
 
 @dataclass(frozen=True)
@@ -94,17 +94,34 @@ class Diagnostic:
         str
             The message, one line.
         """
-        words = []
-        for part in self.parts:
-            if isinstance(part, Option):
-                said = spell(part)
-                words.append(str(part) if said is None else said)
-            else:
-                words.append(part)
-        return "".join(words)
+        return word_parts(self.parts, spell)
 
     def __reduce__(self):  # pickled (a worker process's error) with its parts
         return (_rebuild, (type(self), self.parts, self.param))
+
+
+def word_parts(parts: Sequence[str | Option],
+               spell: Callable[[Option], str | None] | None = None) -> str:
+    """Message parts joined, every :class:`Option` spelled by ``spell``.
+
+    Parameters
+    ----------
+    parts : sequence of str or Option
+        The message.
+    spell : callable, optional
+        ``spell(option)`` returns a front end's words for the option, or None to keep
+        Python's (default: Python's for all).
+
+    Returns
+    -------
+    str
+        The message.
+    """
+    words = []
+    for part in parts:
+        said = spell(part) if spell is not None and isinstance(part, Option) else None
+        words.append(str(part) if said is None else said)
+    return "".join(words)
 
 
 def _rebuild(cls: type, parts: tuple, param: str | None) -> Diagnostic:

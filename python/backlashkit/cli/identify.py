@@ -420,7 +420,7 @@ def _run(args: argparse.Namespace, flags: dict[str, Any]) -> int:
                                                               PriorMismatchWarning)
     notes = read_notes + _noted(caught, flags, first) + _notes(args, est, caught, flags)
     report = maybe_write_report(args, records, est, prior, final_records=finals,
-                                notes=notes)
+                                notes=notes, flags=flags)
     result = {
         "command": "identify",
         "method": args.method,

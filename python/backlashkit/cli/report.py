@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from ..identify.report import write_identification_report
 from ..plants import TwoMassDrive
-from .main import flag_names
+from .main import Flag, flag_names, spell
 
 __all__ = ["add_report_option", "maybe_write_report"]
 
@@ -49,6 +49,7 @@ def maybe_write_report(
     prior: TwoMassDrive,
     final_records: Any = None,
     notes: Sequence[str] = (),
+    flags: Mapping[str, Flag] | None = None,
 ) -> Path | None:
     """Write the report if ``--report`` was given.
 
@@ -66,6 +67,8 @@ def maybe_write_report(
         Experiments of the final least squares, when given separately.
     notes : sequence of str, optional
         The command's notes on the answer, listed in the report.
+    flags : mapping of str to Flag, optional
+        Library parameter -> the command's flag, for the advice the page words itself.
 
     Returns
     -------
@@ -78,6 +81,7 @@ def maybe_write_report(
         index = write_identification_report(
             args.report, records, result, prior=prior, force=bool(args.force),
             final_records=final_records, notes=notes,
+            spell=lambda option: spell(option, flags or {}),
         )
     print(f"backlashkit: wrote {index}", file=sys.stderr)
     return index

@@ -37,7 +37,7 @@ from __future__ import annotations
 import html
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -188,6 +188,7 @@ def write_identification_report(
     final_records: Any = None,
     title: str = "Backlash identification report",
     notes: Sequence[str] = (),
+    spell: Callable[[Option], str | None] | None = None,
 ) -> Path:
     """Write an HTML report of a fitted identifier into ``directory``.
 
@@ -217,6 +218,10 @@ def write_identification_report(
     notes : sequence of str, optional
         What the reader must know of the answer (the command line's notes), listed
         under the estimates.
+    spell : callable, optional
+        ``spell(option)`` words an option the page advises for the front end that
+        wrote it (the command line's flag), or returns None for Python's words
+        (default).
 
     Returns
     -------
@@ -254,7 +259,7 @@ def write_identification_report(
     fits = _draw_fits(out, prior, recs, finals, shown, result)
     _draw_criterion(out, prior, finals, shown, result)
     index.write_text(page(title, _sections(title, prior, recs, fits, shown, result,
-                                           notes)), encoding="utf-8")
+                                           notes, spell)), encoding="utf-8")
     return index
 
 
@@ -434,13 +439,13 @@ def _cost_sentence(shown: _Shown, result: Any) -> str:
             "penalty.</p>")
 
 
-def _noise_note(result: Any) -> str:
+def _noise_note(result: Any, spell: Callable[[Option], str | None] | None) -> str:
     """The joint estimator's noise model and what its residuals say of it."""
     from .joint import CORRELATED_LAG1
 
     ar = getattr(result, "noise_ar_", None)
     model = "white" if ar is None else f"autoregressive of order {ar.shape[-1]}"
-    message = result.correlation_message()
+    message = result.correlation_message(spell=spell)
     if message:
         said = f"<b>Note:</b> {html.escape(message)}."
     else:
@@ -472,7 +477,8 @@ def _notes_list(notes: Sequence[str]) -> str:
 
 
 def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_Fit],
-              shown: _Shown, result: Any, notes: Sequence[str] = ()) -> list[str]:
+              shown: _Shown, result: Any, notes: Sequence[str] = (),
+              spell: Callable[[Option], str | None] | None = None) -> list[str]:
     """The page's HTML sections."""
     bounds, dt4, method = shown.bounds, shown.dt4, shown.method
     profile = getattr(result, "profile_", None)
@@ -536,5 +542,5 @@ def _sections(title: str, prior: TwoMassDrive, recs: list[Record], fits: list[_F
         ),
     ]
     if hasattr(result, "correlation_message"):  # the joint estimator's noise model
-        sections.append(_noise_note(result))
+        sections.append(_noise_note(result, spell))
     return [s for s in sections if s]
