@@ -80,6 +80,28 @@ def test_json_summary(tmp_path, capsys):
         (e.time, e.kind, e.flank) for e in ref.events
     ]
     assert {e["kind"] for e in summary["events"]} == {"contact_made", "contact_lost"}
+    drive = read_drive_toml(DRIVE)
+    assert summary["model"] == {**dataclasses.asdict(drive), "fs_M": 0.0, "fs_L": 0.0,
+                                "tau_i": None}
+    assert summary["encoder"] is None
+
+
+def test_json_says_the_friction_loop_and_encoder_simulated(tmp_path, capsys):
+    """The summary said nothing of the Coulomb torques, the loop or the encoder a run
+    simulated (a QA pass)."""
+    toml = tmp_path / "real.toml"
+    toml.write_text(Path(DRIVE).read_text() + "fc_M = 0.02\nfc_L = 0.04\nfs_L = 0.05\n"
+                    "\n[actuator]\ntau_i = 0.003\n")
+    code, stdout, err = run([str(toml), "--experiment", "step-down", "--amplitude", "0.5",
+                             "--hold", "1", "--duration", "2", "--encoder", "4096",
+                             "--out", str(tmp_path / "r.csv"), "--json"], capsys)
+    assert code == 0, err
+    summary = json.loads(stdout)
+    model = summary["model"]
+    assert (model["fc_M"], model["fc_L"], model["fs_M"], model["fs_L"]) == (0.02, 0.04, 0.02,
+                                                                           0.05)
+    assert model["tau_i"] == 0.003
+    assert summary["encoder"] == {"counts_per_rev": 4096.0, "speed_filter": 0.0}
 
 
 def test_no_pull_law_is_used(tmp_path, capsys):

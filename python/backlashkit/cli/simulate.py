@@ -459,6 +459,12 @@ def run(args: argparse.Namespace) -> int:
             "command": "simulate",
             "drive": str(args.drive),
             "law": args.law,
+            # what was simulated, friction, loop and encoder included, as read
+            "model": {**dataclasses.asdict(drive),
+                      **dict(zip(("fs_M", "fs_L"), drive.to_chain().fs, strict=True)),
+                      "tau_i": None if actuator is None else actuator.tau_i},
+            "encoder": None if encoder is None else {
+                "counts_per_rev": encoder.counts_per_rev, "speed_filter": encoder.tau_w},
             **source,
             "output": str(out),
             "columns": list(columns),
