@@ -190,7 +190,7 @@ def _add_model(p: argparse.ArgumentParser) -> None:
         type=float,
         metavar="TAU",
         help="with --encoder: first-order filter of the encoder speeds, time constant TAU "
-        "in s (the drive's speed observer; default none)",
+        "in s (the drive's speed observer; default none; identify does not model it)",
     )
 
 
