@@ -218,12 +218,11 @@ def test_noise_model_note(tmp_path, record):
     result = SimpleNamespace(theta_=0.03, std_=1e-3, ci95_=(0.028, 0.032), interval_="fisher",
                              t_c_=[None], t_b_=[None], noise_ar_=None,
                              residual_lag1_=np.array([[0.004, -0.002]]),
-                             correlation_message=lambda *, spell=None: None)
+                             correlation_message=lambda: None)
     page = check_page(write_identification_report(tmp_path / "w", record, result, prior=PRIOR))
     assert "Noise model: white." in page and "largest lag-1 correlation is 0.004" in page
     result.noise_ar_ = np.zeros((1, 2, 3))
-    result.correlation_message = lambda *, spell=None: ("the residual of w_L in exp (record 1) "
-                                                        "has lag-1 x")
+    result.correlation_message = lambda: "the residual of w_L in exp (record 1) has lag-1 x"
     page = check_page(write_identification_report(tmp_path / "a", record, result, prior=PRIOR))
     assert "Noise model: autoregressive of order 3." in page
     assert "<b>Note:</b> the residual of w_L in exp (record 1) has lag-1 x." in page

@@ -121,7 +121,6 @@ from ..errors import (
     PriorMismatchWarning,
     QuantisedSpeedsWarning,
     SensitivityWarning,
-    word_parts,
 )
 from ..parallel import reporter
 from ..plants import TwoMassDrive
@@ -426,15 +425,8 @@ class JointIdentifier:
             self._far_from_prior(linear, records,
                                  [held_speed_gain(r, prior) for r in records])
 
-    def correlation_message(self, *, spell: Callable[[Option], str | None] | None = None
-                            ) -> str | None:
+    def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.
-
-        Parameters
-        ----------
-        spell : callable, optional
-            ``spell(option)`` words the advised option for a front end (the command
-            line's flag), or returns None for Python's words (default).
 
         Returns
         -------
@@ -443,7 +435,7 @@ class JointIdentifier:
             (a too narrow interval) or is numerical error (:data:`NOISE_FREE`); else None.
         """
         parts = self._correlation_parts()
-        return None if parts is None else word_parts(parts, spell)
+        return None if parts is None else "".join(map(str, parts))
 
     def _correlation_parts(self) -> tuple[str | Option, ...] | None:
         """:meth:`correlation_message` with its remedy as an :class:`Option` (the

@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, Option
+from ..errors import InputError, Option, word_parts
 from ..htmlpage import figure, page, save_figure, table
 from ..io import check_writable
 from ..plants import TwoMassDrive
@@ -445,7 +445,9 @@ def _noise_note(result: Any, spell: Callable[[Option], str | None] | None) -> st
 
     ar = getattr(result, "noise_ar_", None)
     model = "white" if ar is None else f"autoregressive of order {ar.shape[-1]}"
-    message = result.correlation_message(spell=spell)
+    # the command line's words for the advice where it wrote the page
+    message = (result.correlation_message() if spell is None
+               else _worded(result._correlation_parts(), spell))
     if message:
         said = f"<b>Note:</b> {html.escape(message)}."
     else:
@@ -454,6 +456,10 @@ def _noise_note(result: Any, spell: Callable[[Option], str | None] | None) -> st
                 f"largest lag-1 correlation is {largest:.3f} (a note appears above "
                 f"{CORRELATED_LAG1:g}).")
     return f'<p class="note">Noise model: {model}. {said}</p>'
+
+
+def _worded(parts, spell) -> str | None:
+    return None if parts is None else word_parts(parts, spell)
 
 
 def _prior_text(prior: TwoMassDrive, result: Any) -> str:
