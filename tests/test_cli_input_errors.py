@@ -1128,3 +1128,20 @@ def test_speeds_against_the_torque_are_refused_before_the_fit(steady_csv, tmp_pa
     assert re.search(r"signflip\.csv: under the torque held before the step-down at t = 2 s "
                      r"the speeds are -1(\.0\d*)? times the prior's: they turn against the "
                      r"torque; negate the speeds \(or the torque\)", err), err
+
+
+def test_the_record_table_widens_for_unix_time_stamps():
+    """A record timed in Unix seconds (1.7e9) overflowed the table's 10 characters and
+    shifted the columns after it (a QA pass)."""
+    from backlashkit.cli._identify_text import _record_table
+
+    lines = _record_table([
+        {"file": "a.csv", "t_s": 1700000002.0, "t_c": 1700000002.0151, "t_b": None,
+         "theta_ini": 0.0123},
+        {"file": "b.csv", "t_s": 2.0, "t_c": 2.01, "t_b": 2.05, "theta_ini": None}])
+    ends = {len(line) for line in lines}
+    assert len(ends) == 1, lines  # every line as long: the columns line up
+    heads = lines[0].split()
+    assert heads[:3] == ["file", "t_s", "(s)"]
+    assert lines[1].index("1700000002.0000") < lines[1].index("1700000002.0151")
+    assert lines[2].rstrip().endswith("-")

@@ -36,11 +36,15 @@ def _record_table(per_record: list[dict[str, Any]]) -> list[str]:
     together, is printed under the table). A "-" is a file without that value (the
     joint model's shaft leaves its flank after no step-down)."""
     shown = [c for c in COLUMNS if any(row[c[0]] is not None for row in per_record)]
-    lines = [" ".join([f"{'file':<30}", *(f"{head:>{w}}" for _, head, w, _ in shown)])]
-    for row in per_record:
-        cells = [f"{row[k]:{w}{f}}" if row[k] is not None else f"{'-':>{w}}"
-                 for k, _, w, f in shown]
-        lines.append(" ".join([f"{row['file'][-30:]:<30}", *cells]))
+    cells = [[format(row[k], f) if row[k] is not None else "-" for k, _, _, f in shown]
+             for row in per_record]
+    # a column as wide as its widest cell (a record's Unix time stamps: 1.7e9 s)
+    widths = [max(w, *(len(c[j]) for c in cells)) for j, (_, _, w, _) in enumerate(shown)]
+    lines = [" ".join([f"{'file':<30}", *(f"{head:>{w}}" for (_, head, _, _), w
+                                          in zip(shown, widths, strict=True))])]
+    for row, texts in zip(per_record, cells, strict=True):
+        lines.append(" ".join([f"{row['file'][-30:]:<30}",
+                               *(f"{x:>{w}}" for x, w in zip(texts, widths, strict=True))]))
     return lines
 
 
