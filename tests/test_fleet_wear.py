@@ -78,7 +78,14 @@ def test_the_rates_legend_promises_an_interval_only_where_one_is_drawn():
     few = wear_trends(_rows("few", 0.05, 4, seed=3) + _rows("some", 0.01, 3, seed=4))
     assert all(math.isnan(t.ci95_low) for t in few)
     labels = [t.get_text() for t in plot_rates(few).axes[0].get_legend().get_texts()]
-    assert labels and all(label.endswith("(Theil-Sen)") for label in labels), labels
+    assert labels and all(label.endswith("(Theil-Sen; no interval below 5 tests)")
+                          for label in labels), labels
+    # two drives: two panels side by side, none left blank (a QA pass)
+    from backlashkit.fleet.report import plot_drives
+
+    rows = _rows("few", 0.05, 4, seed=3) + _rows("some", 0.01, 3, seed=4)
+    (fig,) = plot_drives(few, rows)
+    assert [ax.get_visible() for ax in fig.axes] == [True, True]
     many = wear_trends(_rows("many", 0.05, 10, seed=1))
     labels = [t.get_text() for t in plot_rates(many).axes[0].get_legend().get_texts()]
     assert labels == ["flagged drive (Theil-Sen, Sen's 95 % interval)"], labels

@@ -106,7 +106,8 @@ def plot_rates(trends: Sequence[DriveTrend], *, ax=None):
         hi = np.array([shown[i].ci95_high for i in idx]) * 1e3
         err = np.vstack([s - lo, hi - s])
         # too few tests give no interval: the legend then promises none
-        said = "Theil-Sen, Sen's 95 % interval" if np.isfinite(err).any() else "Theil-Sen"
+        said = ("Theil-Sen, Sen's 95 % interval" if np.isfinite(err).any() else
+                f"Theil-Sen; no interval below {MIN_TREND_TESTS} tests")
         ax.errorbar(s, y[idx], xerr=np.nan_to_num(err), fmt="o", ms=4, color=colour,
                     capsize=2, label=f"{label} ({said})")
     ax.axvline(0.0, color="0.5", lw=0.8)
@@ -195,14 +196,15 @@ def plot_drives(trends: Sequence[DriveTrend], rows: Sequence[Mapping[str, Any]])
     figs = []
     for k in range(0, len(trends), PANELS_PER_FIGURE):
         chunk = trends[k:k + PANELS_PER_FIGURE]
-        n_rows = math.ceil(len(chunk) / _COLS)
+        cols = min(_COLS, len(chunk))  # fewer drives fill the width, no blank panels
+        n_rows = math.ceil(len(chunk) / cols)
         fig = _figure(10.0, 0.6 + 2.0 * n_rows)
-        axes = np.atleast_1d(fig.subplots(n_rows, _COLS, squeeze=False)).ravel()
+        axes = np.atleast_1d(fig.subplots(n_rows, cols, squeeze=False)).ravel()
         for ax, trend in zip(axes, chunk, strict=False):
             _panel(ax, trend, sorted(ok[trend.drive], key=lambda r: str(r["date"])))
         for ax in axes[len(chunk):]:
             ax.set_visible(False)
-        for ax in axes[::_COLS]:
+        for ax in axes[::cols]:
             ax.set_ylabel("theta (mrad)", fontsize=8)
         handles, labels = axes[0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside lower center", ncols=2, frameon=False,
