@@ -19,6 +19,14 @@ N_OMEGA_PLOT = 300
 #: of ``omega_max q h`` (``omega_max`` the largest crossing frequency, widened).
 PLOT_MIN_NODES = 30
 PLOT_NODES_PER_UNIT = 0.9
+#: The rightmost root is drawn at this many more delays across this share of ``h_max``
+#: about it: the default range runs to ten times ``h_max``, whose crossing its 60 even
+#: steps would draw with a few points only.
+NEAR_H_MAX = (0.8, 1.2)
+N_NEAR_H_MAX = 9
+#: The rightmost root's axis is linear within this share of its largest magnitude about
+#: 0, logarithmic beyond.
+SYMLOG_SHARE = 1e-3
 
 
 def _rightmost(result, hs: np.ndarray) -> np.ndarray:
@@ -80,16 +88,23 @@ def plot_margin(result, *, ax=None, h_range=(0.0, 1.0), n_h: int = 60):
     ax1.set_ylabel("|z_i(omega)|")
     ax1.set_title("generalized eigenvalues of the pencil")
     ax1.legend(loc="best")
-    hs = np.linspace(*h_range, n_h + 1)[1:]
-    ax2.plot(hs, _rightmost(result, hs), lw=1.2, label="rightmost root (spectral)")
+    hs = np.linspace(*h_range, n_h + 1)
+    if h_range[0] < result.h_max < h_range[1]:  # the crossing itself, drawn closely
+        hs = np.union1d(hs, result.h_max * np.linspace(*NEAR_H_MAX, N_NEAR_H_MAX))
+    re = _rightmost(result, hs)
+    ax2.plot(hs, re, lw=1.2, label="rightmost root (spectral)")
     ax2.axhline(0.0, color="k", lw=0.8)
+    # linear within a small band about 0, logarithmic beyond: a root just past the axis
+    # stays visible beside the short delays' deeply stable ones
+    ax2.set_yscale("symlog", linthresh=SYMLOG_SHARE * max(float(np.nanmax(np.abs(re))),
+                                                          1e-300))
     if math.isfinite(result.h_max) and result.h_max > 0:
         ax2.axvline(result.h_max, color="C3", ls="--", lw=1,
                     label=f"h_max = {result.h_max:.6g} s")
     for k, (a, b) in enumerate(result.stability_windows(h_range)):
         ax2.axvspan(a, b, color="C2", alpha=0.12, label="stable" if k == 0 else None)
     ax2.set_xlabel("delay h (s)")
-    ax2.set_ylabel("max Re s (1/s)")
+    ax2.set_ylabel("max Re s (1/s, symmetric log scale)")
     ax2.set_title("rightmost characteristic root")
     ax2.legend(loc="best")
     return fig
