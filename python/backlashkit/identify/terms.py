@@ -43,7 +43,7 @@ from ..errors import InputError, Option
 from ..io import UNCERTAIN_TERM_KEYS
 from ..plants import TwoMassDrive
 from .record import Record
-from .step import find_step_down, held_speed_gain, held_unsteady_share
+from .step import HELD_UNSTEADY, find_step_down, held_speed_gain, held_unsteady_share
 
 __all__ = [
     "ESTIMATED_FALL", "FRICTION_CHOICES", "KEEP_LEVEL", "KEEP_SHIFT", "PRIOR_PARAMS",
@@ -104,17 +104,6 @@ FC_START_FLOOR = 1e-3
 #: an extrapolation that amplifies the speeds' noise (paper A's two levels differ by a
 #: factor of about 6).
 LEVEL_SPREAD = 1.5
-#: A hold whose drive still accelerates with more than this share of the held torque
-#: at the step-down (:func:`~backlashkit.identify.step.held_unsteady_share`) shows no
-#: steady level: ``T - (f_M + f_L) w`` would count that share as friction. A 2 s hold
-#: of paper A's drive from rest (share over 0.5) started both Coulomb torques at over
-#: 0.3 N m for a truth of 0.02 and 0.04, and theta ended 12 % low
-#: (``tests/test_identify_real_drive.py::
-#: test_a_short_hold_from_rest_starts_the_coulomb_torques_from_the_rigid_body``). This
-#: share of paper A's larger torque is 0.094 N m too much for each; paper A's 40 s holds
-#: read up to 0.095 with priors 50 % off (``HELD_UNSTEADY``'s note), so its protocol
-#: keeps the start from the levels.
-COULOMB_STEADY = 0.2
 #: Starts of a fitted current-loop time constant, in sample times. The loop is added to
 #: the model after the search, from its result: where the drive also has Coulomb
 #: friction, that result has traded the loop's lag for friction and backlash, and a
@@ -605,7 +594,8 @@ def coulomb_start(recs: Sequence[Record], prior: TwoMassDrive) -> float:
     the prior's: a small difference of large numbers, which a prior 10 % high in
     ``f_M + f_L`` put at its floor on the second drive of
     ``benchmarks/real_drive.py`` (16 times below the truth's half-sum). Holds that
-    still accelerate the drive (beyond :data:`COULOMB_STEADY`) are left out; where
+    still accelerate the drive (beyond :data:`~backlashkit.identify.step.HELD_UNSTEADY`)
+    are left out; where
     every hold does, the median over records of the friction the prior's rigid body
     sees in each, ``T (1 - g)`` (``g``:
     :func:`~backlashkit.identify.step.held_speed_gain`). Halved, floored at
@@ -638,11 +628,16 @@ def coulomb_start(recs: Sequence[Record], prior: TwoMassDrive) -> float:
 
 
 def _accelerates(rec: Record, prior: TwoMassDrive) -> bool:
-    """Whether a step-down record's hold still accelerates the drive at its step-down
-    by more than :data:`COULOMB_STEADY` of the torque (False where that is not known:
-    no step-down, or too short a hold to tell)."""
+    """Whether a step-down record's hold is no steady level: at its step-down the drive
+    still accelerates by more than :data:`~backlashkit.identify.step.HELD_UNSTEADY` of
+    the torque, where the two-step method refuses its steady start (False where that is
+    not known: no step-down, or too short a hold to tell). ``T - (f_M + f_L) w`` would
+    count that share as friction: a 2 s hold of paper A's drive from rest started both
+    Coulomb torques at over 0.3 N m for a truth of 0.02 and 0.04, and theta ended 12 %
+    low (``tests/test_identify_real_drive.py::
+    test_a_short_hold_from_rest_starts_the_coulomb_torques_from_the_rigid_body``)."""
     try:
-        return held_unsteady_share(rec, prior) > COULOMB_STEADY
+        return held_unsteady_share(rec, prior) > HELD_UNSTEADY
     except InputError:
         return False
 
