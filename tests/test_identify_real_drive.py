@@ -785,6 +785,20 @@ def test_angle_unit_mistakes_are_named_as_such(tmp_path, capsys):
                for n in notes), notes
 
 
+def test_a_misfit_of_encoder_angles_is_said_of_the_angles():
+    """The correlated residual of angles fitted with the linear parameters held at a
+    prior 30 % off was said of the speeds (``w_M``), with the speed noise model's remedy
+    (``try noise_model=ARNoise()``), which does not apply to angles (a QA pass)."""
+    recs = _encoder_records(P_TRUE, THETA, seed=0)
+    wrong = {**P_TRUE, "k_sh": 1.3 * P_TRUE["k_sh"]}
+    with pytest.warns(bk.CorrelatedResidualsWarning) as caught:
+        _fit(recs, wrong, prior_rel_std=0, interval=bk.FisherInterval())
+    said = [str(w.message) for w in caught
+            if issubclass(w.category, bk.CorrelatedResidualsWarning)]
+    assert all("the residual of phi_" in m and "counts_per_rev" in m and "ARNoise" not in m
+               for m in said), said
+
+
 def test_cli_reads_encoder_counts(tmp_path, capsys):
     """``identify --counts-per-rev N`` reads the angles phi_motor, phi_load as counts
     and fits them."""

@@ -368,10 +368,10 @@ class JointIdentifier:
         _warn_fixed_loop(fitted["fixed_tests_"], self._terms()[1])
         self.__dict__.update(fitted, misfit_restarted_=restarted, misfit_restart_won_=won,
                              far_from_prior_=far)
+        self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
         parts = self._correlation_parts()
         if parts is not None:
             warnings.warn(CorrelatedResidualsWarning(*parts), stacklevel=2)
-        self.measured_ = ["angles" if r.has_positions else "speeds" for r in records]
         _warn_quantised(records, quanta)
         if self.interval != _PROFILE and self.interval_ == "quantisation":
             warnings.warn(QuantisedSpeedsWarning(
@@ -458,7 +458,14 @@ class JointIdentifier:
             what = f"ARNoise(order={self.noise_ar_.shape[-1]}) does not whiten the noise"
             fix = ("raise ", Option("order", None, python="the order"))
         held = self.held_noise_lag1_[k, c]
-        if (self.noise_ar_ is None and np.isfinite(held)
+        angles = self.measured_[k] == "angles"
+        if angles:  # no noise model of the speeds applies to the angles fitted
+            what = ("the errors of the encoder angles are not white (a misfit, or the "
+                    "quantisation while a shaft stands still)")
+            fix = ("check the prior, the encoders' counts per revolution (",
+                   Option("counts_per_rev", None), ") and whether a two-mass drive with "
+                   "backlash describes the record")
+        elif (self.noise_ar_ is None and np.isfinite(held)
                 and not noise_coloured(self.held_noise_lag1_, self._held_samples)):
             # the speeds' own noise is white: the residual's correlation is the model's
             what = (f"the model misfits, since the noise itself is white (lag-1 {held:.2f} "
@@ -469,7 +476,8 @@ class JointIdentifier:
         missing = self._missing_terms()  # a term the drive has may be what misfits
         lacks = (("; or the model lacks a term of the drive, or fixes it wrongly: try ",
                   *missing) if missing else ())
-        return (f"the residual of {('w_M', 'w_L')[c]} in {self._record_names[k]} (record "
+        signal = (("phi_M", "phi_L") if angles else ("w_M", "w_L"))[c]
+        return (f"the residual of {signal} in {self._record_names[k]} (record "
                 f"{k + 1}) has lag-1 "
                 f"autocorrelation {rho:.2f} (white noise: about 0): {what}, so the standard "
                 "error and interval of theta are too narrow; ", *fix, *lacks)
