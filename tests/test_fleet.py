@@ -252,6 +252,23 @@ def test_a_manifest_grown_by_a_week_completes_its_results(fleet, serial, tmp_pat
     assert out.read_bytes() == serial[0].read_bytes()
 
 
+def test_a_manifest_may_drop_a_refused_test(fleet, serial, tmp_path):
+    """A refused test has no result to lose: a manifest without it completes the file
+    (its other rows are kept, nothing is fitted), where one that drops a fitted test is
+    refused."""
+    short = read_manifest(_first_weeks(fleet, fleet.manifest.with_name("FIRST2.csv")))
+    last = fleet.dates[-1].isoformat()
+    lines = serial[0].read_text(encoding="utf-8").splitlines(keepends=True)
+    refused = [x.replace(f",{last},ok,", f",{last},refused,", 1) for x in lines[2:]]
+    assert sum(f",{last},refused," in x for x in refused) == N_DRIVES
+    out = tmp_path / "RESULTS.csv"
+    out.write_text("".join(lines[:2] + refused), encoding="utf-8")
+    calls = []
+    kept = identify_fleet(short, out=out, progress=lambda d, n: calls.append(d))
+    assert calls == [len(short.tests)]  # nothing fitted
+    assert kept == [r for r in serial[1] if r["date"] != last]
+
+
 def test_a_test_whose_files_changed_is_not_kept(fleet, serial, tmp_path, capsys):
     """A results row is kept for a test only with the files it was fitted from."""
     text = fleet.manifest.read_text(encoding="utf-8")

@@ -161,8 +161,9 @@ class ResultsFile:
         without a fingerprint: unless the file was written for this very manifest)."""
         if sha == self.sha256:
             return
-        stale = [f"{r['drive']} on {r['date']}" for r in rows
-                 if self.inputs.get((r["drive"], r["date"])) != r["inputs"]]
+        # a refused test has no result to lose: the manifest may drop it
+        stale = [f"{r['drive']} on {r['date']}" for r in rows if r["status"] != "refused"
+                 and self.inputs.get((r["drive"], r["date"])) != r["inputs"]]
         if not stale:
             return
         which = f"{stale[0]} and {len(stale) - 1} more are" if len(stale) > 1 \
