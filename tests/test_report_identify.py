@@ -195,6 +195,22 @@ def test_plot_helpers_take_ax_and_return_figure(record, fitted):
     assert plot_profile([[0.01, 1.0], [0.02, 0.0], [0.03, 4.0]], ci95=(0.012, 0.029),
                         ax=axes[4]) is fig
     assert isinstance(plot_cost([0.0, 0.01], [1.0, 2.0]), Figure)
+    # a QA pass: the load's residual was titled the motor-speed residual's, and a
+    # malformed profile or measured speeds failed in NumPy's or matplotlib's words
+    title = plot_residual_acf(record.w_load - record.w_load.mean(), ts=record.ts,
+                              label="w_L - w_L,sim").axes[0].get_title()
+    assert title.startswith("Autocorrelation of the residual w_L - w_L,sim"), title
+    with pytest.raises(InputError, match=r"profile must be rows \(theta in rad, cost "
+                                         r"rise\), shape \(k, 2\), got shape \(3,\)"):
+        plot_profile([1.0, 2.0, 3.0])
+    drive = bk.TwoMassDrive(J_M=4.88e-3, J_L=6.8e-2, k_sh=78.0, f_M=5e-3, f_L=5e-3,
+                            f_sh=1.575e-2, theta=0.0349)
+    t = signals.time_grid(0.2, 1e-3)
+    r = drive.simulate(t, signals.step_down(t, 0.942, t_s=0.1))
+    with pytest.raises(InputError, match=r"measured must hold 2 speed arrays, one per "
+                                         r"inertia, each of 201 samples .* got one array "
+                                         r"of shape \(201,\)"):
+        r.plot(measured=r.w_motor)
 
 
 def test_cli_hook(tmp_path, record, capsys):

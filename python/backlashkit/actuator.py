@@ -27,6 +27,12 @@ class CurrentLoop:
         Time constant in s, finite and >= 0; 0 applies the set-point exactly (the same
         as no actuator).
 
+    Notes
+    -----
+    A simulation starts the loop settled at the first set-point sample, as a drive that
+    has held it: a step at ``t[0]`` shows no lag (give ``initial_state`` one more entry,
+    the motor torque, to start it elsewhere, e.g. at 0).
+
     Examples
     --------
     >>> from backlashkit import CurrentLoop

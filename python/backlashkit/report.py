@@ -113,9 +113,16 @@ def plot_drive_response(
     """
     from matplotlib.lines import Line2D
 
-    fig, (ax_w, ax_t, ax_phi) = axes_of(ax, 3)
     t = response.t
     n = response.n_inertias
+    if measured is not None and (np.ndim(measured[0]) != 1 or len(measured) != n or any(
+            np.shape(w) != t.shape for w in measured)):
+        got = (f"one array of shape {np.shape(measured)}" if np.ndim(measured[0]) != 1
+               else f"{len(measured)} of shapes {[np.shape(w) for w in measured]}")
+        raise InputError(
+            f"measured must hold {n} speed arrays, one per inertia, each of {t.size} "
+            f"samples like the response's t, got {got}")
+    fig, (ax_w, ax_t, ax_phi) = axes_of(ax, 3)
     names = ["motor", "load"] if n == 2 else [f"inertia {i + 1}" for i in range(n)]
     for i in range(n):
         line = ax_w.plot(t, response.speeds[:, i], lw=1, zorder=3,

@@ -303,9 +303,13 @@ def plot_profile(
     """
     from .intervals import CHI2_95
 
+    p = np.asarray(profile, float)
+    p = p.reshape(0, 2) if p.size == 0 else p
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise InputError(f"profile must be rows (theta in rad, cost rise), shape (k, 2), "
+                         f"got shape {p.shape}: give JointIdentifier.profile_")
     fig, ax = _ax(ax)
     deg = 180.0 / math.pi
-    p = np.asarray(profile, float).reshape(-1, 2)
     if theta is not None and std is not None and theta > 0 and std > 0:
         lo, hi = float(np.min(p[:, 0])), float(np.max(p[:, 0]))
         span = max(hi - lo, 4.0 * std)
@@ -371,8 +375,8 @@ def plot_residual_acf(
     ax.axhline(0, color="k", lw=0.5)
     ax.set_xlabel("lag [ms]")
     ax.set_ylabel("autocorrelation")
-    ax.set_title(f"Autocorrelation of the motor-speed residual (N = {n} samples)",
-                 fontsize="medium")
+    what = "the motor-speed residual" if label is None else f"the residual {label}"
+    ax.set_title(f"Autocorrelation of {what} (N = {n} samples)", fontsize="medium")
     legend_outside(ax)
     ax.grid(alpha=0.3)
     return fig
