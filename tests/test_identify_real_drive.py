@@ -843,6 +843,10 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     assert "dropped" in small.reason() and "theta moves by 0.5" in small.reason()
     # a larger fit ending higher than the nested one found nothing: no number to read
     assert "ends no lower" in no_gain.reason() and "-0.5" not in no_gain.reason()
+    assert "stopped short" not in no_gain.reason()
+    # far higher: the larger model's search fell short of the one it contains
+    short = TermChoice.decide("friction", -5.8, 9.21, 0.0)
+    assert "its search may have stopped short" in short.reason(), short.reason()
     # estimated but not called for: the interval spans the model not chosen too
     cis = ((0.034, 0.036), (0.035, 0.037))
     assert TermChoice.decide("actuator", 5.0, 6.63, 3.0, True, cis).other_ci95 == cis[1]

@@ -93,6 +93,10 @@ SCREEN_DROP = 0.5
 #: 32 %) counted a third of them as estimated and spanned their intervals with the
 #: other model's, unbounded in some fits of ideal records.
 ESTIMATED_FALL = 0.5
+#: A model with a term that ends this much higher in ``-2 log L`` than the model without
+#: it (which it contains) did not converge: its reason says so (rounding and a stop
+#: within ``_lm.FINAL_ATOL`` of an optimum stay far below it).
+STOPPED_SHORT = 1.0
 #: Values of ``friction``.
 FRICTION_CHOICES = ("auto", "viscous", "coulomb")
 #: Start of each fitted Coulomb torque when the held levels show none, as a fraction
@@ -400,9 +404,13 @@ class TermChoice:
                     f"{SCREEN_DROP} (too little to pin it down): the data do not call for it")
         if self.rise <= 0:
             # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
-            # torques of 0), so a fit with the term ending higher found no better point
+            # torques of 0), so a fit with the term ending higher found no better point;
+            # far higher, its search stopped short of the model it contains
+            short = (f"; it ended {-self.rise:.3g} higher than the model without it, which "
+                     "it contains, so its search may have stopped short"
+                     if self.rise < -STOPPED_SHORT else "")
             return (f"{name} dropped: the fit with it ends no lower in -2 log L ({test}): "
-                    "the data do not call for it")
+                    f"the data do not call for it{short}")
         gain = f"it lowers -2 log L by {self.rise:.3g}"
         moves = (f"without it theta moves by {self.shift:.2g} of its standard errors"
                  if math.isfinite(self.shift) else
