@@ -804,9 +804,10 @@ def test_no_glitch_in_the_robustness_drives(j_l):
 @pytest.mark.parametrize("counts_per_rev", [4096.0, None])
 def test_encoder_angles_of_a_slow_drive_are_no_glitches(counts_per_rev):
     """A 4096-count encoder on a drive held at 0.3 N m: its speeds, differenced from the
-    angles, step by one count (1.53 rad/s) in a range of 6 rad/s. Read as counts or as
-    angles in rad (whose differences also differ by 1e-14 where the counts are equal),
-    1814 of those steps were refused as "single-sample spikes" (a QA pass)."""
+    angles, step by one count (1.53 rad/s) in a range of a few counts a sample (the
+    assertion below). Read as counts or as angles in rad (whose differences also differ
+    by rounding where the counts are equal), those steps were refused as
+    "single-sample spikes" (a QA pass)."""
     import backlashkit as bk
     from backlashkit import signals
     from backlashkit.identify.record import check_spikes

@@ -542,13 +542,14 @@ def test_the_coulomb_start_does_not_lean_on_the_priors_viscous_friction():
 def test_a_short_hold_from_rest_starts_the_coulomb_torques_from_the_rigid_body(
         monkeypatch, hold):
     """One record of paper A's drive with Coulomb friction and a 3 ms loop, held 2 s
-    from rest (still accelerating with about 70 % of the torque at the step-down) or
-    5 s (45 %), 3 s after, and a prior 15 % off: ``T - (f_M + f_L) w`` took that
-    acceleration for friction and started both Coulomb torques at 0.36 or 0.24 N m. The
-    search did not come back: after 2 s the test dropped friction ("the fit with it
-    ends no lower") and theta ended 12 % low with an interval 22 standard errors off (a
-    QA pass); after 5 s, 10 % low. The prior's rigid body, from rest, sees the friction
-    in how much the drive lags it (``T (1 - g)``; ``-s`` prints both fits)."""
+    from rest (still accelerating with 73 % of the torque at the step-down) or 5 s
+    (45 %; ``-s`` prints both shares), 3 s after, and a prior 15 % off:
+    ``T - (f_M + f_L) w`` took that acceleration for friction and started both Coulomb
+    torques at 0.36 or 0.24 N m. The search did not come back: after 2 s the test
+    dropped friction ("the fit with it ends no lower") and theta ended 12 % low with
+    an interval 22 standard errors off (a QA pass); after 5 s, 10 % low. The prior's
+    rigid body, from rest, sees the friction in how much the drive lags it
+    (``T (1 - g)``; ``-s`` prints both fits)."""
     from backlashkit.identify import terms
 
     truth = bk.TwoMassDrive(**P_TRUE, theta=0.03, fc_M=0.02, fc_L=0.04)

@@ -241,8 +241,8 @@ SPIKE_RANGE = 0.2
 
 
 #: Steps of a speed below this share of its largest value are rounding, not a quantum:
-#: speeds differenced from angles in rad (counts times ``2 pi / N``) differ by about
-#: 1e-14 of their size where the counts are the same.
+#: speeds differenced from angles in rad (counts times ``2 pi / N``) differ by a few
+#: units in their last place where the counts are the same, far below this.
 ROUNDING_STEP = 1e-9
 
 
