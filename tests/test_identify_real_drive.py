@@ -231,6 +231,44 @@ def test_ideal_records_keep_paper_a_model_unchanged(monkeypatch):
     assert auto.estimated_ == plain.estimated_
 
 
+def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
+    """A drive with no backlash (theta = 0, the scipy reference at 40 dB; trials 2 and
+    4 of the seed-7 trials of ``python benchmarks/small_backlash.py``): theta is fitted
+    as a logarithm, which only approaches 0, so its interval was ``[theta_ / 10, 10
+    theta_]``, the widest the profile's search in log theta reaches: about an estimate of
+    8e-15 rad in trial 2, leaving out 0 and the standard error's 9e-6 rad alike. In
+    trial 4 ``f_M`` moved x0.31 from the prior, which is the truth, with a warning that
+    blamed swapped columns: without backlash the two speeds hardly tell the motor's
+    viscous friction from the load's, and that move is within its own noise. The
+    interval now reaches 0 (the profile at theta = 0 stays below 3.84) and ends where
+    the profile, followed in rad, crosses 3.84; no warning."""
+    trials = np.random.SeedSequence(7).spawn(12)
+    recs = _records(P_TRUE, 0.0, seed=trials[2])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PriorMismatchWarning)
+        moved = _fit(_records(P_TRUE, 0.0, seed=trials[4]), P_TRUE)
+        fit = _fit(recs, P_TRUE)
+    print(f"trial 4: f_M x{moved.params_['f_M'] / P_TRUE['f_M']:.3g}, the standard error of "
+          f"its logarithm {moved.param_std_['f_M'] / moved.params_['f_M']:.3g}, ci95_ from "
+          f"{moved.ci95_[0]:.3g}")
+    lo, hi = fit.ci95_
+    print(f"trial 2: theta_ {fit.theta_:.3g} rad, std_ {fit.std_:.3g}, ci95_ [{lo:.3g}, "
+          f"{hi:.3g}]")
+    assert moved.ci95_[0] == 0.0
+    assert lo == 0.0 and fit.ci95_bounded_ == (True, True)
+    at_0 = fit.profile_[fit.profile_[:, 0] == 0.0, 1]
+    at_hi = fit.profile_[np.argmin(np.abs(fit.profile_[:, 0] - hi)), 1]
+    assert at_0.size and np.all(at_0 < 3.84) and at_hi == pytest.approx(3.84, abs=0.25)
+    assert fit.std_ < hi < fit.theta_ + 5.0 * fit.std_
+    paths, prior = _files(recs, tmp_path)  # the command line says what it means
+    capsys.readouterr()
+    assert cli_main(["identify", *paths, "--drive", prior, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["ci95"] == [0.0, pytest.approx(hi)]
+    assert any(n.startswith("the 95% interval of theta reaches 0: these records are "
+                            "consistent with a drive without backlash") for n in doc["notes"])
+
+
 def test_known_current_loop_is_not_fitted():
     recs = _records(P_TRUE, THETA, tau_i=1e-3, seed=4)
     fit = _fit(recs, P_TRUE, friction="viscous", actuator=bk.CurrentLoop(tau_i=1e-3))

@@ -626,6 +626,9 @@ def _notes(args: argparse.Namespace, est: Any, caught: list[warnings.WarningMess
     if getattr(est, "std_", None) is None:  # two-step, regression: a bounded search
         return (_noted(caught, flags, (SearchEdgeWarning,)) + _unread_table(args)
                 + _unused_torques(est))
+    if est.ci95_[0] == 0.0:
+        out.append("the 95% interval of theta reaches 0: these records are consistent with a "
+                   "drive without backlash (its upper end is the largest backlash they allow)")
     for end, bounded in zip(("lower", "upper"), est.ci95_bounded_, strict=True):
         if not bounded:
             out.append(f"the likelihood does not rise to the 95% level on the {end} side "

@@ -456,7 +456,8 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
                 draw: Callable[[np.ndarray, np.random.Generator], list[Record]],
                 refit: Callable[[list[Record]], float], *, look_past: bool = False,
                 anchor: dict[str, float] | None = None,
-                rivals: Sequence[np.ndarray] = ()) -> Uncertain:
+                rivals: Sequence[np.ndarray] = (), jacobian: np.ndarray | None = None
+                ) -> Uncertain:
     """Stage 8: Gauss-Newton covariance and the interval object's interval; a profile
     refit well below the estimate's cost moves the estimate there (at most
     :data:`RECENTRE_MAX` times). ``draw(z, rng)``: a bootstrap resample at ``z``;
@@ -464,17 +465,14 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
     ``anchor``: the prior's point (z units by name), a second start of the profile's
     end refits (:attr:`IntervalInputs.anchor`); ``rivals``: the search's other minima
     (log-parameters of ``pb``), refitted on ``rows_unc`` and handed on where they stay
-    rivals (:attr:`IntervalInputs.rivals`)."""
+    rivals (:attr:`IntervalInputs.rivals`); ``jacobian``: the Jacobian of ``rows_unc``
+    at ``best.z``, where already made."""
     near = [pb.refine(rows_unc, z, max_iter) for z in rivals]
     for k_centre in range(RECENTRE_MAX + 1):
         z = best.z
-        # the prior's rows are in the residual: its information is in J^T J
-        jz = pb.central_jacobian(rows_unc, z)
-        info = jz.T @ jz
-        try:
-            cov_z = np.linalg.inv(info)
-        except np.linalg.LinAlgError:
-            cov_z = np.linalg.pinv(info)
+        jz = (jacobian if k_centre == 0 and jacobian is not None
+              else pb.central_jacobian(rows_unc, z))
+        cov_z = fisher_covariance(jz)
         values = pb.values(z)
         dv = np.where(pb.scales > 0, pb.scales, values)  # delta method: dp = p dz
         cov = cov_z * np.outer(dv, dv)
@@ -492,6 +490,17 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
             break
         best = st
     return Uncertain(best, values, cov, std, found, jz, cov_z)  # z is best.z on every exit
+
+
+def fisher_covariance(jz: np.ndarray) -> np.ndarray:
+    """The Gauss-Newton covariance ``(J^T J)^-1`` of the estimated values from the
+    residual's Jacobian ``jz`` (the prior's rows are in it: its information is in
+    ``J^T J``); the pseudo-inverse where that is singular."""
+    info = jz.T @ jz
+    try:
+        return np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(info)
 
 
 def resample(pb: Problem, sig: np.ndarray, ar: np.ndarray | None, z: np.ndarray,
@@ -681,13 +690,15 @@ _UNSET = object()
 def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record], *,
         start_drive: TwoMassDrive, z_anchor: np.ndarray, fixed_noise: bool, noise_model,
         interval, refit: Callable[[list[Record]], float], terms: Sequence[Term] = (),
-        refuse_far: Callable[[dict[str, float]], None] = lambda linear: None,
+        refuse_far: Callable[[dict[str, float], dict[str, float]], None]
+        = lambda linear, log_std: None,
         stage: Callable[[int], None] = lambda done: None) -> Outcome:
     """The whole search from ``z_anchor`` (log linear parameters, then the added
     terms'), the noise levels, the choice of the ``"auto"`` terms, the uncertainty and
     the interval. ``refit(records)``: ``theta`` of a bootstrap resample's fit;
-    ``refuse_far(linear)``: raises where the estimated linear parameters (by name) are
-    too far from the prior, checked before the uncertainty; ``stage(k)``: called as
+    ``refuse_far(linear, log_std)``: raises where the estimated linear parameters (by
+    name; ``log_std``: their logarithms' standard errors) are too far from the prior,
+    checked before the uncertainty; ``stage(k)``: called as
     each of the :data:`STAGES` stages ends."""
     final_h = search.final_horizon
     anchor = dict(zip(pb.free, z_anchor, strict=True))
@@ -712,9 +723,14 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     # before the uncertainty (whose refits at such a point can take minutes)
     checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
     refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1], terms)
-    refuse_far({n: float(x) for n, x in zip(pb.names, pb.values(best.z), strict=True)
-                if n in LINEAR_PARAMS})
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
+    # a move within a parameter's own noise is no sign of a wrong prior or units
+    jz = pb.central_jacobian(rows_unc, best.z)
+    log_std = np.sqrt(np.maximum(np.diag(fisher_covariance(jz)), 0.0))
+    refuse_far({n: float(x) for n, x in zip(pb.names, pb.values(best.z), strict=True)
+                if n in LINEAR_PARAMS},
+               {n: float(x) for n, x in zip(pb.names, log_std, strict=True)
+                if n in LINEAR_PARAMS})
     # a term added after the search (a loop's lag) trades against the linear parameters
     # along a curved valley, and theta's profile can fall again past a crossing
     unc = uncertainty(pb, best, rows_unc, interval, search.max_iter,
@@ -724,7 +740,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
                       anchor=anchor if search.restarts.prior else None,
                       rivals=[np.array([pt.get(n, x) for n, x in zip(pb.names, best.z,
                                                                     strict=True)])
-                              for pt in rival_points])
+                              for pt in rival_points], jacobian=jz)
     if quantised(rows_unc):
         errors = quantisation_errors(unc, rows_unc)
         unc.interval = interval._quantised(unc.interval, float(unc.values[0]), errors)

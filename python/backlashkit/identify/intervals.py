@@ -55,6 +55,10 @@ PROFILE_FIRST_STEP = 0.05
 #: the profile of ``theta`` rose to 3.79 at its first crossing and fell to 2.65 a
 #: quarter further out; the truth lay beyond.
 LOOK_PAST = 0.25
+#: Largest upper end (rad) of a profile followed in rad of theta: a backlash half-width
+#: of half a turn is no gear's, and records that do not bound theta below it do not
+#: bound it at all.
+MAX_HALF_WIDTH = math.pi
 #: Looks past an end at most, per side.
 LOOKS_PAST = 2
 #: Iterations of an end's refit from the prior's point before it must be below the
@@ -197,6 +201,16 @@ class ProfileLikelihood:
     factor ``max_factor`` of ``theta_`` is reported at that factor: the records do not
     bound ``theta`` there.
 
+    Where the Fisher interval reaches 0 (``theta_ <= 1.96 std_``: a drive with no
+    backlash, or less than the records resolve), the logarithm's distances cannot reach
+    it: the profile is followed in rad of ``theta`` instead, from the estimate down to
+    ``theta = 0`` (the other parameters refitted there) and up to ``max_factor`` times
+    the larger of ``theta_`` and ``1.96 std_`` (at most :data:`MAX_HALF_WIDTH`). The
+    lower end is 0, bounded, where the profile at ``theta = 0`` stays below 3.84: the
+    records are consistent with a drive without backlash, and the upper end is the
+    largest backlash they allow. The lower side of any other profile that does not
+    reach 3.84 within ``max_factor`` is followed down to 0 the same way.
+
     Parameters
     ----------
     tol : float, optional
@@ -230,29 +244,75 @@ class ProfileLikelihood:
         cov_z = fit.cov_z
         s_z = math.sqrt(cov_z[0, 0]) if cov_z[0, 0] > 0 else 0.0
         first = Z_95 * s_z if s_z > 0 else PROFILE_FIRST_STEP
-        search = _HeldTheta(fit, self.max_iter)
-        ends = self._ends(search, first, fit.look_past,
-                          fit.anchor is not None and bool(fit.anchor.size))
-        evaluated = list(search.evaluated)
+        recheck = fit.anchor is not None and bool(fit.anchor.size)
+        # where theta's Fisher interval reaches 0, the logarithm's distances cannot reach
+        # it: the profile is followed in rad of theta, down to no backlash at all
+        near_zero = fit.theta <= Z_95 * fit.std
+        # the widest upper end
+        top = min(self.max_factor * max(fit.theta, Z_95 * fit.std), MAX_HALF_WIDTH)
+        searches = [_HeldTheta(fit, self.max_iter, natural=near_zero)]
+        if near_zero:
+            ends = [self._natural_end(searches[0], sign, Z_95 * fit.std, fit.look_past,
+                                      recheck, top) for sign in (-1.0, 1.0)]
+        else:
+            ends = self._ends(searches[0], first, fit.look_past, recheck)
+            if not ends[0][1]:  # not bounded within max_factor below: on down to 0
+                searches.append(_HeldTheta(fit, self.max_iter, natural=True))
+                ends[0] = self._natural_end(searches[1], -1.0, Z_95 * fit.std,
+                                            fit.look_past, recheck, top)
         for z_r, cost_r in fit.rivals:  # the profile is the lowest over every basin
-            other = _HeldTheta(replace(fit, z=z_r, anchor=None), self.max_iter,
-                               cost_r - fit.cost)
-            # the side away from the estimate: between the two lies the estimate's basin;
-            # no farther than the estimate's own search goes
-            side = 1.0 if z_r[0] > fit.z[0] else -1.0
-            room = math.log(self.max_factor) - abs(z_r[0] - fit.z[0])
-            if room <= 0.0:
+            found = self._rival_end(fit, z_r, cost_r, first, near_zero, top)
+            if found is None:
                 continue
-            (end,) = self._ends(other, first, fit.look_past, False, (side,), room)
-            k = int(side > 0)
-            if (end[0] - ends[k][0]) * side > 0:
+            end, other = found
+            k = int(z_r[0] > fit.z[0])
+            if (end[0] - ends[k][0]) * (2 * k - 1) > 0:
                 ends[k] = end
-            evaluated += other.evaluated
-        lowest = min(evaluated, key=lambda e: e[0])
+            searches.append(other)
+        evaluated = [e for search in searches for e in search.evaluated]
+        # a refit at theta = 0 (log theta -inf) is no point to refine the estimate from
+        lowest = min((e for e in evaluated if math.isfinite(e[1][0])), key=lambda e: e[0])
         points = np.array(sorted((math.exp(zz[0]), r) for r, zz in evaluated))
         return ThetaInterval("profile", (ends[0][0], ends[1][0]), (ends[0][1], ends[1][1]),
                              profile=points, lowest_rise=float(lowest[0]),
                              lowest_z=lowest[1], rivals=len(fit.rivals))
+
+    def _rival_end(self, fit: IntervalInputs, z_r: np.ndarray, cost_r: float, first: float,
+                   near_zero: bool, top: float) -> tuple[tuple[float, bool], _HeldTheta] | None:
+        """The end of a rival basin's profile (at ``z_r``, ``cost_r``) on its side away
+        from the estimate, and its search; None where it lies beyond the estimate's own
+        search (``top``, or ``max_factor`` in log theta). Between the two lies the
+        estimate's basin."""
+        side = 1.0 if z_r[0] > fit.z[0] else -1.0
+        other = _HeldTheta(replace(fit, z=z_r, anchor=None), self.max_iter,
+                           cost_r - fit.cost, natural=near_zero)
+        if near_zero:
+            if side > 0 and other.theta0 >= top:
+                return None
+            return self._natural_end(other, side, Z_95 * fit.std, fit.look_past, False,
+                                     top), other
+        room = math.log(self.max_factor) - abs(z_r[0] - fit.z[0])
+        if room <= 0.0:
+            return None
+        (end,) = self._ends(other, first, fit.look_past, False, (side,), room)
+        return end, other
+
+    def _natural_end(self, search: _HeldTheta, sign: float, first: float, look_past: bool,
+                     recheck: bool, top: float) -> tuple[float, bool]:
+        """One end ``(theta, bounded)`` of a basin's profile followed in rad of theta
+        (``search.natural``): on the lower side (``sign`` -1) 0, bounded, where the
+        profile at ``theta = 0`` stays below 3.84 (the records allow no backlash), else
+        its crossing above 0; on the upper side its crossing up to ``top`` (rad)."""
+        memo: dict[float, np.ndarray] = {}
+        rise = partial(search.rise, sign, memo)
+        largest = search.theta0 if sign < 0 else top - search.theta0
+        if sign < 0 and rise(largest) < CHI2_95:
+            return 0.0, True
+        d, ok = self._end(rise, min(first, largest), look_past,
+                          partial(search.recheck, sign, memo) if recheck else None, largest)
+        if sign < 0 and not ok:  # a refit from the anchor lowered it below 3.84 down to 0
+            return 0.0, True
+        return search.theta0 + sign * d, ok
 
     def _ends(self, search: _HeldTheta, first: float, look_past: bool, recheck: bool,
               signs: tuple[float, ...] = (-1.0, 1.0), largest: float | None = None
@@ -297,13 +357,19 @@ class ProfileLikelihood:
 class _HeldTheta:
     """Refits of a fit's other log-parameters with ``theta`` held: its profile."""
 
-    def __init__(self, fit: IntervalInputs, max_iter: int, rise0: float = 0.0) -> None:
-        """``fit.z``: the basin's minimum, ``rise0`` above ``fit.cost`` (a rival's)."""
-        self.fit, self.max_iter = fit, max_iter
+    def __init__(self, fit: IntervalInputs, max_iter: int, rise0: float = 0.0, *,
+                 natural: bool = False) -> None:
+        """``fit.z``: the basin's minimum, ``rise0`` above ``fit.cost`` (a rival's).
+        Distances are in log theta, or with ``natural`` in rad of theta (down to
+        ``theta = 0``, which a logarithm only approaches)."""
+        self.fit, self.max_iter, self.natural = fit, max_iter, natural
         z, cov_z = fit.z, fit.cov_z
         # the other log-parameters move with theta along the Fisher covariance: the
         # start of every held-theta refit (its exact optimum where the cost is quadratic)
         self.slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(z.size - 1)
+        self.theta0 = math.exp(z[0])  # the basin's theta, rad
+        if natural:  # d log theta = d theta / theta at the basin's minimum
+            self.slope = self.slope / self.theta0
         #: every refit: cost rise and log-parameters (the estimate first)
         self.evaluated: list[tuple[float, np.ndarray]] = [(rise0, z)]
         self._rises: dict[tuple[float, float], float] = {}  # (sign, d) -> rise
@@ -326,9 +392,18 @@ class _HeldTheta:
         ww[:, 1:] += h * np.eye(m)
         return ((self.fit.residual(ww) - r) / h).T
 
+    def held(self, sign: float, d: float) -> float:
+        """The log theta held at distance ``d`` on the side ``sign`` (``-inf``: theta
+        = 0, the end of the natural distances' lower side)."""
+        if not self.natural:
+            return float(self.fit.z[0] + sign * d)
+        theta = self.theta0 + sign * d
+        return math.log(theta) if theta > 0.0 else -math.inf
+
     def rise(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
-        """Cost rise of the profile at distance ``d`` (log theta) on the side ``sign``;
-        ``memo`` holds that side's refits (distance -> other log-parameters)."""
+        """Cost rise of the profile at distance ``d`` (log theta, or rad where
+        :attr:`natural`) on the side ``sign``; ``memo`` holds that side's refits
+        (distance -> other log-parameters)."""
         if (sign, d) in self._rises:  # a look past an end is where the search goes on
             return self._rises[sign, d]
         self._rises[sign, d] = self._rise(sign, memo, d)
@@ -338,7 +413,7 @@ class _HeldTheta:
         """The rise at an end ``d`` already refitted, refitted again from the fit's
         ``anchor``; the lower refit is kept (in ``memo`` too, so that the search
         continues from it)."""
-        zt = self.fit.z[0] + sign * d
+        zt = self.held(sign, d)
         fun, jac = partial(self._residual, zt), partial(self._jacobian, zt)
         r0 = fun(self.fit.anchor)
         start = LMState(np.array(self.fit.anchor, float), r0, float(r0 @ r0), None)
@@ -363,18 +438,25 @@ class _HeldTheta:
 
     def _rise(self, sign: float, memo: dict[float, np.ndarray], d: float) -> float:
         z, cost = self.fit.z, self.fit.cost
-        zt = z[0] + sign * d
+        zt = self.held(sign, d)
         if z.size == 1:  # theta alone is estimated: the profile is the cost itself
             r = self._residual(zt, np.empty(0))
             self.evaluated.append((float(r @ r) - cost, np.array([zt])))
             return self.evaluated[-1][0]
-        if memo:  # continue from the nearest refit on this side
-            d0 = min(memo, key=lambda x: abs(x - d))
-            w0 = memo[d0] + self.slope * sign * (d - d0)
-        else:
-            w0 = z[1:] + self.slope * sign * d
-        st = lm(partial(self._residual, zt), partial(self._jacobian, zt), w0,
-                max_iter=self.max_iter, atol=PROFILE_ATOL)
+        w_near = memo[min(memo, key=lambda x: abs(x - d))] if memo else z[1:]
+        d0 = min(memo, key=lambda x: abs(x - d)) if memo else 0.0
+        # continue from the nearest refit on this side, moved along the slope
+        w0 = w_near + self.slope * sign * (d - d0)
+        fun = partial(self._residual, zt)
+        start = None
+        if self.natural:
+            # near theta = 0 the Fisher slope is the tangent of a curved valley (the
+            # friction's split is hardly determined without backlash): where it leads
+            # higher than the nearest refit itself, start there
+            start = min((LMState(w, r, float(r @ r), None) for w in (w0, w_near)
+                         for r in (fun(w),)), key=lambda st_: st_.cost)
+        st = lm(fun, partial(self._jacobian, zt), w0, max_iter=self.max_iter,
+                atol=PROFILE_ATOL, state=start)
         memo[d] = st.z
         self.evaluated.append((st.cost - cost, np.r_[zt, st.z]))
         return self.evaluated[-1][0]

@@ -28,7 +28,9 @@ Fitted attributes besides those in the class docstring
 ``ci95_bounded_`` (tuple of bool)
     Whether each end of the profile interval was reached; False where the profile did
     not rise to the 95 % level within ``ProfileLikelihood.max_factor`` of ``theta_``
-    (the records hardly bound ``theta`` there). ``(True, True)`` for other intervals.
+    (the records hardly bound ``theta`` there). A lower end of 0 is bounded: the
+    profile stays below the 95 % level down to ``theta = 0``, so the records are
+    consistent with a drive without backlash. ``(True, True)`` for other intervals.
 ``interval_`` (str)
     ``"profile"``, ``"fisher"`` or ``"bootstrap"``: where ``ci95_`` comes from; or
     ``"quantisation"`` on encoder angles of known step, where ``ci95_`` and ``std_``
@@ -362,7 +364,7 @@ class JointIdentifier:
             labels = (*_search.STAGE_NAMES, *(f"{n}, again" for n in _search.STAGE_NAMES))
             with reporter(self.progress, "identify", unit="stage", labels=labels) as bar:
                 fitted, restarted, won = self._fit_and_restart(records, bar)
-        far = self._far_from_prior(_linear(fitted), records, gains)
+        far = self._far_from_prior(_linear(fitted), records, gains, _linear_log_std(fitted))
         _warn_prior_conflicts(fitted["prior_pull_"],
                               rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
         _warn_fixed_loop(fitted["fixed_tests_"], self._terms()[1])
@@ -404,26 +406,30 @@ class JointIdentifier:
             fitted = again if won else fitted
         return fitted, restarted, won
 
-    def _far_from_prior(self, linear: dict[str, float], records, gains: list[float]):
+    def _far_from_prior(self, linear: dict[str, float], records, gains: list[float],
+                        log_std: dict[str, float]):
         """Refuse the fitted linear parameters ``linear`` beyond REFUSE_FROM_PRIOR before
         the estimator holds the answer; warn of those beyond FAR_FROM_PRIOR (``gains``:
-        the records' :func:`held_speed_gain`)."""
+        the records' :func:`held_speed_gain`; ``log_std``: the standard errors of their
+        logarithms, within FAR_Z of which a move is not far)."""
         return check_fit_near_prior(
             linear, self.prior, allow_far_from_prior=self.allow_far_from_prior,
             stacklevel=3, held_gains=gains,
             missing=self._missing_terms(), names=[r.name for r in records],
-            angles=any(r.has_positions for r in records))
+            angles=any(r.has_positions for r in records), log_std=log_std)
 
-    def _refuse_far(self, records, prior, linear: dict[str, float]) -> None:
+    def _refuse_far(self, records, prior, linear: dict[str, float],
+                    log_std: dict[str, float]) -> None:
         """Refuse the search's point now where :meth:`_far_from_prior` would refuse its
-        answer (``linear``: its linear parameters), before the uncertainty and the
+        answer (``linear``: its linear parameters; ``log_std``: the standard errors of
+        their logarithms), before the uncertainty and the
         second search (``Restarts.misfit``), whose refits from such a point can take far
         longer than a fit (a viscous model of a drive with Coulomb friction drives ``J_M``
         towards 0, where the simulations chatter); warn of nothing (the answer's check
         does)."""
-        if not self.allow_far_from_prior and too_far(linear, self.prior):
+        if not self.allow_far_from_prior and too_far(linear, self.prior, log_std=log_std):
             self._far_from_prior(linear, records,
-                                 [held_speed_gain(r, prior) for r in records])
+                                 [held_speed_gain(r, prior) for r in records], log_std)
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.
@@ -645,6 +651,12 @@ def _warn_quantised(records, quanta: list[tuple[float, float]]) -> None:
 def _linear(fitted: dict[str, Any]) -> dict[str, float]:
     """The estimated linear parameters of a fit, by name."""
     return {n: fitted["params_"][n] for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS}
+
+
+def _linear_log_std(fitted: dict[str, Any]) -> dict[str, float]:
+    """The standard errors of the logarithms of a fit's estimated linear parameters."""
+    return {n: fitted["param_std_"][n] / fitted["params_"][n]
+            for n in fitted["estimated_"][1:] if n in LINEAR_PARAMS}
 
 
 def _misfits(fitted: dict[str, Any]) -> bool:

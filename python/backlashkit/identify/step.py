@@ -34,6 +34,7 @@ __all__ = [
     "check_step_down",
     "check_step_downs",
     "common_scale",
+    "determined_move",
     "find_step_down",
     "held_speed_gain",
     "held_unsteady_share",
@@ -51,6 +52,13 @@ FAR_FROM_PRIOR = 3.0
 #: x0.1, swapped speeds J_M x6 and k_sh x6, held speeds x9.55), whose theta means
 #: nothing.
 REFUSE_FROM_PRIOR = 5.0
+#: A fitted parameter counts as far from the prior only where its move is also beyond
+#: this many of its own standard errors (of its logarithm): the two-sided 0.1 % point
+#: of the normal, so a right prior of a parameter the records hardly determine (the
+#: split of the viscous friction between motor and load on a drive without backlash:
+#: a standard error of x2e4 in ``f_M``) is blamed in 1 fit of 1000, while a unit or
+#: column mistake moves well-determined parameters by many of theirs.
+FAR_Z = 3.29
 #: The advice that overrides the refusal, in a message.
 ALLOW_FAR_FROM_PRIOR = Option("allow_far_from_prior", True)
 #: More separate step-downs (each beyond a tenth of the largest) than this in one record
@@ -610,9 +618,11 @@ def ratios_to_prior(params: Mapping[str, float], prior: TwoMassDrive) -> str:
     return ", ".join(f"{n} x{x / getattr(prior, n):.3g}" for n, x in params.items())
 
 
-def too_far(params: Mapping[str, float], prior: TwoMassDrive) -> dict[str, float]:
+def too_far(params: Mapping[str, float], prior: TwoMassDrive, *,
+            log_std: Mapping[str, float] | None = None) -> dict[str, float]:
     """The fitted linear parameters that :func:`check_fit_near_prior` refuses: more than
-    :data:`REFUSE_FROM_PRIOR` times off the prior's (either way).
+    :data:`REFUSE_FROM_PRIOR` times off the prior's (either way), and more than
+    :data:`FAR_Z` of their standard errors (:func:`determined_move`).
 
     Parameters
     ----------
@@ -620,13 +630,42 @@ def too_far(params: Mapping[str, float], prior: TwoMassDrive) -> dict[str, float
         The estimated linear parameters by name (``J_M``, ``k_sh``, ...).
     prior : TwoMassDrive
         The prior drive.
+    log_std : mapping of str to float, optional
+        Standard error of each one's logarithm; default none known (every move counts).
 
     Returns
     -------
     dict of str to float
         Those of ``params`` that far off, by name.
     """
-    return {n: x for n, x in params.items() if is_far(x / getattr(prior, n), REFUSE_FROM_PRIOR)}
+    return {n: x for n, x in params.items()
+            if is_far(x / getattr(prior, n), REFUSE_FROM_PRIOR)
+            and determined_move(n, x / getattr(prior, n), log_std)}
+
+
+def determined_move(name: str, ratio: float, log_std: Mapping[str, float] | None) -> bool:
+    """Whether the move of parameter ``name`` by ``ratio`` from the prior is beyond
+    :data:`FAR_Z` standard errors of its logarithm (``log_std``; None or a name it
+    lacks: taken as determined).
+
+    Parameters
+    ----------
+    name : str
+        The parameter.
+    ratio : float
+        Its estimate over the prior's value.
+    log_std : mapping of str to float or None
+        Standard error of each parameter's logarithm.
+
+    Returns
+    -------
+    bool
+        False where the records leave the move within the parameter's own noise.
+    """
+    s = (log_std or {}).get(name)
+    if s is None or math.isnan(s) or not ratio > 0:  # its noise unknown: every move counts
+        return True
+    return abs(math.log(ratio)) > FAR_Z * s
 
 
 def common_scale(params: Mapping[str, float], prior: TwoMassDrive) -> float | None:
@@ -679,7 +718,8 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
                          allow_far_from_prior: bool = False, stacklevel: int = 2,
                          held_gains: Sequence[float] = (),
                          missing: Sequence[str | Option] = (),
-                         names: Sequence[str] = (), angles: bool = False) -> list[str]:
+                         names: Sequence[str] = (), angles: bool = False,
+                         log_std: Mapping[str, float] | None = None) -> list[str]:
     """Refuse or warn about fitted linear parameters far from the prior.
 
     The message names the likely cause. Where the speeds held before the step-downs
@@ -712,6 +752,10 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
     angles : bool, optional
         Whether the records hold encoder angles (the advice then names their counts
         per revolution); default False.
+    log_std : mapping of str to float, optional
+        Standard error of each parameter's logarithm: a move within :data:`FAR_Z` of
+        them is the records' noise, not far (:func:`determined_move`); default none
+        known.
 
     Returns
     -------
@@ -730,7 +774,7 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
         When one is more than :data:`FAR_FROM_PRIOR` times off.
     """
     ratio = {n: x / getattr(prior, n) for n, x in params.items()}
-    very_far = too_far(params, prior)
+    very_far = too_far(params, prior, log_std=log_std)
     scale = common_scale(params, prior)
     named = any(unit_mistake(g, angles=angles) is not None and is_far(g)
                 for g in held_gains)
@@ -740,7 +784,7 @@ def check_fit_near_prior(params: Mapping[str, float], prior: TwoMassDrive, *,
         raise InputError(
             f"the fit moved {ratios_to_prior(very_far, prior)} from the prior: ", *cause,
             "; if the prior is that far off, pass ", ALLOW_FAR_FROM_PRIOR)
-    far = [n for n in params if is_far(ratio[n])]
+    far = [n for n in params if is_far(ratio[n]) and determined_move(n, ratio[n], log_std)]
     if far or (scale is not None and not named):
         moved = {n: params[n] for n in (far or params)}
         warnings.warn(PriorMismatchWarning(
