@@ -80,6 +80,11 @@ def row(args, linear, theta: float) -> None:
           f"{zero:>7.1%} {cover:>7.1%} {f'{0.95 - band:.1%}-{0.95 + band:.1%}':>13} "
           f"{both:>7.1%} {median('theta'):>10.3g} {median('std'):>9.3g} {upper:>9.3g} "
           f"{time.perf_counter() - t0:>6.0f}", flush=True)
+    missed = [k for k, r in enumerate(res)
+              if "theta" in r and not r["ci95"][0] <= theta <= r["ci95"][1]]
+    if missed:  # to rerun alone
+        print(f"  the interval leaves the truth out in trials {','.join(map(str, missed))}",
+              flush=True)
     for r in res:
         if "error" in r:
             print(f"  refused: {r['error']}", flush=True)

@@ -492,6 +492,16 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
     return Uncertain(best, values, cov, std, found, jz, cov_z)  # z is best.z on every exit
 
 
+def prior_rise(pb: Problem, rows: Residual, z: np.ndarray) -> float:
+    """-2 log L on ``rows`` of the prior's linear parameters, ``theta`` and the added
+    terms as at the estimate ``z``, above the estimate's (``step.prior_refuted``)."""
+    z_prior = z.copy()
+    for i, name in enumerate(pb.free):
+        if name in LINEAR_PARAMS:
+            z_prior[1 + i] = math.log(pb.p_prior[i])
+    return float(np.sum(rows.at(z_prior) ** 2) - np.sum(rows.at(z) ** 2))
+
+
 def fisher_covariance(jz: np.ndarray) -> np.ndarray:
     """The Gauss-Newton covariance ``(J^T J)^-1`` of the estimated values from the
     residual's Jacobian ``jz`` (the prior's rows are in it: its information is in
@@ -676,6 +686,7 @@ class Outcome:
     ambiguous: bool
     choices: list[TermChoice]  # the likelihood-ratio tests of the "auto" terms
     fixed: dict[str, FixedTest] = field(default_factory=dict)  # fixed terms' tests
+    prior_rise: float = math.nan  # :func:`prior_rise` at the search's answer
 
 
 #: Stages of :func:`run` reported to its ``stage`` callback, by name (a progress bar
@@ -690,16 +701,16 @@ _UNSET = object()
 def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record], *,
         start_drive: TwoMassDrive, z_anchor: np.ndarray, fixed_noise: bool, noise_model,
         interval, refit: Callable[[list[Record]], float], terms: Sequence[Term] = (),
-        refuse_far: Callable[[dict[str, float], dict[str, float]], None]
-        = lambda linear, log_std: None,
+        refuse_far: Callable[[dict[str, float], float, dict[str, float]], None]
+        = lambda linear, rise, log_std: None,
         stage: Callable[[int], None] = lambda done: None) -> Outcome:
     """The whole search from ``z_anchor`` (log linear parameters, then the added
     terms'), the noise levels, the choice of the ``"auto"`` terms, the uncertainty and
     the interval. ``refit(records)``: ``theta`` of a bootstrap resample's fit;
-    ``refuse_far(linear, log_std)``: raises where the estimated linear parameters (by
-    name; ``log_std``: their logarithms' standard errors) are too far from the prior,
-    checked before the uncertainty; ``stage(k)``: called as
-    each of the :data:`STAGES` stages ends."""
+    ``refuse_far(linear, rise, log_std)``: raises where the estimated linear parameters
+    (by name; ``log_std``: the standard errors of their logarithms) are too far from
+    the prior (``rise``: :func:`prior_rise`), checked before the uncertainty;
+    ``stage(k)``: called as each of the :data:`STAGES` stages ends."""
     final_h = search.final_horizon
     anchor = dict(zip(pb.free, z_anchor, strict=True))
     located = locate(pb, search, sigma, recs, start_drive, z_anchor, stage=stage)
@@ -724,11 +735,11 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     checked_z, sims = best.z, pb.simulate(best.z[np.newaxis, :], pb.spans)
     refuse_unexplained(recs, residuals_and_fit(pb.spans, sims)[1], terms)
     rows_unc = pb.residual(pb.final_spans(final_h), final_h, sig, ar)
-    # a move within a parameter's own noise is no sign of a wrong prior or units
-    jz = pb.central_jacobian(rows_unc, best.z)
+    rise = prior_rise(pb, rows_unc, best.z)
+    jz = pb.central_jacobian(rows_unc, best.z)  # the uncertainty's first, made here
     log_std = np.sqrt(np.maximum(np.diag(fisher_covariance(jz)), 0.0))
     refuse_far({n: float(x) for n, x in zip(pb.names, pb.values(best.z), strict=True)
-                if n in LINEAR_PARAMS},
+                if n in LINEAR_PARAMS}, rise,
                {n: float(x) for n, x in zip(pb.names, log_std, strict=True)
                 if n in LINEAR_PARAMS})
     # a term added after the search (a loop's lag) trades against the linear parameters
@@ -752,7 +763,7 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     fixed = {t.params[0]: fixed_test(pb, unc.best, t, recs, final_h, sig, search.max_iter)
              for t in terms if t.mode == "fixed"}
     return Outcome(pb, unc, sig, ar, rows_unc, sims, starts, two_step, ambiguous, choices,
-                   fixed)
+                   fixed, rise)
 
 
 @dataclass(frozen=True)

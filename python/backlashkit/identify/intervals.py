@@ -301,12 +301,14 @@ class ProfileLikelihood:
                      recheck: bool, top: float) -> tuple[float, bool]:
         """One end ``(theta, bounded)`` of a basin's profile followed in rad of theta
         (``search.natural``): on the lower side (``sign`` -1) 0, bounded, where the
-        profile at ``theta = 0`` stays below 3.84 (the records allow no backlash), else
-        its crossing above 0; on the upper side its crossing up to ``top`` (rad)."""
+        profile at ``theta = 0`` (refitted from the fit's anchor too, with ``recheck``)
+        stays below 3.84 (the records allow no backlash), else its crossing above 0; on
+        the upper side its crossing up to ``top`` (rad)."""
         memo: dict[float, np.ndarray] = {}
         rise = partial(search.rise, sign, memo)
         largest = search.theta0 if sign < 0 else top - search.theta0
-        if sign < 0 and rise(largest) < CHI2_95:
+        if sign < 0 and (rise(largest) < CHI2_95 or (
+                recheck and search.recheck(sign, memo, largest) < CHI2_95)):
             return 0.0, True
         d, ok = self._end(rise, min(first, largest), look_past,
                           partial(search.recheck, sign, memo) if recheck else None, largest)

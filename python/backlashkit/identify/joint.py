@@ -364,7 +364,8 @@ class JointIdentifier:
             labels = (*_search.STAGE_NAMES, *(f"{n}, again" for n in _search.STAGE_NAMES))
             with reporter(self.progress, "identify", unit="stage", labels=labels) as bar:
                 fitted, restarted, won = self._fit_and_restart(records, bar)
-        far = self._far_from_prior(_linear(fitted), records, gains, _linear_log_std(fitted))
+        far = self._far_from_prior(_linear(fitted), records, gains, fitted["_prior_rise"],
+                                   _linear_log_std(fitted))
         _warn_prior_conflicts(fitted["prior_pull_"],
                               rel_std(self.prior_rel_std, LINEAR_PARAMS, PRIOR_PARAMS))
         _warn_fixed_loop(fitted["fixed_tests_"], self._terms()[1])
@@ -407,29 +408,33 @@ class JointIdentifier:
         return fitted, restarted, won
 
     def _far_from_prior(self, linear: dict[str, float], records, gains: list[float],
-                        log_std: dict[str, float]):
+                        prior_rise: float, log_std: dict[str, float]):
         """Refuse the fitted linear parameters ``linear`` beyond REFUSE_FROM_PRIOR before
         the estimator holds the answer; warn of those beyond FAR_FROM_PRIOR (``gains``:
-        the records' :func:`held_speed_gain`; ``log_std``: the standard errors of their
-        logarithms, within FAR_Z of which a move is not far)."""
+        the records' :func:`held_speed_gain`); neither where the prior's own parameters
+        fit the records within FAR_RISE of the estimate (``prior_rise``), nor for a
+        move within FAR_Z of its standard errors (``log_std``, of the logarithms)."""
         return check_fit_near_prior(
             linear, self.prior, allow_far_from_prior=self.allow_far_from_prior,
             stacklevel=3, held_gains=gains,
             missing=self._missing_terms(), names=[r.name for r in records],
-            angles=any(r.has_positions for r in records), log_std=log_std)
+            angles=any(r.has_positions for r in records), prior_rise=prior_rise,
+            log_std=log_std)
 
-    def _refuse_far(self, records, prior, linear: dict[str, float],
+    def _refuse_far(self, records, prior, linear: dict[str, float], rise: float,
                     log_std: dict[str, float]) -> None:
         """Refuse the search's point now where :meth:`_far_from_prior` would refuse its
-        answer (``linear``: its linear parameters; ``log_std``: the standard errors of
-        their logarithms), before the uncertainty and the
+        answer (``linear``: its linear parameters; ``rise``: how much worse the prior's
+        fit the records, :func:`~backlashkit.identify._search.prior_rise`; ``log_std``:
+        the standard errors of their logarithms), before the uncertainty and the
         second search (``Restarts.misfit``), whose refits from such a point can take far
         longer than a fit (a viscous model of a drive with Coulomb friction drives ``J_M``
         towards 0, where the simulations chatter); warn of nothing (the answer's check
         does)."""
-        if not self.allow_far_from_prior and too_far(linear, self.prior, log_std=log_std):
+        if not self.allow_far_from_prior and too_far(linear, self.prior, prior_rise=rise,
+                                                     log_std=log_std):
             self._far_from_prior(linear, records,
-                                 [held_speed_gain(r, prior) for r in records], log_std)
+                                 [held_speed_gain(r, prior) for r in records], rise, log_std)
 
     def correlation_message(self) -> str | None:
         """Say whether the residuals of the fit are too correlated for its interval.
@@ -732,7 +737,7 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
         "model_start_": ["rest" if sp.level is None else "steady" for sp in pb.spans],
         "commutations_": commutations,
         "t_c_": [c[1] for c in commutations], "t_b_": [c[2] for c in commutations],
-        "ambiguous_": out.ambiguous,
+        "ambiguous_": out.ambiguous, "_prior_rise": out.prior_rise,
         "prior_pull_": _prior_pulls(pb, unc),
         "fixed_tests_": {n: (f.fall, f.value) for n, f in out.fixed.items()},
     }
