@@ -259,7 +259,9 @@ def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
               f"rise {moved._prior_rise:.3g}, ci95_ from {moved.ci95_[0]:.3g}")
         # the second drive: the friction's split moves far, in a curved valley whose Fisher
         # standard errors are small, yet the truth fits the records about as well
-        print(f"the second drive, trial 1: f_M x{second.params_['f_M'] / OTHER['f_M']:.3g}, f_L x"
+        print(f"the second drive, trial 1: f_M x{second.params_['f_M'] / OTHER['f_M']:.3g} "
+              f"(standard error x"
+              f"{math.exp(second.param_std_['f_M'] / second.params_['f_M']):.3g}), f_L x"
               f"{second.params_['f_L'] / OTHER['f_L']:.3g}; -2 log L of the truth "
               f"{_m2ll(bk.TwoMassDrive(**OTHER, theta=0.0), other) - _m2ll(second, other):+.3g} "
               f"from the estimate's, its prior's rise {second._prior_rise:.3g}")

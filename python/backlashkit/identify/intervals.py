@@ -371,7 +371,8 @@ class _HeldTheta:
         self.slope = cov_z[1:, 0] / cov_z[0, 0] if cov_z[0, 0] > 0 else np.zeros(z.size - 1)
         self.theta0 = math.exp(z[0])  # the basin's theta, rad
         if natural:  # d log theta = d theta / theta at the basin's minimum
-            self.slope = self.slope / self.theta0
+            self.slope = (self.slope / self.theta0 if self.theta0 > 0.0
+                          else np.zeros_like(self.slope))
         #: every refit: cost rise and log-parameters (the estimate first)
         self.evaluated: list[tuple[float, np.ndarray]] = [(rise0, z)]
         self._rises: dict[tuple[float, float], float] = {}  # (sign, d) -> rise
@@ -445,9 +446,9 @@ class _HeldTheta:
             r = self._residual(zt, np.empty(0))
             self.evaluated.append((float(r @ r) - cost, np.array([zt])))
             return self.evaluated[-1][0]
-        w_near = memo[min(memo, key=lambda x: abs(x - d))] if memo else z[1:]
-        d0 = min(memo, key=lambda x: abs(x - d)) if memo else 0.0
         # continue from the nearest refit on this side, moved along the slope
+        d0 = min(memo, key=lambda x: abs(x - d)) if memo else 0.0
+        w_near = memo[d0] if memo else z[1:]
         w0 = w_near + self.slope * sign * (d - d0)
         fun = partial(self._residual, zt)
         start = None
