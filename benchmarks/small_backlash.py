@@ -85,10 +85,10 @@ def row(args, linear, theta: float) -> None:
     if missed:  # to rerun alone
         print(f"  the interval leaves the truth out in trials {','.join(map(str, missed))}",
               flush=True)
-    for r in res:
-        if "error" in r:
-            print(f"  refused: {r['error']}", flush=True)
-            break
+    refused = [k for k, r in enumerate(res) if "error" in r]
+    if refused:
+        print(f"  refused in trials {','.join(map(str, refused))}, the first: "
+              f"{res[refused[0]]['error']}", flush=True)
 
 
 def main() -> None:

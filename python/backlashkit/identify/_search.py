@@ -300,12 +300,17 @@ def restart_start(kind: str, shift: float, z: np.ndarray, free: Sequence[str],
                   anchor: dict[str, float]) -> np.ndarray | None:
     """The start of one restart (:meth:`~.search.Restarts.shifts`) of the solution
     ``z``: its linear parameters at the prior's ``anchor`` (:func:`prior_point`),
-    ``k_sh`` shifted, or the friction split shifted; None where there is none."""
+    ``k_sh`` shifted, the friction split shifted, or the prior's linear parameters with
+    ``theta`` shifted; None where there is none."""
     if kind == "prior":
         return prior_point(z, free, anchor)
     if kind == "k_sh":
         z0 = z.copy()
         z0[1 + free.index("k_sh")] += shift
+        return z0
+    if kind == "theta":
+        z0 = prior_point(z, free, anchor)
+        z0[0] += shift
         return z0
     return resplit(z, free, ("f_M", "f_L"), shift)
 

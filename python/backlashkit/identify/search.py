@@ -40,6 +40,12 @@ __all__ = ["Continuation", "FirstHorizon", "JointSearch", "Restarts", "ThetaGrid
 #: Default upper end of the theta grid: a 15 deg half-width, 7.5 times paper A's 2 deg;
 #: a larger backlash needs a larger ``ThetaGrid(theta_max=...)``.
 THETA_MAX = float(np.deg2rad(15.0))
+#: ``Restarts.no_backlash`` starts ``theta`` at this share of the solution's: three
+#: decades down, below the standard error near 0 of both drives of
+#: ``benchmarks/real_drive.py`` whatever backlash the search ended at (from 1e-6 rad
+#: up), and as many of the search's steps (at most ``e^0.5`` each) from where it
+#: starts.
+NO_BACKLASH_SHARE = 1e-3
 
 
 def _shifts(owner: str, name: str, value) -> tuple[float, ...]:
@@ -314,6 +320,15 @@ class Restarts(_Config):
         whole-record cost is above the basin around the prior's (by 13.3 in
         ``-2 log L`` in a trial with Coulomb friction at 30 dB, where ``theta``
         stopped 6.1 % low; docs/design/joint-search.md, item 8).
+    no_backlash : bool, optional
+        Restart last from the prior's linear parameters with ``theta`` a thousandth of
+        the solution's (:data:`NO_BACKLASH_SHARE`; default True): a drive with no
+        backlash, or less than the records resolve, has its basin below where the
+        grid's starts (``theta_max / points`` and up) and the first window's bounds
+        (``theta_max / 1000`` and up) reach, and a search from there can end in a basin
+        far worse (on the second drive of ``benchmarks/real_drive.py`` without
+        backlash, ``k_sh`` x5.5 and refused; docs/design/real-drives.md, "A drive
+        without backlash").
 
     Notes
     -----
@@ -330,6 +345,7 @@ class Restarts(_Config):
     friction: Sequence[float] = (1.0,)
     misfit: bool = True
     prior: bool = True
+    no_backlash: bool = True
 
     def __post_init__(self) -> None:
         self._set("stiffness", _shifts("Restarts", "stiffness", self.stiffness))
@@ -338,10 +354,12 @@ class Restarts(_Config):
         self._set("friction", _shifts("Restarts", "friction", self.friction))
         self._set("misfit", _flag("Restarts", "misfit", self.misfit))
         self._set("prior", _flag("Restarts", "prior", self.prior))
+        self._set("no_backlash", _flag("Restarts", "no_backlash", self.no_backlash))
 
     def shifts(self, free: Sequence[str]) -> list[tuple[str, float]]:
         """The restarts in order: ``("prior", 0)`` (the prior's linear parameters),
-        then ``("k_sh", d)`` and ``("f_M:f_L", d)`` log-shifts.
+        then ``("k_sh", d)`` and ``("f_M:f_L", d)`` log-shifts, then ``("theta", d)``
+        (the prior's linear parameters, ``theta`` shifted by ``d`` in its logarithm).
 
         Parameters
         ----------
@@ -356,6 +374,7 @@ class Restarts(_Config):
         out = [("prior", 0.0)] if self.prior else []
         out += [("k_sh", d) for x in self.stiffness for d in (-x, x) if "k_sh" in free]
         out += [("f_M:f_L", d) for x in self.friction for d in (-x, x)]
+        out += [("theta", math.log(NO_BACKLASH_SHARE))] if self.no_backlash else []
         return out
 
     def long_shifts(self, free: Sequence[str]) -> list[float]:
