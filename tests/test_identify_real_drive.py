@@ -22,9 +22,11 @@ import backlashkit as bk
 from backlashkit.cli.main import main as cli_main
 from backlashkit.errors import InputError, PriorMismatchWarning
 from backlashkit.identify.joint import PRIOR_CONFLICT_Z
+from backlashkit.identify.search import JointSearch, Restarts
 from backlashkit.identify.terms import SCREEN_DROP
 from backlashkit.io import write_csv
 from backlashkit.papers.ravanbod2002 import A1, A2, P_TRUE, THETA
+from backlashkit.parallel import task_seeds
 from backlashkit.verify import reference_angles, reference_simulate
 
 #: Issue 20's bar on theta for friction and current loop (not quantised).
@@ -283,6 +285,24 @@ def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
     assert doc["ci95"] == [0.0, pytest.approx(hi)]
     assert any(n.startswith("the 95% interval of theta reaches 0: these records are "
                             "consistent with a drive without backlash") for n in doc["notes"])
+
+
+def test_a_drive_without_backlash_is_searched_for():
+    """The second drive without backlash (trials 23 and 1 of the seed-7 trials of
+    ``python benchmarks/small_backlash.py --drive other``): the grid's starts and the
+    first window's bounds do not reach its basin, and without the restart from a
+    thousandth of the solution's theta (``Restarts.no_backlash``) the search ended with
+    ``k_sh`` x5.5 and was refused; with the linear parameters held at the truth it
+    ended at theta 5.4e-4 rad with an interval that left out 0."""
+    trials = task_seeds(7, 100)
+    refused, held = _records(OTHER, 0.0, seed=trials[23]), _records(OTHER, 0.0, seed=trials[1])
+    without = JointSearch(restarts=Restarts(no_backlash=False))
+    with pytest.raises(InputError, match=r"^the fit moved k_sh x5\.5 from the prior"):
+        _fit(refused, OTHER, search=without)
+    old = _fit(held, OTHER, prior_rel_std=0, search=without)
+    assert old.theta_ == pytest.approx(5.4e-4, rel=0.01) and old.ci95_[0] > 5e-4
+    assert _fit(refused, OTHER).ci95_[0] == 0.0
+    assert _fit(held, OTHER, prior_rel_std=0).ci95_[0] == 0.0
 
 
 def test_known_current_loop_is_not_fitted():
