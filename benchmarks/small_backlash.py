@@ -20,7 +20,9 @@ the share of intervals with both ends bounded, and the medians of ``theta_``, ``
 and the interval's upper end, in rad.
 
 Run: ``python benchmarks/small_backlash.py [--trials 100] [--jobs 2] [--drive paper|other]
-[--thetas 0,1e-5,3e-5,1e-4] [--snr 40] [--seed 7]``.
+[--thetas 0,1e-5,3e-5,1e-4] [--snr 40] [--seed 7]``; ``--trial K`` reruns trial ``K`` of
+each row alone and prints its interval, the profile's rise at ``theta = 0`` and the
+truth's ``-2 log L`` above the estimate's.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import statistics
 import time
 import warnings
 
+import numpy as np
 from real_drive import DRIVES, Task, clean_records, trial_records
 
 import backlashkit as bk
@@ -55,6 +58,32 @@ def one_trial(pair) -> dict:
     far = any(issubclass(w.category, PriorMismatchWarning) for w in caught)
     return {"theta": fit.theta_, "std": fit.std_, "ci95": list(fit.ci95_),
             "bounded": list(fit.ci95_bounded_), "far": far}
+
+
+def trial_alone(args, linear, theta: float, k: int) -> None:
+    """Rerun trial ``k`` of one ``theta``'s row: its interval, the profile's rise at
+    ``theta = 0`` and the truth's -2 log L above the estimate's (the fit's noise
+    levels; the truth simulated by the compiled kernel from the records' steady
+    start)."""
+    clean = clean_records(linear, theta, (0.0, 0.0), 0.0)
+    task = Task(linear, theta, clean, 0, args.snr, 0.0)
+    recs = trial_records(task, task_seeds(args.seed, k + 1)[k])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = bk.JointIdentifier(bk.TwoMassDrive(**linear), workers=1).fit(recs)
+    at_0 = [r for t, r in fit.profile_ if t == 0.0]
+    truth = bk.TwoMassDrive(**linear, theta=theta)
+    cost = 0.0
+    for (e_m, _), rec, (s_m, s_l) in zip(fit.residuals_, recs, fit.noise_std_, strict=True):
+        i0 = rec.t.size - e_m.size  # the fitted span's first sample
+        sim = truth.simulate(rec.t[i0:], rec.torque[i0:],
+                             initial_state=truth.steady_state(rec.torque[i0]))
+        cost += (np.sum(((rec.w_motor[i0:] - sim.w_motor) / s_m) ** 2)
+                 + np.sum(((rec.w_load[i0:] - sim.w_load) / s_l) ** 2))
+    print(f"theta {theta:g} rad, trial {k}: theta_ {fit.theta_:.3g}, std_ {fit.std_:.3g}, "
+          f"ci95_ [{fit.ci95_[0]:.3g}, {fit.ci95_[1]:.3g}], the profile's rise at 0 "
+          f"{min(at_0) if at_0 else math.nan:.3g}, the truth's -2 log L above the "
+          f"estimate's {cost - fit.cost_:.3g}", flush=True)
 
 
 def row(args, linear, theta: float) -> None:
@@ -100,8 +129,14 @@ def main() -> None:
     ap.add_argument("--drive", choices=sorted(DRIVES), default="paper")
     ap.add_argument("--thetas", default=",".join(f"{x:g}" for x in THETAS),
                     help="comma-separated backlash half-widths in rad, one row each")
+    ap.add_argument("--trial", type=int, default=None,
+                    help="rerun trial K of each row alone and print its profile at 0")
     args = ap.parse_args()
     linear = DRIVES[args.drive][0]
+    if args.trial is not None:
+        for theta in (float(x) for x in args.thetas.split(",")):
+            trial_alone(args, linear, theta, args.trial)
+        return
     print(f"{args.drive} drive, {args.snr:g} dB, {args.trials} trials a row (seed {args.seed})")
     print(f"{'theta':>8} {'answered':>9} {'far':>4} {'from 0':>7} {'cover':>7} "
           f"{'2-sigma band':>13} {'bounded':>7} {'theta_':>10} {'std_':>9} {'upper':>9} "
