@@ -195,6 +195,13 @@ def test_plot_helpers_take_ax_and_return_figure(record, fitted):
     assert plot_profile([[0.01, 1.0], [0.02, 0.0], [0.03, 4.0]], ci95=(0.012, 0.029),
                         ax=axes[4]) is fig
     assert isinstance(plot_cost([0.0, 0.01], [1.0, 2.0]), Figure)
+    # an estimate whose interval reaches 0: the Fisher parabola in theta from 0, not in
+    # log theta (flat at 0 about an estimate of 1e-14 rad)
+    near = plot_profile([[0.0, 0.5], [1e-14, 0.0], [2e-5, 3.9]], ci95=(0.0, 2e-5),
+                        theta=1e-14, std=1e-5).axes[0]
+    x, y = near.lines[0].get_data()
+    assert x[0] == 0.0 and np.interp(1.96e-5 * 180 / np.pi, x, y) == pytest.approx(3.84,
+                                                                                 rel=0.01)
     # a QA pass: the load's residual was titled the motor-speed residual's, and a
     # malformed profile or measured speeds failed in NumPy's or matplotlib's words
     title = plot_residual_acf(record.w_load - record.w_load.mean(), ts=record.ts,

@@ -301,7 +301,7 @@ def plot_profile(
     matplotlib.figure.Figure
         The figure holding the axes.
     """
-    from .intervals import CHI2_95
+    from .intervals import CHI2_95, Z_95
 
     p = np.asarray(profile, float)
     p = p.reshape(0, 2) if p.size == 0 else p
@@ -313,9 +313,14 @@ def plot_profile(
     if theta is not None and std is not None and theta > 0 and std > 0:
         lo, hi = float(np.min(p[:, 0])), float(np.max(p[:, 0]))
         span = max(hi - lo, 4.0 * std)
-        grid = np.linspace(max(lo - 0.15 * span, theta * 1e-3), hi + 0.15 * span, 200)
-        ax.plot(grid * deg, (np.log(grid / theta) / (std / theta)) ** 2, color="C0",
-                ls=":", lw=1.2, label="Fisher (quadratic)")
+        # quadratic in log theta, as fitted; in theta where its interval reaches 0 (the
+        # profile is then followed in rad, ProfileLikelihood)
+        near_zero = theta <= Z_95 * std
+        grid = np.linspace(0.0 if near_zero else max(lo - 0.15 * span, theta * 1e-3),
+                           hi + 0.15 * span, 200)
+        quad = ((grid - theta) / std) ** 2 if near_zero else (
+            np.log(grid / theta) / (std / theta)) ** 2
+        ax.plot(grid * deg, quad, color="C0", ls=":", lw=1.2, label="Fisher (quadratic)")
     ax.plot(p[:, 0] * deg, p[:, 1], color="k", ls="none", marker="o", ms=5,
             label="refit with theta held")
     ax.axhline(CHI2_95, color="C3", ls="--", lw=1, label="95 % level (3.84)")
