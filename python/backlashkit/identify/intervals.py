@@ -38,7 +38,8 @@ from ..errors import InputError
 from ..parallel import map_tasks, reporter, root_seed
 from ._lm import LMState, lm
 
-__all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing"]
+__all__ = ["FisherInterval", "ParametricBootstrap", "ProfileLikelihood", "profile_crossing",
+           "reaches_zero"]
 
 #: ``progress(done, total)``: a report of the refits done.
 Progress = Callable[[int, int], None]
@@ -81,6 +82,26 @@ RECHECK_FAR = 1.0
 #: ``tol`` (0.25) of 3.84, and the last steps of a slow valley (a Coulomb torque
 #: trading against viscous friction) gain hundredths each.
 PROFILE_ATOL = 0.01
+
+
+def reaches_zero(theta: float, std: float) -> bool:
+    """Whether the Fisher interval ``theta -+ 1.96 std`` of ``theta`` (rad) reaches 0:
+    there the profile is followed in rad of ``theta``, not its logarithm
+    (:class:`ProfileLikelihood`).
+
+    Parameters
+    ----------
+    theta : float
+        The estimate in rad.
+    std : float
+        Its Fisher standard error in rad.
+
+    Returns
+    -------
+    bool
+        True where ``theta <= 1.96 std``.
+    """
+    return theta <= Z_95 * std
 
 
 @dataclass
@@ -247,7 +268,7 @@ class ProfileLikelihood:
         recheck = fit.anchor is not None and bool(fit.anchor.size)
         # where theta's Fisher interval reaches 0, the logarithm's distances cannot reach
         # it: the profile is followed in rad of theta, down to no backlash at all
-        near_zero = fit.theta <= Z_95 * fit.std
+        near_zero = reaches_zero(fit.theta, fit.std)
         # the widest upper end
         top = min(self.max_factor * max(fit.theta, Z_95 * fit.std), MAX_HALF_WIDTH)
         searches = [_HeldTheta(fit, self.max_iter, natural=near_zero)]
@@ -261,12 +282,13 @@ class ProfileLikelihood:
                 ends[0] = self._natural_end(searches[1], -1.0, Z_95 * fit.std,
                                             fit.look_past, recheck, top)
         for z_r, cost_r in fit.rivals:  # the profile is the lowest over every basin
-            found = self._rival_end(fit, z_r, cost_r, first, near_zero, top)
+            side = 1.0 if z_r[0] > fit.z[0] else -1.0  # the side the rival's end is on
+            found = self._rival_end(fit, z_r, cost_r, side, first, near_zero, top)
             if found is None:
                 continue
             end, other = found
-            k = int(z_r[0] > fit.z[0])
-            if (end[0] - ends[k][0]) * (2 * k - 1) > 0:
+            k = int(side > 0)
+            if (end[0] - ends[k][0]) * side > 0:
                 ends[k] = end
             searches.append(other)
         evaluated = [e for search in searches for e in search.evaluated]
@@ -277,13 +299,13 @@ class ProfileLikelihood:
                              profile=points, lowest_rise=float(lowest[0]),
                              lowest_z=lowest[1], rivals=len(fit.rivals))
 
-    def _rival_end(self, fit: IntervalInputs, z_r: np.ndarray, cost_r: float, first: float,
-                   near_zero: bool, top: float) -> tuple[tuple[float, bool], _HeldTheta] | None:
-        """The end of a rival basin's profile (at ``z_r``, ``cost_r``) on its side away
-        from the estimate, and its search; None where it lies beyond the estimate's own
-        search (``top``, or ``max_factor`` in log theta). Between the two lies the
+    def _rival_end(self, fit: IntervalInputs, z_r: np.ndarray, cost_r: float, side: float,
+                   first: float, near_zero: bool, top: float
+                   ) -> tuple[tuple[float, bool], _HeldTheta] | None:
+        """The end of a rival basin's profile (at ``z_r``, ``cost_r``) on its ``side``
+        away from the estimate, and its search; None where it lies beyond the estimate's
+        own search (``top``, or ``max_factor`` in log theta). Between the two lies the
         estimate's basin."""
-        side = 1.0 if z_r[0] > fit.z[0] else -1.0
         other = _HeldTheta(replace(fit, z=z_r, anchor=None), self.max_iter,
                            cost_r - fit.cost, natural=near_zero)
         if near_zero:

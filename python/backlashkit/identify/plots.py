@@ -301,7 +301,7 @@ def plot_profile(
     matplotlib.figure.Figure
         The figure holding the axes.
     """
-    from .intervals import CHI2_95, Z_95
+    from .intervals import CHI2_95, reaches_zero
 
     p = np.asarray(profile, float)
     p = p.reshape(0, 2) if p.size == 0 else p
@@ -315,7 +315,7 @@ def plot_profile(
         span = max(hi - lo, 4.0 * std)
         # quadratic in log theta, as fitted; in theta where its interval reaches 0 (the
         # profile is then followed in rad, ProfileLikelihood)
-        near_zero = theta <= Z_95 * std
+        near_zero = reaches_zero(theta, std)
         grid = np.linspace(0.0 if near_zero else max(lo - 0.15 * span, theta * 1e-3),
                            hi + 0.15 * span, 200)
         quad = ((grid - theta) / std) ** 2 if near_zero else (

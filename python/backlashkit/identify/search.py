@@ -40,11 +40,11 @@ __all__ = ["Continuation", "FirstHorizon", "JointSearch", "Restarts", "ThetaGrid
 #: Default upper end of the theta grid: a 15 deg half-width, 7.5 times paper A's 2 deg;
 #: a larger backlash needs a larger ``ThetaGrid(theta_max=...)``.
 THETA_MAX = float(np.deg2rad(15.0))
-#: ``Restarts.no_backlash`` starts ``theta`` at this share of the solution's: three
-#: decades down, below the standard error near 0 of both drives of
-#: ``benchmarks/real_drive.py`` whatever backlash the search ended at (from 1e-6 rad
-#: up), and as many of the search's steps (at most ``e^0.5`` each) from where it
-#: starts.
+#: ``Restarts.no_backlash`` starts ``theta`` at this share of the solution's: from a
+#: solution at the first window's lower bound (``theta_max / 1000``, 2.6e-4 rad) that is
+#: 2.6e-7 rad, below the median standard errors near 0 of both drives of
+#: ``benchmarks/small_backlash.py`` (8.9e-6 and 2.8e-6 rad), so the restart starts in
+#: the basin of no backlash wherever the search ended above it.
 NO_BACKLASH_SHARE = 1e-3
 
 
