@@ -205,6 +205,28 @@ def test_batch_equals_single_runs_whatever_the_workers():
         assert a.events == single.events == b.events
 
 
+def test_batch_with_a_current_loop_and_angles_matches_single_runs():
+    """``simulate_batch`` takes the current loop and the angles as ``simulate_drive``
+    does, and gives each drive's run, with Coulomb friction."""
+    t = np.arange(1500) * 1e-3
+    u = np.where(t < 0.5, 0.157, 0.0)
+    drives = [bk.TwoMassDrive(**PAPER, theta=th, fc_M=fc) for th, fc in
+              ((THETA, 0.01), (0.5 * THETA, 0.02), (2.0 * THETA, 0.005))]
+    loop = bk.CurrentLoop(tau_i=1e-3)
+    x0 = drives[0].steady_state(0.157)
+    batch = bk.simulate_batch(drives, t, u, actuator=loop, positions=True, workers=2,
+                              initial_state=x0)
+    for d, a in zip(drives, batch, strict=True):
+        single = d.simulate(t, u, actuator=loop, positions=True, initial_state=x0)
+        assert np.array_equal(a.states, single.states) and a.events == single.events
+        assert np.array_equal(a.phi_motor, single.phi_motor)
+        assert np.array_equal(a.motor_torque, single.motor_torque)
+    given = bk.simulate_batch(drives[:1], t, u, actuator=loop, initial_state=np.r_[x0, 0.0])
+    assert given[0].motor_torque[0] == 0.0  # the loop's torque as given, not settled
+    with pytest.raises(bk.InputError, match=r"initial_state must have shape \(3,\) or \(3, 3\)"):
+        bk.simulate_batch(drives, t, u, initial_state=np.r_[x0, 0.0])
+
+
 def test_response_columns_plot_and_pandas():
     import matplotlib.pyplot as plt
 
@@ -215,6 +237,16 @@ def test_response_columns_plot_and_pandas():
     assert list(cols) == ["t", "torque", "w_motor", "w_load", "phi_d", "shaft_torque"]
     df = r.to_pandas()
     assert df.index.name == "t" and np.array_equal(df["w_load"].to_numpy(), r.w_load)
+    # an encoder drive's run tracks the angles, and a current loop's adds its torque
+    tracked = drive.simulate(t, np.where(t < 1.0, 0.157, 0.0), positions=True,
+                             actuator=bk.CurrentLoop(tau_i=1e-3)).to_pandas()
+    assert list(tracked) == ["torque", "motor_torque", "w_motor", "w_load", "phi_d",
+                             "shaft_torque", "phi_motor", "phi_load"]
+    w = tracked["w_motor"].to_numpy()
+    assert tracked["phi_motor"].iloc[0] == 0.0
+    # the trapezoid of the speeds, within its own error (Ts^2 / 12 of the acceleration)
+    assert np.allclose(np.diff(tracked["phi_motor"].to_numpy()), 0.5e-3 * (w[1:] + w[:-1]),
+                       atol=1e-5)
     before = plt.get_fignums()
     fig = r.plot()
     assert len(fig.axes) == 3 and plt.get_fignums() == before

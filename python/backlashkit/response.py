@@ -355,11 +355,23 @@ class DriveResponse(StateColumns):
         Returns
         -------
         dict of str to numpy.ndarray
-            ``t``, ``torque`` and, for a two-mass drive, ``w_motor``, ``w_load``,
-            ``phi_d``, ``shaft_torque``; for a longer chain ``w_1 .. w_N``,
-            ``phi_1 .. phi_{N-1}`` and ``shaft_torque_1 .. shaft_torque_{N-1}``.
+            ``t``, ``torque``, ``motor_torque`` (behind a current loop only) and, for
+            a two-mass drive, ``w_motor``, ``w_load``, ``phi_d``, ``shaft_torque``;
+            for a longer chain ``w_1 .. w_N``, ``phi_1 .. phi_{N-1}`` and
+            ``shaft_torque_1 .. shaft_torque_{N-1}``. Where the run tracked the
+            angles (``positions=True``), ``phi_motor`` and ``phi_load`` last (rad).
         """
         cols: dict[str, np.ndarray] = {"t": self.t, "torque": self.torque}
+        if self.loop_torque is not None:
+            cols["motor_torque"] = self.loop_torque
+        cols.update(self._chain_columns())
+        if self.angle is not None:  # not computed here where the run did not track it
+            cols.update(phi_motor=self.phi_motor, phi_load=self.phi_load)
+        return cols
+
+    def _chain_columns(self) -> dict[str, np.ndarray]:
+        """The speeds, twists and shaft torques of :meth:`to_columns`."""
+        cols: dict[str, np.ndarray] = {}
         if self.n_inertias == 2:
             cols.update(
                 w_motor=self.w_motor,

@@ -246,6 +246,8 @@ def simulate_batch(
     law: ShaftLaw | str = "paper",
     initial_state: Sequence[float] | np.ndarray | None = None,
     workers: int | None = None,
+    actuator: CurrentLoop | None = None,
+    positions: bool = False,
 ) -> list[DriveResponse]:
     """Simulate many drives in parallel (compiled kernel, the GIL released).
 
@@ -257,29 +259,64 @@ def simulate_batch(
     t : array_like
         Uniform time grid in s shared by all runs.
     torque : array_like
-        Motor torque in N m: shape ``(n,)`` shared by all runs, or ``(len(drives), n)``.
+        Motor torque (set-point, with an actuator) in N m: shape ``(n,)`` shared by
+        all runs, or ``(len(drives), n)``.
     law : {"paper", "no-pull", "modelica"} or ShaftLaw, optional
         Contact law, default ``"paper"``.
     initial_state : array_like, optional
-        Shape ``(2N - 1,)`` shared, or ``(len(drives), 2N - 1)``; default rest.
+        Shape ``(2N - 1,)`` shared, or ``(len(drives), 2N - 1)``; default rest. With a
+        current loop each row may hold the motor torque as one more entry; by default
+        it is the run's first set-point (the loop settled).
     workers : int, optional
         Number of threads; default all cores. The result does not depend on it.
+    actuator : CurrentLoop, optional
+        One current loop between set-point and motor torque for every run, as in
+        :func:`simulate_drive`; default none.
+    positions : bool, optional
+        Track the absolute motor angle in every run (:attr:`DriveResponse.phi_motor`),
+        as in :func:`simulate_drive`; default False.
 
     Returns
     -------
     list of DriveResponse
-        One response per drive, in order.
+        One response per drive, in order; each the same as :func:`simulate_drive`'s of
+        that drive.
     """
     from . import _core
 
+    chains, t_arr, ts, law_, u = _batch_inputs(drives, t, torque, law)
+    act = _actuator(actuator)
+    x0 = _batch_initial_states(chains, initial_state, u, act is not None)
+    if positions:
+        x0 = np.column_stack([x0, np.zeros(len(chains))])
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise InputError(f"workers must be a positive integer, got {workers!r}")
+    params = np.array([np.concatenate([c.J, c.f, c.k, c.d, c.theta]) for c in chains])
+    if act is not None or any(c.has_friction for c in chains):  # the packed layout's tail
+        tau_i = 0.0 if act is None else act.tau_i
+        tail = np.array([np.concatenate([c.fc, c.fs, [tau_i]]) for c in chains])
+        params = np.hstack([params, tail])
+    states, modes, events = _core.simulate_chain_batch(
+        chains[0].n_inertias, params, law_.code, float(t_arr[0]), ts, u,
+        np.ascontiguousarray(x0), workers or 0, positions
+    )
+    return [
+        _response(c, t_arr, u[i if u.shape[0] > 1 else 0], law_, (states[i], modes[i], *events[i]),
+                  act, positions)
+        for i, c in enumerate(chains)
+    ]
+
+
+def _batch_inputs(drives, t, torque, law):
+    """:func:`simulate_batch`'s drives as chains, its grid, law and torque rows, checked."""
     if hasattr(drives, "to_chain"):  # one drive where a sequence is expected
         raise InputError(f"drives must be a sequence of drives, got one {type(drives).__name__}"
                          ": pass [drive], or call drive.simulate(t, torque)")
     chains = [_as_chain(d) for d in drives]
     if not chains:
         raise InputError("drives must contain at least one drive")
-    n_in, b = chains[0].n_inertias, len(chains)
-    if any(c.n_inertias != n_in for c in chains):
+    b = len(chains)
+    if any(c.n_inertias != chains[0].n_inertias for c in chains):
         raise InputError("drives must all have the same number of inertias")
     t_arr, ts = v.time_grid(t)
     law_ = ShaftLaw.parse(law)
@@ -292,28 +329,26 @@ def simulate_batch(
         raise InputError(
             f"torque must have shape ({t_arr.size},) or ({b}, {t_arr.size}), got {np.shape(torque)}"
         )
-    n_states = chains[0].n_states
+    return chains, t_arr, ts, law_, np.ascontiguousarray(u)
+
+
+def _batch_initial_states(chains, initial_state, u: np.ndarray, loop: bool) -> np.ndarray:
+    """:func:`simulate_batch`'s initial states, one row per run: ``2N - 1`` entries, and
+    with a current loop the motor torque (given, or the run's first set-point)."""
+    b, n_states = len(chains), chains[0].n_states
     x0 = np.zeros(n_states) if initial_state is None else np.asarray(initial_state, float)
-    x0 = np.broadcast_to(x0, (b, n_states)) if x0.ndim == 1 else x0
+    x0 = np.broadcast_to(x0, (b, x0.shape[-1])) if x0.ndim == 1 else x0
     x0 = v.finite_array("initial_state", x0, ndim=2)
-    if x0.shape != (b, n_states):
+    widths = (n_states, n_states + 1) if loop else (n_states,)
+    if x0.shape[0] != b or x0.shape[1] not in widths:
+        extra = " (and optionally the motor torque, with a current loop)" if loop else ""
         raise InputError(
-            f"initial_state must have shape ({n_states},) or ({b}, {n_states}), "
+            f"initial_state must have shape ({n_states},) or ({b}, {n_states}){extra}, "
             f"got {np.shape(initial_state)}"
         )
-    if workers is not None and (not isinstance(workers, int) or workers < 1):
-        raise InputError(f"workers must be a positive integer, got {workers!r}")
-    params = np.array([np.concatenate([c.J, c.f, c.k, c.d, c.theta]) for c in chains])
-    if any(c.has_friction for c in chains):  # the packed layout's friction tail
-        tail = np.array([np.concatenate([c.fc, c.fs, [0.0]]) for c in chains])
-        params = np.hstack([params, tail])
-    states, modes, events = _core.simulate_chain_batch(
-        n_in, params, law_.code, float(t_arr[0]), ts, u, x0, workers or 0
-    )
-    return [
-        _response(c, t_arr, u[i if u.shape[0] > 1 else 0], law_, (states[i], modes[i], *events[i]))
-        for i, c in enumerate(chains)
-    ]
+    if loop and x0.shape[1] == n_states:  # the loop settled at each run's first set-point
+        x0 = np.column_stack([x0, np.broadcast_to(u[:, 0], (b,))])
+    return np.array(x0, float)
 
 
 def simulate_packed(
