@@ -16,8 +16,10 @@ Printed per row: fits answered (refusals apart), how many warned that a linear
 parameter moved far from the prior (:class:`~backlashkit.errors.PriorMismatchWarning`),
 the share of intervals whose lower end is 0 ("consistent with no backlash"), the share
 that cover the true ``theta`` with the 2-binomial-standard-deviation band about 95 %,
-the share of intervals with both ends bounded, and the medians of ``theta_``, ``std_``
-and the interval's upper end, in rad.
+the share of intervals with both ends bounded, how many fits' intervals span the
+profiles of other minima (``rival_basins_`` above 0, which the command line notes as
+"other minima near the best"), and the medians of ``theta_``, ``std_`` and the
+interval's upper end, in rad.
 
 Run: ``python benchmarks/small_backlash.py [--trials 100] [--jobs 2] [--drive paper|other]
 [--thetas 0,1e-5,3e-5,1e-4] [--snr 40] [--seed 7]``; ``--trial K`` reruns trial ``K`` of
@@ -56,7 +58,7 @@ def one_trial(pair) -> dict:
             return {"error": str(exc)}
     far = any(issubclass(w.category, PriorMismatchWarning) for w in caught)
     return {"theta": fit.theta_, "std": fit.std_, "ci95": list(fit.ci95_),
-            "bounded": list(fit.ci95_bounded_), "far": far}
+            "bounded": list(fit.ci95_bounded_), "far": far, "rivals": fit.rival_basins_}
 
 
 def trial_alone(args, linear, theta: float, k: int) -> None:
@@ -78,7 +80,8 @@ def trial_alone(args, linear, theta: float, k: int) -> None:
           f"{min(at_0) if at_0 else math.nan:.3g}; {moved} moved most, x"
           f"{fit.params_[moved] / linear[moved]:.3g} (standard error x"
           f"{math.exp(fit.param_std_[moved] / fit.params_[moved]):.3g}), the prior's point "
-          f"{fit._prior_rise:.3g} above the estimate", flush=True)
+          f"{fit._prior_rise:.3g} above the estimate; rival basins {fit.rival_basins_}",
+          flush=True)
     print(truth_line(linear, theta, (0.0, 0.0), 0.0, recs, fit), flush=True)
 
 
@@ -103,7 +106,8 @@ def row(args, linear, theta: float) -> None:
     upper = statistics.median(r["ci95"][1] for r in ok) if ok else math.nan
     print(f"{theta:>8.3g} {len(ok):>4}/{len(res):<4} {sum(r['far'] for r in ok):>4} "
           f"{zero:>7.1%} {cover:>7.1%} {f'{0.95 - band:.1%}-{0.95 + band:.1%}':>13} "
-          f"{both:>7.1%} {median('theta'):>10.3g} {median('std'):>9.3g} {upper:>9.3g} "
+          f"{both:>7.1%} {sum(r['rivals'] > 0 for r in ok):>6} {median('theta'):>10.3g} "
+          f"{median('std'):>9.3g} {upper:>9.3g} "
           f"{time.perf_counter() - t0:>6.0f}", flush=True)
     missed = [k for k, r in enumerate(res)
               if "theta" in r and not r["ci95"][0] <= theta <= r["ci95"][1]]
@@ -135,8 +139,8 @@ def main() -> None:
         return
     print(f"{args.drive} drive, {args.snr:g} dB, {args.trials} trials a row (seed {args.seed})")
     print(f"{'theta':>8} {'answered':>9} {'far':>4} {'from 0':>7} {'cover':>7} "
-          f"{'2-sigma band':>13} {'bounded':>7} {'theta_':>10} {'std_':>9} {'upper':>9} "
-          f"{'s':>6}")
+          f"{'2-sigma band':>13} {'bounded':>7} {'rivals':>6} {'theta_':>10} {'std_':>9} "
+          f"{'upper':>9} {'s':>6}")
     for theta in (float(x) for x in args.thetas.split(",")):
         row(args, linear, theta)
 

@@ -9,6 +9,7 @@ trials stay fast.
 from __future__ import annotations
 
 import json
+import math
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -393,7 +394,8 @@ def _check_coulomb_columns(pb, sig, z):
     torques tied to them) the Jacobian is the kernel's sensitivities weighed as the
     residual (tests/test_sensitivity_kernel.py checks those against extrapolated
     differences: plain ones resolve only 1e-2 on this record); a torque held at its
-    floor has a zero column; behind a current loop they are the kernel's with it."""
+    floor has a zero column, but for the uncertainty (``upward``); behind a current
+    loop they are the kernel's with it."""
     from backlashkit._sensitivity import sensitivities
 
     rough = pb.with_params(("fc_M", "fc_L"), {"fc_M": 1e-9, "fc_L": 1e-9},
@@ -417,6 +419,9 @@ def _check_coulomb_columns(pb, sig, z):
         assert np.array_equal(jac[pos:, -2:], np.zeros((len(rough.free), 2)))
         r = res.at(zr)
         assert np.array_equal(res.jacobian(zr, r), jac)
+    # the uncertainty's (upward): the floored torque's derivative up from its floor
+    up = res.exact_jacobian(zr, upward=True)
+    assert np.array_equal(up[:, :-1], jac[:, :-1]) and np.abs(up[:pos, -1]).max() > 0
     looped = rough.with_params(("tau_i",), {"tau_i": 1e-5}, {})
     res_loop, zl = looped.residual(looped.spans, None, sig), np.r_[z, 1.0, 1.0, np.log(1e-3)]
     jac, (drive, loop) = res_loop.exact_jacobian(zl), looped.exact_model(zl)
@@ -603,6 +608,39 @@ def test_candidates_along_one_basins_flat_direction_count_as_one():
     assert len(distinct([a, state(3e-3, 100.0 + 2 * SAME_COST)], 3, np.inf)) == 2
     assert len(distinct([a, state(2 * DISTINCT, 100.0)], 3, np.inf)) == 2
     assert len(distinct([a, state(1e-4, 150.0)], 3, np.inf)) == 1  # SAME_POINT
+
+
+def test_a_rival_on_the_estimates_valley_floor_is_no_rival():
+    """``bowl_rise`` measures a rival's distance up the estimate's Fisher quadratic in
+    natural units. Two friction coefficients of about equal size whose sum alone the
+    residual sees: a split moved x0.53 and x1.39 (0.63 and 0.33 apart in their
+    logarithms, far beyond DISTINCT) keeps the sum, and lies on the valley's floor,
+    while a point 3 standard errors off the sum lies 9 up it. ``theta`` next to 0: a
+    thousandth of the estimate's, 7 apart in its logarithm, is no step in rad."""
+    from backlashkit.identify._search import BOWL_RISE, bowl_rise, outside_bowl
+
+    f = np.array([1.0, 1.2])  # the two coefficients, their sum seen with std 0.01
+    jz = np.zeros((2, 3))
+    jz[0, 1:] = f / 0.01  # columns p dr/dp; theta's: 0 (a theta of 1e-14 rad)
+    jz[1, 0] = 1e-9
+    z = np.r_[math.log(1e-14), np.log(f)]
+    split = np.r_[z[0], np.log([f[0] * 0.5348, f[1] + f[0] * (1 - 0.5348)])]
+    assert np.ptp(split[1:] - z[1:]) > 60 * 1e-2  # far apart in logarithms
+    logs = np.zeros(3, bool)
+    assert bowl_rise(jz, z, split, logs) == pytest.approx(0.0, abs=1e-12)
+    off = np.r_[z[0], np.log(f * (1 + 0.03 / f.sum()))]  # the sum 0.03 up: 3 std
+    assert bowl_rise(jz, z, off, logs) == pytest.approx(9.0)
+    near_0 = np.r_[z[0] - math.log(1e3), z[1:]]
+    assert bowl_rise(jz, z, near_0, logs) < 1e-15
+    assert outside_bowl(jz, z, [split, off, near_0], logs) == [off] and BOWL_RISE < 9.0
+    # the same split with the two estimated in natural units (as the Coulomb torques, of
+    # scale 1: their columns dr/dp): its steps are the differences themselves
+    jz[0, 1:] = 1.0 / 0.01
+    natural = np.array([False, True, True])
+    assert bowl_rise(jz, np.r_[z[0], f], np.r_[z[0], np.exp(split[1:])],
+                     natural) == pytest.approx(0.0, abs=1e-12)
+    assert bowl_rise(jz, np.r_[z[0], f], np.r_[z[0], np.exp(off[1:])],
+                     natural) == pytest.approx(9.0)
 
 
 def test_parametric_bootstrap(short):

@@ -21,6 +21,7 @@ import pytest
 import backlashkit as bk
 from backlashkit.cli.main import main as cli_main
 from backlashkit.errors import InputError, PriorMismatchWarning
+from backlashkit.identify import _search
 from backlashkit.identify.joint import PRIOR_CONFLICT_Z
 from backlashkit.identify.search import JointSearch, Restarts
 from backlashkit.identify.terms import SCREEN_DROP
@@ -136,7 +137,6 @@ def test_a_fit_too_far_from_the_prior_is_refused_before_its_uncertainty(coulomb,
     """The same refusal comes as soon as the search has chosen its model: the profile
     interval's refits and the second search (``Restarts.misfit``) from linear
     parameters that far off can take minutes; a bootstrap refit still answers."""
-    from backlashkit.identify import _search
 
     def no_uncertainty(*args, **kwargs):
         raise AssertionError("the uncertainty ran at a point the prior refuses")
@@ -233,7 +233,7 @@ def test_ideal_records_keep_paper_a_model_unchanged(monkeypatch):
     assert auto.estimated_ == plain.estimated_
 
 
-def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
+def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys, monkeypatch):
     """A drive with no backlash (theta = 0, the scipy reference at 40 dB; trials 2 and
     4 of the seed-7 trials of ``python benchmarks/small_backlash.py``): theta is fitted
     as a logarithm, which only approaches 0, so its interval was ``[theta_ / 10, 10
@@ -245,14 +245,27 @@ def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
     second drive's x0.2 (trial 1 of its seed-7 trials), where the prior's parameters fit
     the records about as well as the estimate. The
     interval now reaches 0 (the profile at theta = 0 stays below 3.84) and ends where
-    the profile, followed in rad, crosses 3.84; no warning."""
+    the profile, followed in rad, crosses 3.84; no warning. The search's other ends
+    along the friction split's flat floor (and at other thetas next to 0) were counted
+    as 4 rival minima, with a note that the interval was wider than theta -+ 1.96 std
+    for them; they lie within 0.003 of the estimate up its Fisher quadratic in natural
+    units (``_search.bowl_rise``), so they are no rivals."""
     trials = np.random.SeedSequence(7).spawn(12)
     recs = _records(P_TRUE, 0.0, seed=trials[2])
     other = _records(OTHER, 0.0, seed=trials[1])
+    seen = []  # the search's other ends that trial 2's uncertainty is handed
+
+    def outside_bowl(jz, z, points, natural):
+        seen.extend((_search.bowl_rise(jz, z, pt, natural), np.exp(pt - z)) for pt in points)
+        return bowl(jz, z, points, natural)
+
+    bowl = _search.outside_bowl
     with warnings.catch_warnings():
         warnings.simplefilter("error", PriorMismatchWarning)
         moved = _fit(_records(P_TRUE, 0.0, seed=trials[4]), P_TRUE)
+        monkeypatch.setattr(_search, "outside_bowl", outside_bowl)
         fit = _fit(recs, P_TRUE)
+        monkeypatch.setattr(_search, "outside_bowl", bowl)
         second = _fit(other, OTHER)
     with capsys.disabled():  # -s shows what the docstring quotes
         print(f"trial 4: f_M x{moved.params_['f_M'] / P_TRUE['f_M']:.3g}, the standard error of "
@@ -272,8 +285,12 @@ def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
     with capsys.disabled():
         print(f"trial 2: theta_ {fit.theta_:.3g} rad, std_ {fit.std_:.3g}, ci95_ [{lo:.3g}, "
               f"{hi:.3g}]")
+        for rise, ratio in seen:
+            print(f"  the search's end at theta x{ratio[0]:.3g}, f_M x{ratio[4]:.3g}, f_L "
+                  f"x{ratio[5]:.3g} of the estimate's: {rise:.2g} up its Fisher quadratic")
+    assert len(seen) == 4 and all(rise < 0.01 for rise, _ in seen)
     assert moved.ci95_[0] == 0.0
-    assert lo == 0.0 and fit.ci95_bounded_ == (True, True)
+    assert lo == 0.0 and fit.ci95_bounded_ == (True, True) and fit.rival_basins_ == 0
     at_0 = fit.profile_[fit.profile_[:, 0] == 0.0, 1]
     at_hi = fit.profile_[np.argmin(np.abs(fit.profile_[:, 0] - hi)), 1]
     assert at_0.size and np.all(at_0 < 3.84) and at_hi == pytest.approx(3.84, abs=0.25)
@@ -285,6 +302,7 @@ def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys):
     assert doc["ci95"] == [0.0, pytest.approx(hi)]
     assert any(n.startswith("the 95% interval of theta reaches 0: these records are "
                             "consistent with a drive without backlash") for n in doc["notes"])
+    assert doc["rival_basins"] == 0 and not any("other minima" in n for n in doc["notes"])
 
 
 def test_a_drive_without_backlash_is_searched_for():
@@ -303,6 +321,36 @@ def test_a_drive_without_backlash_is_searched_for():
     assert old.theta_ == pytest.approx(5.4e-4, rel=0.01) and old.ci95_[0] > 5e-4
     assert _fit(refused, OTHER).ci95_[0] == 0.0
     assert _fit(held, OTHER, prior_rel_std=0).ci95_[0] == 0.0
+
+
+def test_a_coulomb_torque_fitted_to_0_has_a_standard_error():
+    """``friction="coulomb"`` on a drive without Coulomb friction: the fit puts both
+    torques on their floor (0). The floor held them, so their Jacobian columns were 0,
+    the information singular, and its pseudo-inverse gave them a standard error of 0,
+    as if they were known exactly. The uncertainty now takes their derivative up from
+    the floor. ``theta``'s standard error is then about the viscous fit's (the torques
+    hardly trade against it here). ``friction_`` said "viscous" beside the fitted
+    torques."""
+    recs = _records(P_TRUE, THETA, seed=np.random.SeedSequence(7).spawn(12)[2])
+    fit = _fit(recs, P_TRUE, friction="coulomb", actuator=None)
+    viscous = _fit(recs, P_TRUE, friction="viscous", actuator=None)
+    assert fit.params_["fc_M"] == 0.0 and fit.friction_ == "coulomb"  # still the model's
+    assert all(1e-5 < fit.param_std_[n] < 1e-2 for n in ("fc_M", "fc_L"))  # N m
+    assert fit.std_ == pytest.approx(viscous.std_, rel=0.05)
+
+
+def test_a_singular_information_keeps_a_theta_next_to_0():
+    """Where ``J^T J`` is singular (a column of zeros), the pseudo-inverse used to cut
+    ``theta``'s column too when ``theta`` sat next to 0, ``theta dr/dtheta`` in its
+    logarithm being 1e-9 of the others: a standard error of 0 and an interval of
+    ``[0, 10 theta_]``. Scaled to unit columns first, it keeps it."""
+    from backlashkit.identify._search import fisher_covariance
+
+    rng = np.random.default_rng(3)
+    jz = rng.normal(size=(50, 3)) * [1e-9, 1e4, 0.0]
+    cov = fisher_covariance(jz)
+    keep = np.linalg.inv(jz[:, :2].T @ jz[:, :2])
+    assert np.allclose(cov[:2, :2], keep, rtol=1e-8) and cov[2, 2] == 0.0
 
 
 def test_known_current_loop_is_not_fitted():
@@ -581,7 +629,6 @@ def test_the_interval_spans_a_rival_basin(monkeypatch):
     both basins, so the interval now spans the second one's profile too and covers
     the truth. Without the rivals (``rivals_of`` finding none) it does not (``-s``
     prints both)."""
-    from backlashkit.identify import _search
 
     recs = _records(OTHER, 0.02, fc=(0.01, 0.02),
                     seed=np.random.SeedSequence(2020, spawn_key=(1, 1, 60)), snr=30.0)
@@ -727,7 +774,6 @@ def test_ringing_restarts_reach_a_basin_a_stiffness_shift_alone_does_not(monkeyp
     the ringing's frequency moves into a basin near the truth, lower in ``-2 log L`` by
     more than 3, with theta within 2 %; screened for as few iterations as the other
     restarts, they stop on the way (``-s`` prints the three)."""
-    from backlashkit.identify import _search
 
     recs, prior, kw = _coulomb_p10(18)
     fit = _fit(recs, prior, **kw)

@@ -206,16 +206,24 @@ class Problem:
         ratio = self.values(z)[idx] / self.p_prior[[i - 1 for i in idx]]
         return bool(np.any((ratio > SEARCH_SPAN) | (ratio < 1.0 / SEARCH_SPAN)))
 
-    def exact_scale(self, z: np.ndarray) -> np.ndarray:
+    def exact_scale(self, z: np.ndarray, *, upward: bool = False) -> np.ndarray:
         """``dp/dz`` of each estimated parameter at ``z``: ``p`` for a logarithm, the
         scale for one in natural units, and 0 where a floor holds it (the kernel
-        simulates the floor, which does not move with ``z``)."""
-        values = self.values(z)
-        out = np.where(self.scales > 0, self.scales, values)
-        for i, col in enumerate(self.cols):
-            if col in self.floors and values[i] < self.floors[col]:
-                out[i] = 0.0
+        simulates the floor, which does not move with ``z``); with ``upward``, the
+        scale there too: the derivative up from the floor, the information of a
+        parameter on its bound (a Coulomb torque fitted to 0), which 0 would take for
+        no information at all."""
+        out = np.where(self.scales > 0, self.scales, self.values(z))
+        if not upward:
+            out[self.on_floor(z)] = 0.0
         return out
+
+    def on_floor(self, z: np.ndarray) -> np.ndarray:
+        """Whether a floor holds each estimated parameter at ``z`` (its value below the
+        smallest value simulated)."""
+        values = self.values(z)
+        return np.array([col in self.floors and values[i] < self.floors[col]
+                         for i, col in enumerate(self.cols)], bool)
 
     def residual(self, spans: Sequence[Span], horizon: float | None, sig: np.ndarray,
                  ar: np.ndarray | None = None) -> Residual:
@@ -230,17 +238,20 @@ class Problem:
     def central_jacobian(self, res: Residual, z: np.ndarray) -> np.ndarray:
         """Jacobian of ``res`` at ``z`` for the uncertainty: exact
         (:meth:`Residual.exact_jacobian`) where the compiled sensitivities cover the
-        model, else by central differences."""
-        exact = res.exact_jacobian(z)
+        model, else by central differences; a parameter a floor holds takes its
+        derivative up from the floor (``upward``; a forward difference)."""
+        exact = res.exact_jacobian(z, upward=True)
         if exact is not None:
             return exact
         n, h = len(self.names), self.fd_step
+        floored = self.on_floor(z)
         zz = np.repeat(z[np.newaxis, :], 2 * n, axis=0)
         for i in range(n):
             zz[2 * i, i] += h
-            zz[2 * i + 1, i] -= h
+            if not floored[i]:  # below the floor the model does not move
+                zz[2 * i + 1, i] -= h
         rr = res(zz)
-        return ((rr[0::2] - rr[1::2]) / (2 * h)).T
+        return ((rr[0::2] - rr[1::2]) / np.where(floored, h, 2 * h)).T
 
 
 #: The searches take a point whose linear parameter lies over this factor off its prior
@@ -351,10 +362,13 @@ class Residual:
         zz = np.repeat(z[np.newaxis, :], n, axis=0) + h * np.eye(n)
         return ((self(zz) - r) / h).T
 
-    def exact_jacobian(self, z: np.ndarray, *, with_theta: bool = True) -> np.ndarray | None:
+    def exact_jacobian(self, z: np.ndarray, *, with_theta: bool = True, upward: bool = False
+                       ) -> np.ndarray | None:
         """The Jacobian in the estimated values from the compiled forward
         sensitivities, one run per span of the estimated parameters alone (without
-        ``theta``'s column where ``with_theta`` is false: a refit that holds it); None
+        ``theta``'s column where ``with_theta`` is false: a refit that holds it; with
+        ``upward``, a parameter on its floor moves up from it,
+        :meth:`Problem.exact_scale`); None
         outside their scope (:meth:`Problem.exact_model`) or where a change grazes (no
         derivative there: the caller differences instead). The
         sensitivities follow the residual's own simulation at ``z`` (:attr:`kept`
@@ -372,7 +386,7 @@ class Residual:
 
         first = 0 if with_theta else 1
         names = pb.names[first:]
-        scale = pb.exact_scale(z)  # dp/dz
+        scale = pb.exact_scale(z, upward=upward)  # dp/dz
         # the residual is data - model: its rows move as -S (negating a factor is exact)
         minus_per_z = -scale[first:]
         out = np.empty((self.n_res, len(names)))

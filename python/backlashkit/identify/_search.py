@@ -91,6 +91,17 @@ RESTART_MARGIN = 1.0
 #: WHOLE_RECORD_MARGIN has it); two units of slack keep a rival whose short-window rise
 #: is a little above CHI2_95.
 RIVAL_SCREEN = CHI2_95 + 2.0
+#: A rival that the estimate's own Fisher quadratic puts within this of it (chi-square
+#: units) lies on the floor of the estimate's basin, not in a basin of its own, and is
+#: not counted as another minimum (its profile is still followed, one more start of the
+#: profile's refits along that floor). Where a drive has no backlash the friction's
+#: split is hardly determined, and the search's ends along that flat floor, as far apart
+#: in their logarithms as two basins, lie 0.0025 or less up it
+#: (tests/test_identify_real_drive.py, ``-k without_backlash_gets -s``); a basin of
+#: another ringing phase, with k_sh several standard errors off, lies far up it.
+BOWL_RISE = 1.0
+#: Largest exponent :func:`bowl_rise` takes (``math.exp`` overflows past 709).
+MAX_EXP = 700.0
 #: A held-theta refit of the profile search ending more than this (chi-square units)
 #: below the estimate's cost restarts the final refinement from there, at most
 #: RECENTRE_MAX times: a rattling shaft's likelihood is rough at the scale of 1-2
@@ -285,6 +296,28 @@ def rivals_of(best: LMState, states: Sequence[LMState]) -> list[LMState]:
     return out
 
 
+def bowl_rise(jz: np.ndarray, z: np.ndarray, point: np.ndarray, natural: np.ndarray
+              ) -> float:
+    """The rise of ``-2 log L`` from the estimate ``z`` (Jacobian ``jz`` of its residual)
+    to ``point`` by its Fisher quadratic in natural units: ``|jz dp/p|^2`` for the
+    log-parameters (``jz``'s columns are ``p dr/dp``), each step a share of the value,
+    and ``jz dz`` for those estimated in natural units (``natural``: their mask,
+    ``Problem.scales > 0``). The logarithms' steps would not do: between two points
+    near ``theta = 0`` they mean nothing, and a valley straight in natural units, as a
+    friction split's of fixed sum, is curved in them."""
+    dz = np.asarray(point, float) - z
+    # capped where the ratio overflows (a theta next to 0, whose column is then about 0)
+    step = np.where(natural, dz, np.expm1(np.minimum(dz, MAX_EXP)))
+    return float(np.sum((jz @ step) ** 2))
+
+
+def outside_bowl(jz: np.ndarray, z: np.ndarray, points: Sequence[np.ndarray],
+                 natural: np.ndarray) -> list[np.ndarray]:
+    """The ``points`` more than :data:`BOWL_RISE` up the Fisher quadratic of the
+    estimate ``z`` (:func:`bowl_rise`): possible rivals in basins of their own."""
+    return [pt for pt in points if bowl_rise(jz, z, pt, natural) > BOWL_RISE]
+
+
 def prior_point(z: np.ndarray, free: Sequence[str], anchor: dict[str, float]
                 ) -> np.ndarray:
     """Log-parameters ``z`` (theta first, then ``free``) with the linear parameters
@@ -470,8 +503,9 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
     ``anchor``: the prior's point (z units by name), a second start of the profile's
     end refits (:attr:`IntervalInputs.anchor`); ``rivals``: the search's other minima
     (log-parameters of ``pb``), refitted on ``rows_unc`` and handed on where they stay
-    rivals (:attr:`IntervalInputs.rivals`); ``jacobian``: the Jacobian of ``rows_unc``
-    at ``best.z``, where already made."""
+    rivals (:attr:`IntervalInputs.rivals`; those outside the estimate's Fisher
+    quadratic, :func:`outside_bowl`, are counted as :attr:`ThetaInterval.rivals`);
+    ``jacobian``: the Jacobian of ``rows_unc`` at ``best.z``, where already made."""
     near = [pb.refine(rows_unc, z, max_iter) for z in rivals]
     for k_centre in range(RECENTRE_MAX + 1):
         z = best.z
@@ -482,12 +516,16 @@ def uncertainty(pb: Problem, best: LMState, rows_unc: Residual, interval, max_it
         dv = np.where(pb.scales > 0, pb.scales, values)  # delta method: dp = p dz
         cov = cov_z * np.outer(dv, dv)
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        others = rivals_of(best, near)
         found = interval._interval(IntervalInputs(
             float(values[0]), float(std[0]), z, cov_z, float(best.cost), rows_unc,
             pb.fd_step, partial(draw, z), refit,
             partial(rows_unc.exact_jacobian, with_theta=False), look_past,
             None if anchor is None else prior_point(z, pb.free, anchor)[1:],
-            [(st.z, st.cost) for st in rivals_of(best, near)]))
+            [(st.z, st.cost) for st in others]))
+        if found.rivals:  # the profile's: of those, the minima in basins of their own
+            found = replace(found, rivals=len(outside_bowl(jz, z, [st.z for st in others],
+                                                           pb.scales > 0)))
         if k_centre == RECENTRE_MAX or found.lowest_rise > -RECENTRE_MARGIN:
             break
         st = pb.refine(rows_unc, found.lowest_z, max_iter)
@@ -510,12 +548,17 @@ def prior_rise(pb: Problem, rows: Residual, z: np.ndarray) -> float:
 def fisher_covariance(jz: np.ndarray) -> np.ndarray:
     """The Gauss-Newton covariance ``(J^T J)^-1`` of the estimated values from the
     residual's Jacobian ``jz`` (the prior's rows are in it: its information is in
-    ``J^T J``); the pseudo-inverse where that is singular."""
+    ``J^T J``); where that is singular, the pseudo-inverse of its columns scaled to
+    unit norm. Unscaled, the pseudo-inverse's cut-off (relative to the largest
+    singular value) would take the column of a ``theta`` next to 0, ``theta dr/dtheta``
+    in its logarithm, for no information, and give it a standard error of 0."""
     info = jz.T @ jz
     try:
         return np.linalg.inv(info)
     except np.linalg.LinAlgError:
-        return np.linalg.pinv(info)
+        norm = np.sqrt(np.diag(info))
+        s = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 1.0)
+        return np.linalg.pinv(info * np.outer(s, s)) * np.outer(s, s)
 
 
 def resample(pb: Problem, sig: np.ndarray, ar: np.ndarray | None, z: np.ndarray,

@@ -150,7 +150,8 @@ class ThetaInterval:
 
     ``lowest_rise`` below 0: a held-theta refit (at log-parameters ``lowest_z``) ended
     below the estimate's cost, so the estimate was not the nearby minimum. ``rivals``:
-    the other basins whose profiles the interval spans (:attr:`IntervalInputs.rivals`).
+    the other basins whose profiles the interval spans (:attr:`IntervalInputs.rivals`;
+    the joint search counts only those off the floor of the estimate's own basin).
     """
 
     kind: str

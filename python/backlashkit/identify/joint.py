@@ -42,7 +42,9 @@ Fitted attributes besides those in the class docstring
 ``rival_basins_`` (int)
     Other minima of the likelihood, in other basins, within 3.84 (chi-square) of the
     estimate's: the profile interval spans their profiles too, so ``ci95_`` can be
-    wider than ``std_`` says (0 for the other intervals).
+    wider than ``std_`` says (0 for the other intervals). Only minima more than 1 up
+    the estimate's Fisher quadratic count; those on the floor of its own basin (a flat
+    valley's, such as the friction split's of a drive without backlash) do not.
 ``bootstrap_thetas_`` (array or None)
     The refitted ``theta`` of every bootstrap resample.
 ``param_std_``, ``covariance_``
@@ -723,7 +725,10 @@ def _published(out: _search.Outcome, prior: TwoMassDrive, law: str) -> dict[str,
         "params_": {**{n: float(getattr(drive, n)) for n in (*LINEAR_PARAMS, "fc_M", "fc_L")},
                     "tau_i": tau_i},
         "drive_": drive, "estimated_": pb.names,
-        "friction_": "coulomb" if drive.fc_M > 0 or drive.fc_L > 0 else "viscous",
+        # Coulomb torques fitted to 0 (friction="coulomb" on a drive without) are still
+        # the model's: the model line and the JSON say so beside their values
+        "friction_": ("coulomb" if {"fc_M", "fc_L"} & set(pb.names) or drive.fc_M > 0
+                      or drive.fc_L > 0 else "viscous"),
         "fc_M_": float(drive.fc_M), "fc_L_": float(drive.fc_L), "tau_i_": tau_i,
         "choices_": out.choices,
         "param_std_": dict(zip(pb.names, (float(s) for s in unc.std), strict=True)),
