@@ -323,20 +323,37 @@ def test_a_drive_without_backlash_is_searched_for():
     assert _fit(held, OTHER, prior_rel_std=0).ci95_[0] == 0.0
 
 
-def test_a_coulomb_torque_fitted_to_0_has_a_standard_error():
-    """``friction="coulomb"`` on a drive without Coulomb friction: the fit puts both
+def test_a_coulomb_torque_fitted_to_0_has_a_standard_error(tmp_path, capsys):
+    """``friction="coulomb"`` on drives without Coulomb friction: the fit puts the
     torques on their floor (0). The floor held them, so their Jacobian columns were 0,
     the information singular, and its pseudo-inverse gave them a standard error of 0,
-    as if they were known exactly. The uncertainty now takes their derivative up from
-    the floor. ``theta``'s standard error is then about the viscous fit's (the torques
-    hardly trade against it here). ``friction_`` said "viscous" beside the fitted
-    torques."""
-    recs = _records(P_TRUE, THETA, seed=np.random.SeedSequence(7).spawn(12)[2])
+    as if they were known exactly; ``friction_`` said "viscous" beside them. The
+    uncertainty now takes their derivative up from the floor. With backlash,
+    ``theta``'s standard error is then about the viscous fit's. Without (the records of
+    ``test_a_drive_without_backlash_gets_an_interval_from_0`` as CSV files, ``identify
+    --friction coulomb``), the pseudo-inverse also cut ``theta``'s own column, 1e-9 of
+    the others' next to ``theta = 0``: its standard error read 0 and its interval
+    ``[0, 8.2e-14]`` rad, ten times an estimate of 8.2e-15 rad (``-s`` prints it now)."""
+    trials = np.random.SeedSequence(7).spawn(12)
+    recs = _records(P_TRUE, THETA, seed=trials[2])
     fit = _fit(recs, P_TRUE, friction="coulomb", actuator=None)
     viscous = _fit(recs, P_TRUE, friction="viscous", actuator=None)
     assert fit.params_["fc_M"] == 0.0 and fit.friction_ == "coulomb"  # still the model's
     assert all(1e-5 < fit.param_std_[n] < 1e-2 for n in ("fc_M", "fc_L"))  # N m
     assert fit.std_ == pytest.approx(viscous.std_, rel=0.05)
+    # a fresh trial 2 (the first draw spawned children of trials[2])
+    fresh = np.random.SeedSequence(7).spawn(12)[2]
+    paths, prior = _files(_records(P_TRUE, 0.0, seed=fresh), tmp_path)
+    capsys.readouterr()
+    assert cli_main(["identify", *paths, "--drive", prior, "--friction", "coulomb",
+                     "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    with capsys.disabled():
+        print(f"without backlash, --friction coulomb: theta {doc['theta']:.3g} rad, std "
+              f"{doc['std']:.3g}, ci95 [{doc['ci95'][0]:.3g}, {doc['ci95'][1]:.3g}], fc_M "
+              f"{doc['fc_M']:.3g} N m")
+    assert doc["theta"] < 1e-12 and doc["fc_M"] == doc["fc_L"] == 0.0
+    assert doc["std"] > 1e-6 and doc["ci95"][0] == 0.0 and doc["ci95"][1] > doc["std"]
 
 
 def test_a_singular_information_keeps_a_theta_next_to_0():
