@@ -113,6 +113,47 @@ def test_free_flight_inside_the_gap_is_first_order_decay(law):
     np.testing.assert_allclose(ref.phi_d, phi, rtol=0, atol=1e-11)
 
 
+@pytest.mark.parametrize("rtol", [1e-10, 1e-12])
+def test_loop_steps_keep_free_flight_behind_a_current_loop_exact(rtol):
+    """Free flight behind a current loop of 1 ms, against its closed form: the loop's
+    torque ``u + (T0 - u) e^(-t / tau_i)`` drives the motor, the load coasts. DOP853's
+    steps had outgrown the loop's stability interval once its decay lay below the error
+    control's notice: at ``rtol`` 1e-12 the loop's torque grew back and the motor's
+    speed drifted from the closed form (``_reference_engine.LOOP_MAX_STEP``)."""
+    jm, jl, fm, fl, u, t0q, tau = (PAPER["J_M"], PAPER["J_L"], PAPER["f_M"], PAPER["f_L"],
+                                   0.0, 0.157, 1e-3)
+    drive = bk.TwoMassDrive(**PAPER, theta=50.0)  # never closed within 1.5 s
+    t = np.arange(1501) * 1e-3
+    w0m, w0l = 16.0, 15.0
+    ref = reference_simulate(drive, t, np.full(t.size, u), initial_state=[w0m, w0l, 0.0, t0q],
+                             actuator=bk.CurrentLoop(tau_i=tau), rtol=rtol)
+    assert ref.events == () and np.all(ref.modes == 0)
+    b = (t0q - u) / (fm - jm / tau)  # the loop's share of the motor's speed
+    w_m = u / fm + (w0m - u / fm - b) * np.exp(-t * fm / jm) + b * np.exp(-t / tau)
+    torque = u + (t0q - u) * np.exp(-t / tau)
+    for got, want in ((ref.loop_torque, torque), (ref.w_motor, w_m),
+                      (ref.w_load, w0l * np.exp(-t * fl / jl))):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_paper_step_down_behind_a_loop_matches_the_kernel(capsys):
+    """Paper A's step-down (0.942 N m held, 0 at 2 s, 8 s) with Coulomb friction
+    behind a 1 ms loop, the records ``benchmarks/real_drive.py`` makes: the reference
+    at its default ``rtol`` against the kernel's exact flow. Before the loop bounded
+    its steps they differed by 1.0e-7 rad/s (``-s`` prints the difference)."""
+    drive = bk.TwoMassDrive(**PAPER, theta=THETA, fc_M=0.01, fc_L=0.02)
+    t = np.arange(8000) * 1e-3
+    u = np.where(t < 2.0, 0.942, 0.0)
+    loop, x0 = bk.CurrentLoop(tau_i=1e-3), drive.steady_state(0.942)
+    ref = reference_simulate(drive, t, u, actuator=loop, initial_state=x0)
+    kernel = drive.simulate(t, u, actuator=loop, initial_state=x0)
+    gap = float(np.max(np.abs(ref.states[:, :2] - kernel.states[:, :2])))
+    with capsys.disabled():
+        print(f"reference against kernel behind a 1 ms loop: {gap:.2g} rad/s at most")
+    assert [e.kind for e in ref.events] == [e.kind for e in kernel.events]
+    assert gap < 1e-8
+
+
 @pytest.mark.parametrize("law", ["paper", "no-pull"])
 @pytest.mark.parametrize("flank", [1, -1])
 def test_contact_time_of_a_coasting_drive_is_exact(law, flank):

@@ -364,7 +364,7 @@ def reference_simulate(
         The solver failed or the contact configuration chatters.
     """
     model, t_arr, u, x0, law_, scale = prepare(drive, t, torque, law, initial_state, actuator)
-    options = SolverOptions.build(method, rtol, atol, max_step, scale)
+    options = SolverOptions.build(method, rtol, atol, max_step, scale, model.tau_i)
     trace = run(model, t_arr, u, x0, options)
     return _result(model, trace, t_arr, u, law_, options)
 
