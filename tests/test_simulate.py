@@ -221,6 +221,9 @@ def test_batch_with_a_current_loop_and_angles_matches_single_runs():
         assert np.array_equal(a.states, single.states) and a.events == single.events
         assert np.array_equal(a.phi_motor, single.phi_motor)
         assert np.array_equal(a.motor_torque, single.motor_torque)
+    plain = bk.TwoMassDrive(**PAPER, theta=THETA)  # a loop without friction
+    (alone,) = bk.simulate_batch([plain], t, u, actuator=loop)
+    assert np.array_equal(alone.states, plain.simulate(t, u, actuator=loop).states)
     given = bk.simulate_batch(drives[:1], t, u, actuator=loop, initial_state=np.r_[x0, 0.0])
     assert given[0].motor_torque[0] == 0.0  # the loop's torque as given, not settled
     with pytest.raises(bk.InputError, match=r"initial_state must have shape \(3,\) or \(3, 3\)"):

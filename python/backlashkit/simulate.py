@@ -336,7 +336,8 @@ def _batch_initial_states(chains, initial_state, u: np.ndarray, loop: bool) -> n
     """:func:`simulate_batch`'s initial states, one row per run: ``2N - 1`` entries, and
     with a current loop the motor torque (given, or the run's first set-point)."""
     b, n_states = len(chains), chains[0].n_states
-    x0 = np.zeros(n_states) if initial_state is None else np.asarray(initial_state, float)
+    x0 = (np.zeros(n_states) if initial_state is None
+          else np.atleast_1d(np.asarray(initial_state, float)))
     x0 = np.broadcast_to(x0, (b, x0.shape[-1])) if x0.ndim == 1 else x0
     x0 = v.finite_array("initial_state", x0, ndim=2)
     widths = (n_states, n_states + 1) if loop else (n_states,)
