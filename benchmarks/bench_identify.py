@@ -9,8 +9,9 @@
    share of its profile-likelihood interval (the fit's time minus that of the same fit
    with ``interval=FisherInterval()``), the same fit with the stiffness restarts of
    earlier versions, ``stiffness_restarts=(0.15,)`` (the cost of the wider default),
-   without the restarts of the friction split, ``friction_restarts=()``,
-   and with ``noise_model=ARNoise(2)``, left out of the default for its cost.
+   without the restarts of the friction split, ``friction_restarts=()``, with no
+   restart at all (every field of ``Restarts`` off), and with
+   ``noise_model=ARNoise(2)``, left out of the default for its cost.
 3. With ``--reproduce``: ``backlashkit reproduce ravanbod2002 --runs 10 --jobs 2``
    wall time (target < 60 s on 2 cores), once.
 4. Accuracy of eq. 9 (both onsets) on noise-free records of both steps: ``t_c`` and
@@ -30,7 +31,7 @@ profiler's overhead inflates the total).
 ``--stiffness-grid N`` times ``ThetaGrid(stiffness_points=N)`` in 2. instead.
 
 ``--count`` prints instead what one default fit, one of paper A's model alone (no
-term tested), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
+term tested), one with no restart at all (``BARE``), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
 seven parameters) of the same records cost in simulations of those records: the
 samples the compiled kernel advanced (every parameter row of every call, counted by
 wrapping ``simulate_packed_runs``), divided by the records' samples (issue 24's
@@ -277,6 +278,15 @@ def count(recs, prior) -> None:
     print(f"  with paper A's model alone (friction='viscous', actuator=None, no term "
           f"tested): {n_plain:.0f} simulations in {calls} kernel calls, and "
           f"{sens_plain[0]} sensitivity runs")
+    bare = JointIdentifier(prior, workers=1, search=JointSearch(restarts=BARE)).fit
+    sens_bare = [0, 0, 0.0]
+    start = time.perf_counter()
+    n_bare, calls = simulations(lambda: bare(recs), samples, sens=sens_bare)
+    wall_bare = time.perf_counter() - start
+    print(f"  with no restarts at all (the default model, every field of Restarts off): "
+          f"{n_bare:.0f} simulations in {calls} kernel calls, and {sens_bare[0]} sensitivity "
+          f"runs in {sens_bare[2]:.2f} s: {n_bare + sens_bare[2] / unit:.0f} in all at the "
+          f"steadier unit; its wall time {wall_bare:.2f} s")
     for estimate in (("theta",), "all"):
         n_crb, n_sens, ratio = zip(*(crb_cost(truth, r, estimate) for r in recs),
                                    strict=True)
@@ -324,6 +334,11 @@ def doublings(recs, prior) -> None:
           f"cost) and turns away {tally[False, True] + tally[False, False]} "
           f"({tally[False, True]} would lower it)")
 
+
+#: Every restart off, the misfit's second search too: what the search costs without the
+#: restarts added for drives with friction and loops at 30 dB (issue 20).
+BARE = Restarts(stiffness=(), long=(), ringing=(), friction=(), misfit=False, prior=False,
+                no_backlash=False)
 
 #: Functions ``--profile`` lists.
 PROFILE_TOP = 12
@@ -463,6 +478,9 @@ def main() -> None:
                        args.repeats)
     t_noprior = _median(lambda: fit_with(search={"restarts": Restarts(prior=False)}),
                         args.repeats)
+    # every restart off, the misfit's second search too: what the search costs without
+    # the restarts added for drives with friction and loops at 30 dB (issue 20)
+    t_bare = _median(lambda: fit_with(search={"restarts": BARE}), args.repeats)
     t_ar = _median(lambda: fit_with(noise_model=ARNoise(2)), args.repeats)
     t_two = _median(lambda: TwoStepIdentifier(prior, workers=1).fit(rec1, final_records=rec2),
                     args.repeats)
@@ -477,6 +495,7 @@ def main() -> None:
     print(f"{'    with stiffness_restarts=(0.15,) (before 0.4, 0.8)':<55} {t_narrow:7.2f} s")
     print(f"{'    with friction_restarts=() (before them)':<55} {t_nofric:7.2f} s")
     print(f"{'    with Restarts(prior=False) (none from the prior)':<55} {t_noprior:7.2f} s")
+    print(f"{'    with no restarts at all (Restarts(...) all off)':<55} {t_bare:7.2f} s")
     print(f"{'    with noise_model=ARNoise(2)':<55} {t_ar:7.2f} s")
     print(f"{'  TwoStepIdentifier.fit (paper A), workers=1':<55} {t_two:7.2f} s")
     print(f"{'  RegressionIdentifier.fit (Table 2 baseline), workers=1':<55} {t_reg:7.2f} s")
