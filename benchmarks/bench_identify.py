@@ -31,8 +31,9 @@ profiler's overhead inflates the total).
 ``--stiffness-grid N`` times ``ThetaGrid(stiffness_points=N)`` in 2. instead.
 
 ``--count`` prints instead what one default fit, one of paper A's model alone (no
-term tested), one with no restart at all (``BARE``), and ``cramer_rao_bound`` (of ``theta`` alone, its default, and of all
-seven parameters) of the same records cost in simulations of those records: the
+term tested), one with no restart at all (``BARE``), and ``cramer_rao_bound`` (of
+``theta`` alone, its default, and of all seven parameters) of the same records cost
+in simulations of those records: the
 samples the compiled kernel advanced (every parameter row of every call, counted by
 wrapping ``simulate_packed_runs``), divided by the records' samples (issue 24's
 measure). The fit and the bound take the compiled sensitivities where their model is
