@@ -136,6 +136,31 @@ def test_loop_steps_keep_free_flight_behind_a_current_loop_exact(rtol):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
 
 
+def test_loop_max_step_lies_within_every_explicit_methods_stability_interval(capsys):
+    """The stability intervals ``LOOP_MAX_STEP``'s comment cites, from scipy's own
+    Butcher tableaux: ``|R(z)| <= 1`` for the stability function ``R(z) = 1 + z b^T (I -
+    z A)^-1 1`` on the negative real axis down to the printed boundary (``-s``), and
+    the bound of two lags inside each."""
+    from scipy.integrate._ivp import rk
+
+    from backlashkit._reference_engine import LOOP_MAX_STEP
+
+    for method in (rk.RK23, rk.RK45, rk.DOP853):
+        b = np.asarray(method.B, float)
+        a = np.zeros((b.size, b.size))  # RK45's A leaves out its last, zero column
+        given = np.asarray(method.A, float)[: b.size, : b.size]
+        a[:, : given.shape[1]] = given
+
+        def r(z, a=a, b=b):
+            return 1.0 + z * b @ np.linalg.solve(np.eye(b.size) - z * a, np.ones(b.size))
+
+        zs = -np.arange(1, 100_001) * 1e-4  # to -10
+        edge = zs[np.argmax([abs(r(z)) > 1.0 for z in zs])]
+        with capsys.disabled():
+            print(f"{method.__name__}: stable on the negative real axis down to {edge:.2f}")
+        assert -edge > LOOP_MAX_STEP and all(abs(r(z)) <= 1.0 for z in zs[zs > edge])
+
+
 def test_paper_step_down_behind_a_loop_matches_the_kernel(capsys):
     """Paper A's step-down (0.942 N m held, 0 at 2 s, 8 s) with Coulomb friction
     behind a 1 ms loop, the records ``benchmarks/real_drive.py`` makes: the reference

@@ -38,7 +38,8 @@ _IMPLICIT = ("Radau", "BDF", "LSODA")
 
 #: Largest step of an explicit method behind a current loop, in lags ``tau_i``: the
 #: loop's decay ``e^(-t / tau_i)`` is stable under a step within the method's stability
-#: interval on the negative real axis (RK23 to -2.51, RK45 -3.31, DOP853 -6.39). Beyond
+#: interval on the negative real axis (RK23 to -2.51, RK45 -3.31, DOP853 -6.39:
+#: ``tests/test_verify.py -k stability_interval -s``, from scipy's tableaux). Beyond
 #: it a step amplifies the decay once it lies below the error control's notice: at
 #: ``rtol`` 1e-12, in free flight behind a 1 ms loop, the motor's speed strayed 7.8e-9
 #: rad/s from its closed form, beyond the 1e-9 that ``rtol`` 1e-10 kept

@@ -557,7 +557,7 @@ def fisher_covariance(jz: np.ndarray) -> np.ndarray:
         return np.linalg.inv(info)
     except np.linalg.LinAlgError:
         norm = np.sqrt(np.diag(info))
-        s = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 1.0)
+        s = 1.0 / np.where(norm > 0, norm, 1.0)  # a column of zeros stays as it is
         return np.linalg.pinv(info * np.outer(s, s)) * np.outer(s, s)
 
 
