@@ -30,10 +30,12 @@ import numpy as np
 
 from ._lm import LMState
 from ._problem import Problem, Residual
+from .intervals import Z_95
 from .record import Record
 from .terms import SCREEN_DROP, Term
 
-__all__ = ["Linearised", "Score", "linearise", "score_test"]
+__all__ = ["Linearised", "Score", "held_widening", "linearise", "score_test"]
+
 
 
 @dataclass(frozen=True)
@@ -105,12 +107,17 @@ class Score:
     std : numpy.ndarray
         The standard errors of the log-parameters of the model without the term (inf
         where its information is singular).
+    widening : tuple of float
+        How far down and up, in ``log theta``, the 95 % interval must reach beyond the
+        model's own to span ``theta`` at every value of the term the data do not rule
+        out (:func:`held_widening`); both 0 where the term's column is not known.
     """
 
     drop: float
     value: float
     shift: float
     std: np.ndarray
+    widening: tuple[float, float] = (0.0, 0.0)
 
     @property
     def screened(self) -> bool:
@@ -141,7 +148,53 @@ def score_test(small: Problem, best: LMState, at: Linearised, big: Problem,
     col_out = col - jac @ along
     norm = float(col_out @ col_out)
     value = -float(col_out @ r0) / norm if norm > 0 else 0.0
+    top = max(start[name] for start in term.start_grid(recs))
+    widening = held_widening(float(along[0]), float(std[0]), norm, value, top)
     if not value > 0:
-        return Score(0.0, 0.0, 0.0, std)
+        return Score(0.0, 0.0, 0.0, std, widening)
     drop = value * value * norm
-    return Score(drop, value, abs(float(along[0])) * value / std[0], std)
+    return Score(drop, value, abs(float(along[0])) * value / std[0], std, widening)
+
+
+def held_widening(along: float, std: float, norm: float, value: float, top: float
+                  ) -> tuple[float, float]:
+    """How far the 95 % interval of ``log theta`` reaches beyond the model's own where
+    the term is not known: the profile interval of the linearised larger model with
+    the term's value ``x`` held in ``[0, top]`` and profiled out.
+
+    Held at ``x``, the model without the term refits to ``log theta - along x`` with
+    its own standard error ``std``, and ``-2 log L`` rises by ``norm ((x - value)^2 -
+    value^2)`` from the fit without it (``value``: the unconstrained best ``x``,
+    ``norm``: the information on ``x`` left once the model has moved). ``theta`` is
+    in the interval where some ``x`` puts it within ``Z_95^2`` of the lowest of
+    those: the union over ``x`` of ``log theta - along x -+ std sqrt(Z_95^2 - rise)``.
+    Each end of that union is the largest of a line plus the root of a concave
+    quadratic in ``x``, so it has a closed form. Where the data cannot tell the term
+    from none and it moves ``theta``, the union reaches past the model's interval on
+    one side, as far as the larger model's Fisher interval on that side where nothing
+    bounds ``x`` but the data; a term the data see clearly widens it by next to
+    nothing.
+    """
+    if not (math.isfinite(along) and math.isfinite(std) and std > 0 and top > 0
+            and math.isfinite(norm) and math.isfinite(value)):
+        return (0.0, 0.0)
+    own = Z_95 * std
+    return (max(_held_reach(along, std, norm, value, top) - own, 0.0),
+            max(_held_reach(-along, std, norm, value, top) - own, 0.0))
+
+
+def _held_reach(slope: float, std: float, norm: float, value: float, top: float) -> float:
+    """The largest ``slope x + std sqrt(room(x))`` over ``x`` in ``[0, top]`` where
+    ``room = Z_95^2 - (rise(x) - min rise)`` is not negative (:func:`held_widening`)."""
+    q = Z_95 * Z_95
+    if norm <= 0:  # the data do not see the term: its whole range is allowed
+        return max(slope * top, 0.0) + std * math.sqrt(q)
+    lowest = min(max(value, 0.0), top)
+    reach2 = q / norm + (lowest - value) ** 2  # room >= 0 where (x - value)^2 <= this
+    radius = math.sqrt(reach2)
+    # the stationary point of the line plus the root, inside the allowed x
+    u = math.copysign(math.sqrt(slope * slope * reach2
+                                / (slope * slope + std * std * norm)), slope)
+    x = min(max(value + u, 0.0, value - radius), top, value + radius)
+    room = norm * (reach2 - (x - value) ** 2)
+    return slope * x + std * math.sqrt(max(room, 0.0))

@@ -652,8 +652,10 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
                                term, recs)
             if score.screened:
                 choices.append(TermChoice(term.name, False, score.drop, term.threshold,
-                                          score.shift, screened=True))
+                                          score.shift, screened=True,
+                                          widening=score.widening))
                 continue
+            widening = score.widening
             st = added_term_fit(other, res, best.z, best.cost, term, recs, max_iter)
             (small, st_small), st_big = (pb, best), st
             theta_std = linearised(seen, pb, best, sig, final_h).theta_std
@@ -664,6 +666,8 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             term.name, rise, term.threshold, abs(st_big.z[0] - st_small.z[0]) / theta_std,
             determined(big, st_big.z, std_big, [big.names.index(n) for n in term.params]),
             (fisher_ci95(st_big.z, std_big), fisher_ci95(st_small.z, np.r_[theta_std])))
+        if not term.searched and not choice.kept:
+            choice = replace(choice, widening=widening)
         choices.append(choice)
         if choice.kept != term.searched:  # the other model wins
             pb, best = other, st
@@ -704,9 +708,12 @@ def fisher_ci95(z: np.ndarray, std: np.ndarray) -> tuple[float, float]:
 
 def widened(found: ThetaInterval, choices: Sequence[TermChoice]) -> ThetaInterval:
     """The interval, widened to the other model's where a test could not tell the two
-    apart (:attr:`TermChoice.other_ci95`)."""
-    lo, hi = found.ci95
+    apart (:attr:`TermChoice.other_ci95`), and out by a dropped term's
+    :attr:`TermChoice.widening`."""
+    lo0, hi0 = lo, hi = found.ci95
     for c in choices:
+        down, up = c.widening
+        lo, hi = min(lo, lo0 * math.exp(-down)), max(hi, hi0 * math.exp(up))
         if c.other_ci95 is not None:
             lo, hi = min(lo, c.other_ci95[0]), max(hi, c.other_ci95[1])
     return found if (lo, hi) == found.ci95 else replace(found, ci95=(lo, hi))

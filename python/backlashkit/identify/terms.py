@@ -97,6 +97,9 @@ ESTIMATED_FALL = 0.5
 #: it (which it contains) did not converge: its reason says so (rounding and a stop
 #: within ``_lm.FINAL_ATOL`` of an optimum stay far below it).
 STOPPED_SHORT = 1.0
+#: The smallest :attr:`TermChoice.widening` its reason states, in ``log theta``: the
+#: 0.01 % that the clause's two significant digits still show.
+PRINTED_WIDENING = 1e-4
 #: Values of ``friction``.
 FRICTION_CHOICES = ("auto", "viscous", "coulomb")
 #: Start of each fitted Coulomb torque when the held levels show none, as a fraction
@@ -324,6 +327,11 @@ class TermChoice:
     determined : bool
         Whether the data pin the term's values down (see :meth:`decide`); a term that
         is not is neither kept for its ``shift`` nor widens the interval.
+    widening : tuple of float
+        Where the term is dropped: how far down and up, in ``log theta``, the
+        estimate's interval reaches out to span ``theta`` at every value of the term
+        the data do not rule out (the score test's linearisation,
+        :func:`backlashkit.identify._score.held_widening`); (0, 0) where it is kept.
     """
 
     term: str
@@ -334,6 +342,7 @@ class TermChoice:
     other_ci95: tuple[float, float] | None = None
     screened: bool = False
     determined: bool = True
+    widening: tuple[float, float] = (0.0, 0.0)
 
     @classmethod
     def decide(cls, term: str, rise: float, threshold: float, shift: float,
@@ -395,13 +404,14 @@ class TermChoice:
         name = TERM_NAMES.get(self.term, self.term)
         test = f"likelihood-ratio test at {KEEP_LEVEL:.0%}"
         both = ("; the data cannot tell, so the 95 % interval spans the other model's too"
-                if self.other_ci95 is not None else "")
+                if self.other_ci95 is not None else "") + self._widening_words()
         if self.screened:
             # rounded down, so that a drop just under the limit does not print as it
             drop = math.floor(self.rise * 1e3) / 1e3
             return (f"{name} dropped without fitting it: at the fit without it, a score "
                     f"test predicts it would lower -2 log L by {drop:.3g}, less than "
-                    f"{SCREEN_DROP} (too little to pin it down): the data do not call for it")
+                    f"{SCREEN_DROP} (too little to pin it down): the data do not call for "
+                    f"it{self._widening_words()}")
         if self.rise <= 0:
             # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
             # torques of 0), so a fit with the term ending higher found no better point;
@@ -410,7 +420,7 @@ class TermChoice:
                      "it contains, so its search may have stopped short"
                      if self.rise < -STOPPED_SHORT else "")
             return (f"{name} dropped: the fit with it ends no lower in -2 log L ({test}): "
-                    f"the data do not call for it{short}")
+                    f"the data do not call for it{short}{self._widening_words()}")
         gain = f"it lowers -2 log L by {self.rise:.3g}"
         moves = (f"without it theta moves by {self.shift:.2g} of its standard errors"
                  if math.isfinite(self.shift) else
@@ -427,6 +437,17 @@ class TermChoice:
                     "beyond a factor e), so that shift does not keep it")
         return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}), and "
                 f"{moves}{both}")
+
+    def _widening_words(self) -> str:
+        """The clause on :attr:`widening`, or "" where it is too small to print."""
+        down, up = self.widening
+        if max(down, up) < PRINTED_WIDENING:
+            return ""
+        side = " and ".join(f"{100 * math.expm1(w):.2g} % of theta further {word}"
+                            for w, word in ((down, "down"), (up, "up"))
+                            if w >= PRINTED_WIDENING)
+        return ("; values of it the data do not rule out (linearised at the fit without "
+                f"it) would move theta, so the 95 % interval reaches {side}")
 
 
 def chi2_upper(dof: int, alpha: float) -> float:
