@@ -233,6 +233,25 @@ def test_ideal_records_keep_paper_a_model_unchanged(monkeypatch):
     assert auto.estimated_ == plain.estimated_
 
 
+def test_a_dropped_loop_widens_the_interval_by_the_lags_not_ruled_out():
+    """Where the loop is dropped, the estimate is the model's without it, and its
+    interval is that model's reaching out by the choice's widening: on paper A's ideal
+    records the score test drops the loop unfitted, and a lag it does not rule out
+    still moves theta."""
+    recs = _records(P_TRUE, THETA, seed=3)
+    auto = _fit(recs, P_TRUE, friction="viscous")
+    plain = _fit(recs, P_TRUE, friction="viscous", actuator=None)
+    (loop,) = auto.choices_
+    assert not loop.kept and auto.tau_i_ == 0.0
+    assert auto.theta_ == plain.theta_
+    down, up = loop.widening
+    assert down >= 0 and up >= 0 and max(down, up) > 0
+    lo, hi = plain.ci95_
+    assert auto.ci95_ == pytest.approx((lo * math.exp(-down), hi * math.exp(up)), rel=1e-12)
+    with pytest.raises(AssertionError):  # the widening is no rounding
+        assert auto.ci95_ == pytest.approx(plain.ci95_, rel=1e-4)
+
+
 def test_a_drive_without_backlash_gets_an_interval_from_0(tmp_path, capsys, monkeypatch):
     """A drive with no backlash (theta = 0, the scipy reference at 40 dB; trials 2 and
     4 of the seed-7 trials of ``python benchmarks/small_backlash.py``): theta is fitted

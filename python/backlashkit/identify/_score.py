@@ -110,7 +110,8 @@ class Score:
     widening : tuple of float
         How far down and up, in ``log theta``, the 95 % interval must reach beyond the
         model's own to span ``theta`` at every value of the term the data do not rule
-        out (:func:`held_widening`); both 0 where the term's column is not known.
+        out (:func:`held_widening`); both 0 where the term's column is not known or
+        the linearisation does not bound ``theta``.
     """
 
     drop: float
@@ -173,12 +174,15 @@ def held_widening(along: float, std: float, norm: float, value: float, top: floa
     from none and it moves ``theta``, the union reaches past the model's interval on
     one side, as far as the larger model's Fisher interval on that side where nothing
     bounds ``x`` but the data; a term the data see clearly widens it by next to
-    nothing.
+    nothing. None where the model's own linearised interval reaches ``theta = 0``
+    (``Z_95 std >= 1``): it does not bound ``theta``.
     """
-    if not (math.isfinite(along) and math.isfinite(std) and std > 0 and top > 0
+    own = Z_95 * std
+    # a linearisation whose own interval reaches theta = 0 (the Fisher interval's rule)
+    # does not bound theta, so it cannot say how far the term moves it either
+    if not (math.isfinite(along) and 0 < own < 1 and top > 0
             and math.isfinite(norm) and math.isfinite(value)):
         return (0.0, 0.0)
-    own = Z_95 * std
     return (max(_held_reach(along, std, norm, value, top) - own, 0.0),
             max(_held_reach(-along, std, norm, value, top) - own, 0.0))
 

@@ -28,7 +28,14 @@ from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
 from ._quantised import log_theta_draws, quantised
 from ._score import Linearised, linearise, score_test
-from .intervals import CHI2_95, Z_95, IntervalInputs, ThetaInterval, quantisation_interval
+from .intervals import (
+    CHI2_95,
+    MAX_HALF_WIDTH,
+    Z_95,
+    IntervalInputs,
+    ThetaInterval,
+    quantisation_interval,
+)
 from .noise import sample_noise
 from .record import Record
 from .search import FirstHorizon, JointSearch, Restarts, ThetaGrid
@@ -713,10 +720,16 @@ def widened(found: ThetaInterval, choices: Sequence[TermChoice]) -> ThetaInterva
     lo0, hi0 = lo, hi = found.ci95
     for c in choices:
         down, up = c.widening
-        lo, hi = min(lo, lo0 * math.exp(-down)), max(hi, hi0 * math.exp(up))
+        lo = min(lo, lo0 * math.exp(-down))
+        # no further than the profile follows theta: past it the end is open
+        hi = max(hi, min(hi0 * math.exp(min(up, MAX_EXP)), MAX_HALF_WIDTH))
         if c.other_ci95 is not None:
             lo, hi = min(lo, c.other_ci95[0]), max(hi, c.other_ci95[1])
-    return found if (lo, hi) == found.ci95 else replace(found, ci95=(lo, hi))
+    if (lo, hi) == found.ci95:
+        return found
+    opened = hi >= MAX_HALF_WIDTH > hi0
+    return replace(found, ci95=(lo, hi), bounded=(found.bounded[0],
+                                                  found.bounded[1] and not opened))
 
 
 def determined(pb: Problem, z: np.ndarray, std: np.ndarray, cols: list[int]) -> bool:
