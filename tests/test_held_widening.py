@@ -7,6 +7,7 @@ function takes."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -116,8 +117,10 @@ def test_the_unbounded_widening_is_the_larger_models_fisher_interval():
 def test_a_dropped_terms_reason_states_its_widening():
     screened = TermChoice("actuator", False, 0.0, 6.63, 0.0, screened=True,
                           widening=(0.015, 0.0))
-    assert "reaches 1.5 % of theta further down" in screened.reason()
+    assert "1.5 % of theta further down (linearised)" in screened.reason()
     assert "further up" not in screened.reason()
     tiny = TermChoice("actuator", False, 0.0, 6.63, 0.0, screened=True,
                       widening=(5e-5, 0.0))
-    assert "reaches" not in tiny.reason()
+    assert "spans them" not in tiny.reason()
+    held = replace(tiny, held_ci95=(0.0198, 0.0212))
+    assert held.reason().endswith("spans them: [0.0198, 0.0212] rad (refitted with it held)")

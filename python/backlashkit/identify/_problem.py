@@ -156,6 +156,17 @@ class Problem:
                        floors={**self.floors,
                                **{PACKED_LONG.index(n): x for n, x in floors.items()}})
 
+    def holding(self, name: str, value: float) -> Problem:
+        """The same problem with the unestimated term parameter ``name`` (a current
+        loop's ``tau_i``) held at ``value`` instead of its base value."""
+        base = self.base
+        if base.size == len(PACKED):
+            base = np.r_[base, np.zeros(len(PACKED_LONG) - len(PACKED))]
+        else:
+            base = base.copy()
+        base[PACKED_LONG.index(name)] = value
+        return replace(self, base=base)
+
     def final_spans(self, final_h: float | None) -> list[Span]:
         """The spans of the final stages: the whole spans, or the cheaper ones when
         only windows are fitted (they skip the holds)."""

@@ -658,9 +658,11 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             score = score_test(pb, best, linearised(seen, pb, best, sig, final_h), other, res,
                                term, recs)
             if score.screened:
-                choices.append(TermChoice(term.name, False, score.drop, term.threshold,
-                                          score.shift, screened=True,
-                                          widening=score.widening))
+                choices.append(TermChoice(
+                    term.name, False, score.drop, term.threshold, score.shift,
+                    screened=True, widening=score.widening,
+                    held_ci95=held_ci95(pb, best, term, recs, final_h, sig, max_iter,
+                                        linearised(seen, pb, best, sig, final_h).theta_std)))
                 continue
             widening = score.widening
             st = added_term_fit(other, res, best.z, best.cost, term, recs, max_iter)
@@ -674,11 +676,52 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             determined(big, st_big.z, std_big, [big.names.index(n) for n in term.params]),
             (fisher_ci95(st_big.z, std_big), fisher_ci95(st_small.z, np.r_[theta_std])))
         if not term.searched and not choice.kept:
-            choice = replace(choice, widening=widening)
+            choice = replace(choice, widening=widening,
+                             held_ci95=held_ci95(pb, best, term, recs, final_h, sig, max_iter,
+                                                 theta_std))
         choices.append(choice)
         if choice.kept != term.searched:  # the other model wins
             pb, best = other, st
     return pb, best, choices
+
+
+def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
+              final_h: float | None, sig: np.ndarray, max_iter: int, theta_std: float
+              ) -> tuple[float, float] | None:
+    """The 95 % interval of ``theta`` in rad over the values of a dropped one-parameter
+    ``term`` the data do not rule out: ``pb`` (the model without it) refitted from
+    ``best`` with the term held at each of its starts (:meth:`Term.start_grid`, in
+    ascending order, each from the one before), the union of ``theta_k -+ 1.96 s
+    sqrt(1 - rise_k / 3.84)`` in logarithms over those whose ``-2 log L`` lies within
+    :data:`CHI2_95` of the lowest (the fit without the term, at 0, among them); ``s``:
+    ``theta_std``, the model's own standard error of ``log theta``. It stops at the
+    first beyond, and at the first start the kernel cannot simulate. None where no
+    held fit lies within.
+
+    The score test's linearisation (:attr:`TermChoice.widening`) takes ``theta``'s
+    move with the term as linear; on a stiff drive with Coulomb friction it is not: a
+    0.5 ms lag moved ``theta`` by -4.2 % where the linearisation said -1.4 %
+    (docs/design/real-drives.md)."""
+    (name,) = term.params
+    if not (math.isfinite(theta_std) and Z_95 * theta_std < 1):
+        return None
+    held, z = [], best.z
+    for start in sorted(term.start_grid(recs), key=lambda st: st[name]):
+        other = pb.holding(name, start[name])
+        rows = other.residual(other.final_spans(final_h), final_h, sig)
+        st = other.refine(rows, z, max_iter)
+        if not math.isfinite(st.cost):
+            break
+        held.append((float(st.z[0]), st.cost - best.cost))
+        if st.cost - best.cost - min(0.0, *(r for _, r in held)) > CHI2_95:
+            break
+        z = st.z
+    lowest = min([0.0, *(r for _, r in held)])
+    ends = [(zt - Z_95 * theta_std * math.sqrt(room), zt + Z_95 * theta_std * math.sqrt(room))
+            for zt, rise in held if (room := 1.0 - (rise - lowest) / CHI2_95) >= 0]
+    if not ends:
+        return None
+    return math.exp(min(e[0] for e in ends)), math.exp(max(e[1] for e in ends))
 
 
 def added_term_fit(pb: Problem, res: Residual, z: np.ndarray, cost: float, term: Term,
@@ -716,15 +759,16 @@ def fisher_ci95(z: np.ndarray, std: np.ndarray) -> tuple[float, float]:
 def widened(found: ThetaInterval, choices: Sequence[TermChoice]) -> ThetaInterval:
     """The interval, widened to the other model's where a test could not tell the two
     apart (:attr:`TermChoice.other_ci95`), and out by a dropped term's
-    :attr:`TermChoice.widening`."""
+    :attr:`TermChoice.widening` and :attr:`TermChoice.held_ci95`."""
     lo0, hi0 = lo, hi = found.ci95
     for c in choices:
         down, up = c.widening
         lo = min(lo, lo0 * math.exp(-down))
         # no further than the profile follows theta: past it the end is open
         hi = max(hi, min(hi0 * math.exp(min(up, MAX_EXP)), MAX_HALF_WIDTH))
-        if c.other_ci95 is not None:
-            lo, hi = min(lo, c.other_ci95[0]), max(hi, c.other_ci95[1])
+        for other in (c.other_ci95, c.held_ci95):
+            if other is not None:
+                lo, hi = min(lo, other[0]), max(hi, min(other[1], MAX_HALF_WIDTH))
     if (lo, hi) == found.ci95:
         return found
     opened = hi >= MAX_HALF_WIDTH > hi0

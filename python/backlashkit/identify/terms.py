@@ -332,6 +332,12 @@ class TermChoice:
         estimate's interval reaches out to span ``theta`` at every value of the term
         the data do not rule out (the score test's linearisation,
         :func:`backlashkit.identify._score.held_widening`); (0, 0) where it is kept.
+    held_ci95 : tuple of float or None
+        Where the term is dropped: the interval of ``theta`` in rad that the model
+        without it spans when refitted with the term held at each of its starts
+        (:func:`backlashkit.identify._search.held_ci95`), which the estimate's
+        interval is widened to cover; None where no held fit lies within the 95 %
+        level, or the term is kept.
     """
 
     term: str
@@ -343,6 +349,7 @@ class TermChoice:
     screened: bool = False
     determined: bool = True
     widening: tuple[float, float] = (0.0, 0.0)
+    held_ci95: tuple[float, float] | None = None
 
     @classmethod
     def decide(cls, term: str, rise: float, threshold: float, shift: float,
@@ -439,15 +446,18 @@ class TermChoice:
                 f"{moves}{both}")
 
     def _widening_words(self) -> str:
-        """The clause on :attr:`widening`, or "" where it is too small to print."""
+        """The clause on :attr:`widening` and :attr:`held_ci95`, or "" where there is
+        nothing to state."""
         down, up = self.widening
-        if max(down, up) < PRINTED_WIDENING:
+        parts = [f"{100 * math.expm1(w):.2g} % of theta further {word} (linearised)"
+                 for w, word in ((down, "down"), (up, "up")) if w >= PRINTED_WIDENING]
+        if self.held_ci95 is not None:
+            lo, hi = self.held_ci95
+            parts.append(f"[{lo:.4g}, {hi:.4g}] rad (refitted with it held)")
+        if not parts:
             return ""
-        side = " and ".join(f"{100 * math.expm1(w):.2g} % of theta further {word}"
-                            for w, word in ((down, "down"), (up, "up"))
-                            if w >= PRINTED_WIDENING)
-        return ("; values of it the data do not rule out (linearised at the fit without "
-                f"it) would move theta, so the 95 % interval reaches {side}")
+        return ("; values of it the data do not rule out would move theta, and the 95 % "
+                f"interval spans them: {', '.join(parts)}")
 
 
 def chi2_upper(dof: int, alpha: float) -> float:
