@@ -699,9 +699,9 @@ def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
     held fit lies within.
 
     The score test's linearisation (:attr:`TermChoice.widening`) takes ``theta``'s
-    move with the term as linear; on a stiff drive with Coulomb friction it is not: a
-    0.5 ms lag moved ``theta`` by -4.2 % where the linearisation said -1.4 %
-    (docs/design/real-drives.md)."""
+    move with the term as linear; on a stiff drive with Coulomb friction it is not, and
+    the held fits reach nearly twice as far from the estimate (docs/design/real-drives.md,
+    trial 19 of the real-drive study)."""
     (name,) = term.params
     if not (math.isfinite(theta_std) and Z_95 * theta_std < 1):
         return None
