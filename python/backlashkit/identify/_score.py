@@ -37,7 +37,6 @@ from .terms import SCREEN_DROP, Term
 __all__ = ["Linearised", "Score", "held_widening", "linearise", "score_test"]
 
 
-
 @dataclass(frozen=True)
 class Linearised:
     """A residual linearised at a point: the tests' Gauss-Newton information.

@@ -696,7 +696,8 @@ def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
     :data:`CHI2_95` of the lowest (the fit without the term, at 0, among them); ``s``:
     ``theta_std``, the model's own standard error of ``log theta``. It stops at the
     first beyond, and at the first start the kernel cannot simulate. None where no
-    held fit lies within.
+    held fit lies within, or where the model's own interval reaches ``theta = 0``
+    (``1.96 s >= 1``, as :func:`._score.held_widening`).
 
     The score test's linearisation (:attr:`TermChoice.widening`) takes ``theta``'s
     move with the term as linear; on a stiff drive with Coulomb friction it is not, and

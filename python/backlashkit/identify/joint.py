@@ -23,7 +23,7 @@ Fitted attributes besides those in the class docstring
     What the likelihood-ratio tests of ``friction`` and ``actuator`` found, and why
     (:mod:`backlashkit.identify.terms`). Where the current loop is dropped, ``ci95_``
     reaches out to span ``theta`` at every lag the data do not rule out
-    (``TermChoice.widening``).
+    (``TermChoice.widening`` and ``TermChoice.held_ci95``).
 ``cost_`` (float)
     Weighted sum of squares (whitened with ``ARNoise``) plus the prior penalty at the
     optimum, over ``final_horizon`` if given.

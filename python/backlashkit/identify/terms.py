@@ -441,7 +441,7 @@ class TermChoice:
         if not self.determined and self.shift > KEEP_SHIFT:
             return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}); "
                     f"{moves}, but the data do not pin its value down (a standard error "
-                    "beyond a factor e), so that shift does not keep it")
+                    f"beyond a factor e), so that shift does not keep it{both}")
         return (f"{name} dropped: {gain}, not above {self.threshold:.3g} ({test}), and "
                 f"{moves}{both}")
 
