@@ -34,7 +34,8 @@ from .intervals import Z_95
 from .record import Record
 from .terms import SCREEN_DROP, Term
 
-__all__ = ["Linearised", "Score", "held_widening", "linearise", "score_test"]
+__all__ = ["Linearised", "Score", "bounds_theta", "held_widening", "linearise",
+           "score_test"]
 
 
 @dataclass(frozen=True)
@@ -177,13 +178,18 @@ def held_widening(along: float, std: float, norm: float, value: float, top: floa
     (``Z_95 std >= 1``): it does not bound ``theta``.
     """
     own = Z_95 * std
-    # a linearisation whose own interval reaches theta = 0 (the Fisher interval's rule)
-    # does not bound theta, so it cannot say how far the term moves it either
-    if not (math.isfinite(along) and 0 < own < 1 and top > 0
+    if not (math.isfinite(along) and bounds_theta(std) and top > 0
             and math.isfinite(norm) and math.isfinite(value)):
         return (0.0, 0.0)
     return (max(_held_reach(along, std, norm, value, top) - own, 0.0),
             max(_held_reach(-along, std, norm, value, top) - own, 0.0))
+
+
+def bounds_theta(std: float) -> bool:
+    """Whether a linearisation whose standard error of ``log theta`` is ``std`` bounds
+    ``theta``: its Fisher interval ``theta (1 -+ Z_95 std)`` stays above 0. One whose
+    interval reaches 0 cannot say how far a term moves ``theta`` either."""
+    return 0 < Z_95 * std < 1
 
 
 def _held_reach(slope: float, std: float, norm: float, value: float, top: float) -> float:

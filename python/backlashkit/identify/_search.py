@@ -27,7 +27,7 @@ from ._lm import LMState
 from ._model import LINEAR_PARAMS, Span, model_angles
 from ._problem import Problem, Residual, sample_count, selection
 from ._quantised import log_theta_draws, quantised
-from ._score import Linearised, linearise, score_test
+from ._score import Linearised, bounds_theta, linearise, score_test
 from .intervals import (
     CHI2_95,
     MAX_HALF_WIDTH,
@@ -697,14 +697,14 @@ def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
     ``theta_std``, the model's own standard error of ``log theta``. It stops at the
     first beyond, and at the first start the kernel cannot simulate. None where no
     held fit lies within, or where the model's own interval reaches ``theta = 0``
-    (``1.96 s >= 1``, as :func:`._score.held_widening`).
+    (:func:`._score.bounds_theta`).
 
     The score test's linearisation (:attr:`TermChoice.widening`) takes ``theta``'s
     move with the term as linear; on a stiff drive with Coulomb friction it is not, and
     the held fits reach nearly twice as far from the estimate (docs/design/real-drives.md,
     trial 19 of the real-drive study)."""
     (name,) = term.params
-    if not (math.isfinite(theta_std) and Z_95 * theta_std < 1):
+    if not bounds_theta(theta_std):
         return None
     held, z = [], best.z
     for start in sorted(term.start_grid(recs), key=lambda st: st[name]):
