@@ -124,3 +124,52 @@ def test_a_dropped_terms_reason_states_its_widening():
     assert "spans them" not in tiny.reason()
     held = replace(tiny, held_ci95=(0.0198, 0.0212))
     assert held.reason().endswith("spans them: [0.0198, 0.0212] rad (refitted with it held)")
+
+
+#: Draws of the coverage tests; their Monte Carlo standard error is about 0.0015.
+COVER_DRAWS = 20_000
+#: Marginal standard error of ``log theta`` and the correlation of its estimate with
+#: the term's, as strong as a loop's lag and theta's on a stiff drive.
+COVER_STD, COVER_RHO = 0.01, 0.9
+
+
+def _coverage(true_term: float, top: float, seed: int) -> tuple[float, float]:
+    """Coverage of the model's own interval and of it widened by ``held_widening``,
+    over draws of the unconstrained estimates of ``(log theta, term)`` of a linear
+    Gaussian model (the term's standard error 1, the true ``log theta`` 0): the model
+    without the term refits ``theta`` at the held value ``x`` to ``a - rho s (b - x)``
+    with standard error ``s sqrt(1 - rho^2)``, and ``-2 log L`` rises by
+    ``(x - b)^2 - b^2``."""
+    rng = np.random.default_rng(seed)
+    rho, s = COVER_RHO, COVER_STD
+    a = s * rng.standard_normal(COVER_DRAWS)
+    b = true_term + rho * a / s + math.sqrt(1 - rho**2) * rng.standard_normal(COVER_DRAWS)
+    own_std = s * math.sqrt(1 - rho**2)
+    own = Z_95 * own_std
+    held0 = a - rho * s * b  # the fit without the term: held at 0
+    own_cover = spanned = 0
+    for centre, value in zip(held0, b):
+        down, up = held_widening(-rho * s, own_std, 1.0, float(value), top)
+        own_cover += abs(centre) <= own
+        spanned += -own - up <= centre <= own + down
+    return own_cover / COVER_DRAWS, spanned / COVER_DRAWS
+
+
+def test_the_span_covers_where_a_term_the_data_cannot_see_is_there():
+    """With a term one standard error from none, which the likelihood-ratio test drops
+    as undetermined, the model's own interval misses about half the time; the widened
+    one, which holds the profile interval of the model with the term, covers at least
+    95 %."""
+    own, spanned = _coverage(true_term=1.0, top=12.0, seed=11)
+    assert own < 0.6
+    assert spanned > 0.944
+
+
+def test_the_span_over_covers_where_there_is_no_term():
+    """With no term (its value on the range's end), the profile interval over the
+    range covers more than 95 %: the misses on the side the term moves ``theta`` to are
+    gone, so at most 97.5 %. This is the price of an interval that holds whether or not
+    the drive has a term the data cannot see (docs/validation/real-drives.md)."""
+    own, spanned = _coverage(true_term=0.0, top=12.0, seed=12)
+    assert own == pytest.approx(0.95, abs=0.006)
+    assert 0.962 < spanned < 0.981
