@@ -148,7 +148,7 @@ def _coverage(true_term: float, top: float, seed: int) -> tuple[float, float]:
     own = Z_95 * own_std
     held0 = a - rho * s * b  # the fit without the term: held at 0
     own_cover = spanned = 0
-    for centre, value in zip(held0, b):
+    for centre, value in zip(held0, b, strict=True):
         down, up = held_widening(-rho * s, own_std, 1.0, float(value), top)
         own_cover += abs(centre) <= own
         spanned += -own - up <= centre <= own + down

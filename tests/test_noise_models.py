@@ -181,6 +181,22 @@ def test_ar_model_on_coloured_noise(colored_fits, clean):
     assert abs(ar.theta_ - THETA) < 3 * ar.std_
 
 
+def test_a_dropped_loop_is_tested_and_spanned_under_the_ar_likelihood(colored_fits):
+    """The loop's test and its spans weigh the whitened residual: made on the white
+    one, the spans of the model without the loop fall inside the AR model's wider
+    interval and widen nothing (they did before the tests were whitened)."""
+    rec, white, ar, _ = colored_fits
+    plain = JointIdentifier(PRIOR, noise_model=ARNoise(2), actuator=None).fit(rec)
+    (loop,) = [c for c in ar.choices_ if c.term == "actuator"]
+    (white_loop,) = [c for c in white.choices_ if c.term == "actuator"]
+    assert not loop.kept and ar.theta_ == pytest.approx(plain.theta_, rel=1e-6)
+    assert loop.rise != white_loop.rise
+    # the spans reach past the AR model's own interval, in its units
+    assert loop.held_ci95 is not None and loop.held_ci95[0] < plain.ci95_[0]
+    assert ar.ci95_[0] == loop.held_ci95[0] < white_loop.held_ci95[0]
+    assert ar.ci95_[1] == pytest.approx(plain.ci95_[1], rel=1e-6)
+
+
 def test_ar_cost_is_the_whitened_likelihood_computed_independently(colored_fits):
     rec, _, ar, _ = colored_fits
     sim = ar.drive_.simulate(rec.t, rec.torque)  # the drive's own simulate, not the fit's

@@ -4,7 +4,8 @@
 its weighted residuals (:mod:`backlashkit.identify._problem`); :func:`run` calls the
 stages in order: :func:`grid_minima`, :func:`first_window`, :func:`continue_on` (and
 :func:`direct_path`), :func:`whole_record`, :func:`restart`, :func:`reestimate_noise`,
-:func:`select_terms`, :func:`whiten_noise`, :func:`uncertainty`; :func:`locate` groups
+:func:`select_terms` (under the noise model's likelihood, :func:`tested_terms`),
+:func:`whiten_noise`, :func:`uncertainty`; :func:`locate` groups
 the first five, which :func:`research` runs again where the test adds a term after
 them. The configuration is :mod:`backlashkit.identify.search`'s;
 ``docs/design/joint-search.md`` says why each stage exists.
@@ -631,14 +632,16 @@ def refuse_unexplained(recs: list[Record], fits: np.ndarray, terms: Sequence[Ter
 
 
 def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
-                 terms: Sequence[Term], recs: list[Record], max_iter: int
+                 terms: Sequence[Term], recs: list[Record], max_iter: int,
+                 ar: np.ndarray | None = None
                  ) -> tuple[Problem, LMState, list[TermChoice]]:
     """Likelihood-ratio tests of the ``"auto"`` terms, in order. A term in the search
     is removed and the nested model refitted from ``best``; one outside it is first
     screened by its score test (:mod:`._score`), then added (each start of
     :meth:`Term.start_grid` refitted, the lowest going on) and the larger model
     refitted. The term is kept where ``-2 log L`` is lower with it by more than its
-    threshold, or where removing it moves ``theta`` (:meth:`TermChoice.decide`)."""
+    threshold, or where removing it moves ``theta`` (:meth:`TermChoice.decide`). Every
+    residual is weighed by ``sig`` and whitened by ``ar`` (None: white noise)."""
     choices = []
     seen: dict[tuple[int, bytes], tuple[Problem, Linearised]] = {}
     for term in terms:
@@ -646,31 +649,32 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
             continue
         if term.searched:
             other, keep = pb.without(term.params)
-            res = other.residual(other.final_spans(final_h), final_h, sig)
+            res = other.residual(other.final_spans(final_h), final_h, sig, ar)
             st = other.refine(res, best.z[keep], max_iter)
             (small, st_small), st_big = (other, st), best
             # stopped far from its optimum, its theta says nothing: no shift
-            theta_std = (linearised(seen, small, st_small, sig, final_h).theta_std
+            theta_std = (linearised(seen, small, st_small, sig, final_h, ar).theta_std
                          if st.done else math.nan)
         else:
             other = pb.with_params(term.params, term.floors(recs), term.scales(recs))
-            res = other.residual(other.final_spans(final_h), final_h, sig)
-            score = score_test(pb, best, linearised(seen, pb, best, sig, final_h), other, res,
+            res = other.residual(other.final_spans(final_h), final_h, sig, ar)
+            score = score_test(pb, best, linearised(seen, pb, best, sig, final_h, ar), other, res,
                                term, recs)
             if score.screened:
                 choices.append(TermChoice(
                     term.name, False, score.drop, term.threshold, score.shift,
                     screened=True, widening=score.widening,
                     held_ci95=held_ci95(pb, best, term, recs, final_h, sig, max_iter,
-                                        linearised(seen, pb, best, sig, final_h).theta_std)))
+                                        linearised(seen, pb, best, sig, final_h, ar).theta_std,
+                                        ar)))
                 continue
             widening = score.widening
             st = added_term_fit(other, res, best.z, best.cost, term, recs, max_iter)
             (small, st_small), st_big = (pb, best), st
-            theta_std = linearised(seen, pb, best, sig, final_h).theta_std
+            theta_std = linearised(seen, pb, best, sig, final_h, ar).theta_std
         rise = st_small.cost - st_big.cost
         big = pb if term.searched else other
-        std_big = linearised(seen, big, st_big, sig, final_h).std
+        std_big = linearised(seen, big, st_big, sig, final_h, ar).std
         choice = TermChoice.decide(
             term.name, rise, term.threshold, abs(st_big.z[0] - st_small.z[0]) / theta_std,
             determined(big, st_big.z, std_big, [big.names.index(n) for n in term.params]),
@@ -678,16 +682,35 @@ def select_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | N
         if not term.searched and not choice.kept:
             choice = replace(choice, widening=widening,
                              held_ci95=held_ci95(pb, best, term, recs, final_h, sig, max_iter,
-                                                 theta_std))
+                                                 theta_std, ar))
         choices.append(choice)
         if choice.kept != term.searched:  # the other model wins
             pb, best = other, st
     return pb, best, choices
 
 
+def tested_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
+                 terms: Sequence[Term], recs: list[Record], max_iter: int, noise_model,
+                 noise_iter: int) -> tuple[Problem, LMState, list[TermChoice]]:
+    """:func:`select_terms` under the likelihood of ``noise_model``. Under coloured
+    noise the white likelihood's rises are too large, so the test keeps terms the
+    data do not call for, and its intervals and spans too narrow: the residual is
+    whitened first (:func:`whiten_noise`) and the chosen model refitted on the white
+    one after, which the stages up to the final whitening weigh. White noise: the
+    tests as they were, at no cost."""
+    w_best, w_sig, ar = whiten_noise(pb, best, sig, noise_model, len(recs), noise_iter,
+                                     max_iter)
+    pb, w_best, choices = select_terms(pb, w_best, w_sig, final_h, terms, recs, max_iter,
+                                       ar)
+    if ar is None:
+        return pb, w_best, choices
+    white = pb.residual(pb.final_spans(final_h), final_h, sig)
+    return pb, pb.refine(white, w_best.z, max_iter), choices
+
+
 def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
-              final_h: float | None, sig: np.ndarray, max_iter: int, theta_std: float
-              ) -> tuple[float, float] | None:
+              final_h: float | None, sig: np.ndarray, max_iter: int, theta_std: float,
+              ar: np.ndarray | None = None) -> tuple[float, float] | None:
     """The 95 % interval of ``theta`` in rad over the values of a dropped one-parameter
     ``term`` the data do not rule out: ``pb`` (the model without it) refitted from
     ``best`` with the term held at each of its starts (:meth:`Term.start_grid`, in
@@ -695,7 +718,8 @@ def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
     sqrt(1 - rise_k / 3.84)`` in logarithms over those whose ``-2 log L`` lies within
     :data:`CHI2_95` of the lowest (the fit without the term, at 0, among them); ``s``:
     ``theta_std``, the model's own standard error of ``log theta``. It stops at the
-    first beyond, and at the first start the kernel cannot simulate. None where no
+    first beyond, and at the first start the kernel cannot simulate. The residual is
+    weighed by ``sig`` and whitened by ``ar`` (None: white noise). None where no
     held fit lies within, or where the model's own interval reaches ``theta = 0``
     (:func:`._score.bounds_theta`).
 
@@ -709,7 +733,7 @@ def held_ci95(pb: Problem, best: LMState, term: Term, recs: list[Record],
     held, z = [], best.z
     for start in sorted(term.start_grid(recs), key=lambda st: st[name]):
         other = pb.holding(name, start[name])
-        rows = other.residual(other.final_spans(final_h), final_h, sig)
+        rows = other.residual(other.final_spans(final_h), final_h, sig, ar)
         st = other.refine(rows, z, max_iter)
         if not math.isfinite(st.cost):
             break
@@ -740,13 +764,14 @@ def added_term_fit(pb: Problem, res: Residual, z: np.ndarray, cost: float, term:
 
 
 def linearised(seen: dict, pb: Problem, st: LMState, sig: np.ndarray,
-               final_h: float | None) -> Linearised:
+               final_h: float | None, ar: np.ndarray | None = None) -> Linearised:
     """The whole-record residual of ``pb`` linearised at ``st`` (:func:`._score.linearise`),
     once per model and point: the model the friction test keeps is the one the loop's
     test starts from. ``seen`` holds those already made."""
     key = (id(pb), st.z.tobytes())
     if key not in seen or seen[key][0] is not pb:
-        seen[key] = (pb, linearise(pb.residual(pb.final_spans(final_h), final_h, sig), st.z))
+        seen[key] = (pb, linearise(pb.residual(pb.final_spans(final_h), final_h, sig, ar),
+                                   st.z))
     return seen[key][1]
 
 
@@ -835,11 +860,13 @@ def run(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
     best, sig = reestimate_noise(pb, best, sigma, final_h, len(recs), noise_passes,
                                  search.max_iter)
     stage(5)
-    pb, best, choices = select_terms(pb, best, sig, final_h, terms, recs, search.max_iter)
+    pb, best, choices = tested_terms(pb, best, sig, final_h, terms, recs, search.max_iter,
+                                     noise_model, search.noise_iter)
     pb, best = prior_terms(pb, best, sig, final_h, terms, recs, search.max_iter)
     if joined_terms(terms, choices):
         pb, best, sig, choices = research(pb, best, sig, search, sigma, recs, start_drive,
-                                          anchor, terms, choices, two_step, noise_passes)
+                                          anchor, terms, choices, two_step, noise_passes,
+                                          noise_model)
     best, sig, ar = whiten_noise(pb, best, sig, noise_model, len(recs), search.noise_iter,
                                  search.max_iter)
     stage(6)
@@ -995,7 +1022,7 @@ def joined_terms(terms: Sequence[Term], choices: Sequence[TermChoice]) -> list[T
 def research(pb: Problem, best: LMState, sig: np.ndarray, search: JointSearch,
              sigma: np.ndarray, recs: list[Record], start_drive: TwoMassDrive,
              anchor: dict[str, float], terms: Sequence[Term], choices: list[TermChoice],
-             two_step, noise_passes: int
+             two_step, noise_passes: int, noise_model
              ) -> tuple[Problem, LMState, np.ndarray, list[TermChoice]]:
     """Stages 1-5 again with a term the test added in the search, from the prior's
     point ``anchor`` (z units by name) with each of the added term's starts
@@ -1023,8 +1050,8 @@ def research(pb: Problem, best: LMState, sig: np.ndarray, search: JointSearch,
             again, sig2, cost = st, s2, c
     tested = [replace(t, searched=True) for t in terms
               if t.mode == "auto" and all(n in pb.names for n in t.params)]
-    pb, again, retested = select_terms(pb, again, sig2, final_h, tested, recs,
-                                       search.max_iter)
+    pb, again, retested = tested_terms(pb, again, sig2, final_h, tested, recs,
+                                       search.max_iter, noise_model, search.noise_iter)
     new = {c.term: c for c in retested}
     return pb, again, sig2, [new.get(c.term, c) for c in choices]
 
