@@ -190,7 +190,8 @@ def test_a_dropped_loop_is_tested_and_spanned_under_the_ar_likelihood(colored_fi
     (loop,) = [c for c in ar.choices_ if c.term == "actuator"]
     (white_loop,) = [c for c in white.choices_ if c.term == "actuator"]
     assert not loop.kept and ar.theta_ == pytest.approx(plain.theta_, rel=1e-6)
-    assert loop.rise != white_loop.rise
+    # the white likelihood overstates what a term explains of coloured noise
+    assert 0 <= loop.rise < 0.2 * white_loop.rise
     # the spans reach past the AR model's own interval, in its units
     assert loop.held_ci95 is not None and loop.held_ci95[0] < plain.ci95_[0]
     assert ar.ci95_[0] == loop.held_ci95[0] < white_loop.held_ci95[0]
