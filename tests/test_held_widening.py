@@ -117,13 +117,13 @@ def test_the_unbounded_widening_is_the_larger_models_fisher_interval():
 def test_a_dropped_terms_reason_states_its_widening():
     screened = TermChoice("actuator", False, 0.0, 6.63, 0.0, screened=True,
                           widening=(0.015, 0.0))
-    assert "1.5 % of theta further down (linearised)" in screened.reason()
+    assert "1.5 % further down (linearised)" in screened.reason()
     assert "further up" not in screened.reason()
     tiny = TermChoice("actuator", False, 0.0, 6.63, 0.0, screened=True,
                       widening=(5e-5, 0.0))
-    assert "spans them" not in tiny.reason()
+    assert "spans theta" not in tiny.reason()
     held = replace(tiny, held_ci95=(0.0198, 0.0212))
-    assert held.reason().endswith("spans them: [0.0198, 0.0212] rad (refitted with it held)")
+    assert held.reason().endswith("not ruled out: [0.0198, 0.0212] rad (refitted with it held)")
 
 
 #: Draws of the coverage tests; their Monte Carlo standard error is about 0.0015.

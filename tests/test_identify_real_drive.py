@@ -1118,7 +1118,7 @@ def test_ideal_records_drop_the_loop_unfitted_as_the_fit_would(monkeypatch):
     fit = _fit(recs, P_TRUE)
     loop = {c.term: c for c in fit.choices_}["actuator"]
     assert loop.screened and not loop.kept and loop.rise < SCREEN_DROP
-    assert "current loop dropped without fitting it" in loop.reason()
+    assert "current loop dropped unfitted" in loop.reason()
     score, fitted, slow = _loop_fitted_and_scored(recs, monkeypatch)
     assert score.drop == loop.rise and not fitted.screened
     assert not fitted.kept and fitted.other_ci95 is None

@@ -415,10 +415,9 @@ class TermChoice:
         if self.screened:
             # rounded down, so that a drop just under the limit does not print as it
             drop = math.floor(self.rise * 1e3) / 1e3
-            return (f"{name} dropped without fitting it: at the fit without it, a score "
-                    f"test predicts it would lower -2 log L by {drop:.3g}, less than "
-                    f"{SCREEN_DROP} (too little to pin it down): the data do not call for "
-                    f"it{self._widening_words()}")
+            return (f"{name} dropped unfitted: a score test at the fit without it "
+                    f"predicts -2 log L {drop:.3g} lower with it, under {SCREEN_DROP}: too "
+                    f"little to pin it down{self._widening_words()}")
         if self.rise <= 0:
             # the nested model is the limit of the larger one (a loop of lag 0, Coulomb
             # torques of 0), so a fit with the term ending higher found no better point;
@@ -449,15 +448,15 @@ class TermChoice:
         """The clause on :attr:`widening` and :attr:`held_ci95`, or "" where there is
         nothing to state."""
         down, up = self.widening
-        parts = [f"{100 * math.expm1(w):.2g} % of theta further {word} (linearised)"
+        parts = [f"{100 * math.expm1(w):.2g} % further {word} (linearised)"
                  for w, word in ((down, "down"), (up, "up")) if w >= PRINTED_WIDENING]
         if self.held_ci95 is not None:
             lo, hi = self.held_ci95
             parts.append(f"[{lo:.4g}, {hi:.4g}] rad (refitted with it held)")
         if not parts:
             return ""
-        return ("; values of it the data do not rule out would move theta, and the 95 % "
-                f"interval spans them: {', '.join(parts)}")
+        return ("; the 95 % interval spans theta over the values of it not ruled out: "
+                f"{', '.join(parts)}")
 
 
 def chi2_upper(dof: int, alpha: float) -> float:
