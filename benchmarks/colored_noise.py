@@ -17,7 +17,9 @@ its ratio to the Cramér-Rao bound for this noise (:func:`~backlashkit.cramer_ra
 with ``noise_ar``, all seven parameters estimated), the median reported standard error,
 its ratio to the empirical std (1 for a calibrated standard error), the coverage of
 ``ci95_`` (profile likelihood), the median lag-1 autocorrelation of the residuals the
-fit treats as white (``residual_lag1_``) and the time per fit. With
+fit treats as white (``residual_lag1_``), the time per fit, and in how many fits the
+likelihood-ratio tests kept Coulomb friction and a current loop, which the drive has
+not. With
 ``--corr 0`` the noise is white and both models should agree.
 
 Run: ``python benchmarks/colored_noise.py [--trials 40] [--corr 0.8] [--snr 30]
@@ -84,7 +86,7 @@ def trial(task):
             warnings.simplefilter("ignore", CorrelatedResidualsWarning)
             fit = JointIdentifier(prior, noise_model=model, workers=1).fit(recs)
         out.append((fit.theta_, fit.std_, fit.ci95_, float(np.median(fit.residual_lag1_)),
-                    time.perf_counter() - t0))
+                    time.perf_counter() - t0, fit.friction_ != "viscous", fit.tau_i_ > 0))
     return out
 
 
@@ -110,7 +112,8 @@ def main() -> None:
           f"{args.err_p:g}, {args.trials} trials, seed {args.seed}; Cramer-Rao bound of "
           f"theta for this noise, all seven parameters estimated: {bound:.3g} rad")
     print(f"{'noise model':<14} {'mean err%':>9} {'std emp':>9} {'emp/CRB':>7} {'std rep':>9} "
-          f"{'rep/emp':>7} {'cover95':>8} {'lag1':>6} {'s/fit':>6}")
+          f"{'rep/emp':>7} {'cover95':>8} {'lag1':>6} {'s/fit':>6} {'fc kept':>7} "
+          f"{'loop kept':>9}")
     for k, label in enumerate(("white", f"AR({args.order})")):
         th = np.array([r[k][0] for r in results])
         std = np.array([r[k][1] for r in results])
@@ -121,7 +124,8 @@ def main() -> None:
               f"{emp / bound:7.2f} {rep:9.2e} "
               f"{rep / emp:7.2f} {cover:>4}/{len(th):<3} "
               f"{statistics.median(r[k][3] for r in results):6.3f} "
-              f"{statistics.median(r[k][4] for r in results):6.2f}")
+              f"{statistics.median(r[k][4] for r in results):6.2f} "
+              f"{sum(r[k][5] for r in results):>7} {sum(r[k][6] for r in results):>9}")
     print(f"{time.perf_counter() - start:.0f} s")
 
 
