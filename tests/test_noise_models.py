@@ -184,7 +184,7 @@ def test_ar_model_on_coloured_noise(colored_fits, clean):
 def test_a_dropped_loop_is_tested_and_spanned_under_the_ar_likelihood(colored_fits):
     """The loop's test and its spans weigh the whitened residual: made on the white
     one, the spans of the model without the loop fall inside the AR model's wider
-    interval and widen nothing (they did before the tests were whitened)."""
+    interval and widen nothing, as before the tests were whitened."""
     rec, white, ar, _ = colored_fits
     plain = JointIdentifier(PRIOR, noise_model=ARNoise(2), actuator=None).fit(rec)
     (loop,) = [c for c in ar.choices_ if c.term == "actuator"]
