@@ -1035,7 +1035,7 @@ def test_term_kept_by_the_test_or_by_the_shift_of_theta():
     # a score-test drop just under its limit does not print as the limit (the QA pass
     # read "by 0.5, less than 0.5")
     screened = TermChoice("actuator", False, 0.4996, 6.63, 0.1, screened=True).reason()
-    assert "by 0.499, less than 0.5" in screened
+    assert "0.499 lower with it, under 0.5" in screened
     # a fit without the term that stopped before converging has no theta to compare
     # (the QA pass's 80 s records from rest read "theta moves by 0" beside a fall of 2e7)
     unconverged = TermChoice.decide("friction", 2.09e7, 9.21, math.nan)
