@@ -433,6 +433,12 @@ def test_cli_json_says_what_the_model_chose(coulomb, tmp_path, capsys):
     assert doc["fc_M_std"] > 0 and doc["fc_L_std"] > 0
     assert doc["tau_i"] == 0.0 and doc["tau_i_std"] is None
     assert len(doc["model_choices"]) == 2
+    tests = {t["term"]: t for t in doc["model_tests"]}
+    assert set(tests) == {"friction", "actuator"} and tests["friction"]["kept"]
+    assert tests["friction"]["rise"] > tests["friction"]["threshold"]
+    loop = tests["actuator"]
+    assert not loop["kept"] and len(loop["widening"]) == 2
+    assert loop["held_ci95"] is None or loop["held_ci95"][0] <= doc["ci95"][0] * (1 + 1e-12)
 
 
 def test_cli_reads_a_known_loop_from_the_drive_file(coulomb, tmp_path, capsys):

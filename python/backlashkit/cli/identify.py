@@ -42,7 +42,7 @@ from ..identify.readers import SPEED_UNITS, read_records
 from ..identify.record import Record
 from ..identify.report import check_report_directory
 from ..identify.step import REFUSE_FROM_PRIOR
-from ..identify.terms import FRICTION_CHOICES
+from ..identify.terms import FRICTION_CHOICES, TermChoice
 from ..identify.torque import torque_levels
 from ..identify.two_step import DEFAULT_DT4, RegressionIdentifier, TwoStepIdentifier
 from ..io import read_actuator_toml, read_drive_toml, read_uncertainty_toml
@@ -308,6 +308,20 @@ def _num(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
+def _pair(x: tuple[float, float] | None) -> list[float | None] | None:
+    return None if x is None else [_num(v) for v in x]
+
+
+def _test_json(c: TermChoice) -> dict[str, Any]:
+    """One term's likelihood-ratio test (:class:`~backlashkit.identify.TermChoice`)
+    as numbers: ``widening`` in ``log theta`` (down, up), the intervals in rad."""
+    return {"term": c.term, "kept": c.kept, "rise": _num(c.rise),
+            "threshold": _num(c.threshold), "shift": _num(c.shift),
+            "screened": c.screened, "determined": c.determined,
+            "other_ci95": _pair(c.other_ci95), "widening": _pair(c.widening),
+            "held_ci95": _pair(c.held_ci95)}
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``backlashkit identify``.
 
@@ -564,6 +578,7 @@ def _terms_json(est: Any) -> dict[str, Any]:
         out[name] = est.params_[name]
         out[f"{name}_std"] = _num(est.param_std_.get(name))
     out["model_choices"] = [c.reason() for c in est.choices_]
+    out["model_tests"] = [_test_json(c) for c in est.choices_]
     out["measured"] = list(est.measured_)
     return out
 
