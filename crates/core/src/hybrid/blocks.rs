@@ -1,53 +1,78 @@
-//! The block-wise fast path of the engine (sample time = internal step).
+//! The block-wise fast path of the engine.
 
 use super::mode::ModeData;
 use super::{flow, Engine, HybridModel, GRAZE_RTOL};
 use crate::linalg::Vector;
 
-/// Samples per block of the optimistic fast path.
+/// Internal steps per block of the optimistic fast path.
 const BLOCK: usize = 32;
 
 impl<const S: usize, const W: usize, M: HybridModel<S>> Engine<'_, S, W, M> {
-    /// As [`Self::fast_run`] when the internal step is the sample (`substeps == 1`):
-    /// runs the flow optimistically over a block of samples (the bare recurrence, so
-    /// the state's dependency chain carries nothing else), then checks the guards over
-    /// the stored block in a separate pass without loop-carried dependencies. On a hit
-    /// it rolls back to the start of the first suspect sample. The decisions are the
-    /// same as checking sample by sample.
+    /// Advance with the precomputed flow of mode `md` from internal step `sub` of sample
+    /// `k` until the end of the input or until a guard may fire inside an internal step;
+    /// returns `true` in the latter case, with `x` and the position `(k, sub)` at the
+    /// start of that step. Modes are not written: they do not change.
+    ///
+    /// Runs the flow optimistically over a block of internal steps (the bare
+    /// recurrence, so the state's dependency chain carries nothing else), writing the
+    /// samples' states as it reaches them, then checks the guards over the block in a
+    /// separate pass without loop-carried dependencies. On a hit it rolls back to the
+    /// start of the first suspect internal step. The decisions are the same as checking
+    /// step by step: each step's test takes the function's value and slope at its two
+    /// ends under the input held over it.
     #[inline(always)]
-    pub(super) fn fast_run_blocks(
+    pub(super) fn fast_run_blocks<const ONE: bool>(
         &self,
         md: &ModeData<S, W>,
         x: &mut Vector<S>,
         u: &[f64],
         k: &mut usize,
+        sub: &mut usize,
         states: &mut [f64],
     ) -> bool {
         let (h, n) = (self.h, u.len());
+        // one internal step per sample, known to the compiler (the common case)
+        let per = if ONE { 1 } else { self.substeps };
         let fg = &md.fast;
         let (nf, ng) = (md.funcs.len().min(W), md.guards.len().min(W));
-        // The block column-major, one guard function over the block, per-lane "positive
-        // at the end of the sample" flags, and per-sample "look closely" flags.
+        // The block's states row by row and column-major, its inputs step by step, one
+        // guard function over the block, per-lane "positive at the end of the step"
+        // flags, and per-step "look closely" flags.
+        let mut rows = [[0.0; S]; BLOCK + 1];
+        let mut ubuf = [0.0; BLOCK];
         let mut cols = [[0.0; BLOCK + 1]; S];
         let (mut gv, mut qv) = ([0.0; BLOCK + 1], [0.0; BLOCK + 1]);
         let mut pos = [[0u64; BLOCK]; W];
         while *k + 1 < n {
-            let kb = *k;
-            let m = BLOCK.min(n - 1 - kb);
-            let uu = &u[kb..kb + m];
+            let (kb, sb) = (*k, *sub);
+            let m = BLOCK.min((n - 1 - kb) * per - sb);
             let mut xx = *x;
             let (mut lo, mut hi) = (xx, xx);
-            for (uk, dst) in uu
-                .iter()
-                .zip(states[(kb + 1) * S..(kb + m + 1) * S].chunks_exact_mut(S))
-            {
-                xx = flow(&md.e, &md.fb, &md.fc, &xx, *uk);
-                dst.copy_from_slice(&xx);
-                for c in 0..S {
-                    lo[c] = if xx[c] < lo[c] { xx[c] } else { lo[c] };
-                    hi[c] = if xx[c] > hi[c] { xx[c] } else { hi[c] };
+            let (kk, ss, steps, uu) = if ONE {
+                // The steps are the samples: written in place, where the check reads them.
+                let block = states[(kb + 1) * S..(kb + m + 1) * S].chunks_exact_mut(S);
+                for (uk, dst) in u[kb..kb + m].iter().zip(block) {
+                    xx = flow(&md.e, &md.fb, &md.fc, &xx, *uk);
+                    dst.copy_from_slice(&xx);
+                    widen(&mut lo, &mut hi, &xx);
                 }
-            }
+                (kb + m, 0, &states[kb * S..(kb + m + 1) * S], &u[kb..kb + m])
+            } else {
+                let (mut kk, mut ss) = (kb, sb);
+                rows[0] = xx;
+                for j in 0..m {
+                    ubuf[j] = u[kk];
+                    xx = flow(&md.e, &md.fb, &md.fc, &xx, ubuf[j]);
+                    rows[j + 1] = xx;
+                    ss += 1;
+                    if ss == per {
+                        (kk, ss) = (kk + 1, 0);
+                        states[kk * S..(kk + 1) * S].copy_from_slice(&xx);
+                    }
+                    widen(&mut lo, &mut hi, &xx);
+                }
+                (kk, ss, rows[..=m].as_flattened(), &ubuf[..m])
+            };
             // First filter, O(S) per guard function: interval bounds over the block's
             // state box on the function and its slope. A function whose largest value
             // plus largest slope times h stays short of the boundary cannot cross or
@@ -73,11 +98,10 @@ impl<const S: usize, const W: usize, M: HybridModel<S>> Engine<'_, S, W, M> {
                 }
             }
             if suspect == 0 {
-                *k = kb + m;
-                *x = xx;
+                (*k, *sub, *x) = (kk, ss, xx);
                 continue;
             }
-            for (j, row) in states[kb * S..(kb + m + 1) * S].chunks_exact(S).enumerate() {
+            for (j, row) in steps.chunks_exact(S).enumerate() {
                 for c in 0..S {
                     cols[c][j] = row[c];
                 }
@@ -140,8 +164,7 @@ impl<const S: usize, const W: usize, M: HybridModel<S>> Engine<'_, S, W, M> {
                 }
             }
             if active == 0 {
-                *k = kb + m;
-                *x = xx;
+                (*k, *sub, *x) = (kk, ss, xx);
                 continue;
             }
             for &lanes in &fg.lanes[..ng] {
@@ -159,13 +182,21 @@ impl<const S: usize, const W: usize, M: HybridModel<S>> Engine<'_, S, W, M> {
                 flag.iter_mut().zip(&all).for_each(|(f, a)| *f |= a);
             }
             if let Some(j) = flag[..m].iter().position(|&f| f != 0) {
-                *k = kb + j;
-                x.copy_from_slice(&states[(kb + j) * S..(kb + j + 1) * S]);
+                (*k, *sub) = (kb + (sb + j) / per, (sb + j) % per);
+                x.copy_from_slice(&steps[j * S..(j + 1) * S]);
                 return true;
             }
-            *k = kb + m;
-            *x = xx;
+            (*k, *sub, *x) = (kk, ss, xx);
         }
         false
+    }
+}
+
+/// Widen the box `lo..=hi` to hold `x`.
+#[inline(always)]
+fn widen<const S: usize>(lo: &mut Vector<S>, hi: &mut Vector<S>, x: &Vector<S>) {
+    for c in 0..S {
+        lo[c] = if x[c] < lo[c] { x[c] } else { lo[c] };
+        hi[c] = if x[c] > hi[c] { x[c] } else { hi[c] };
     }
 }

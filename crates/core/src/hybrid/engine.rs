@@ -5,8 +5,8 @@
 use super::locate::{find_crossing, Taylor};
 use super::mode::{encode, ModeCache, ModeData, MODE_CODES};
 use super::settle::Modal;
-use super::{Event, Graze, HybridModel, Trajectory, GRAZE_RTOL};
-use crate::linalg::{dot, spectral_radius_estimate, Mat, Vector};
+use super::{Event, Graze, HybridModel, Trajectory};
+use crate::linalg::{spectral_radius_estimate, Mat, Vector};
 use crate::Error;
 
 /// Largest `rho(A) h` for which the Taylor expansion is used.
@@ -39,7 +39,7 @@ pub struct Engine<'m, const S: usize, const W: usize, M: HybridModel<S>> {
     model: &'m M,
     ts: f64,
     pub(super) h: f64,
-    substeps: usize,
+    pub(super) substeps: usize,
     /// Modes built so far, by code (only the few visited ones are ever built).
     cache: ModeCache<S, W>,
     /// Samples of the last run computed by the flow alone (module `settle`).
@@ -153,9 +153,6 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         let mut id = self.mode(&modes);
         out.states[..S].copy_from_slice(&x);
         out.modes[..ns].copy_from_slice(&modes);
-        // Guard function values and input-free slopes at the current state.
-        let mut cur = ([0.0; W], [0.0; W]);
-        self.refresh(id, &x, &mut cur);
         // Position: internal step `sub` of sample `k`. Grid modes from `filled` on are
         // not written yet; they equal `modes` up to the current sample.
         let (mut k, mut sub, mut filled) = (0usize, 0usize, 1usize);
@@ -173,12 +170,14 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
                 try_at = if sub != 0 {
                     k + 1
                 } else if (end - k) * self.substeps < SETTLE_MIN_STEPS {
-                    end // too short to pay, and only shorter later
+                    // too short to pay, and only shorter later: on to the next hold that
+                    // may (an input that changes every sample would stop the fast path
+                    // at every sample)
+                    next_hold(u, end, SETTLE_MIN_STEPS.div_ceil(self.substeps))
                 } else if self.settles(id, &x, u[k]) {
                     self.coast(id, &mut x, u[k], k..end, out.states);
                     self.settled += end - k;
                     k = end;
-                    self.refresh(id, &x, &mut cur);
                     end
                 } else {
                     k + every
@@ -190,18 +189,11 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             // Run to the end, or to the sample of the next try.
             let stop = if try_at < n { try_at + 1 } else { n };
             let md = self.mode_data(id);
+            let (u, states) = (&u[..stop], &mut *out.states);
             let fired = if self.substeps == 1 {
-                self.fast_run_blocks(md, &mut x, &u[..stop], &mut k, out.states)
+                self.fast_run_blocks::<true>(md, &mut x, u, &mut k, &mut sub, states)
             } else {
-                self.fast_run(
-                    md,
-                    &mut x,
-                    &mut cur,
-                    &u[..stop],
-                    &mut k,
-                    &mut sub,
-                    out.states,
-                )
+                self.fast_run_blocks::<false>(md, &mut x, u, &mut k, &mut sub, states)
             };
             if !fired {
                 continue;
@@ -211,7 +203,6 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
             filled = k + 1;
             let start = t0 + (k as f64) * ts + (sub as f64) * self.h;
             id = self.slow_step(&mut modes, &mut x, u[k], start, &mut out)?;
-            self.refresh(id, &x, &mut cur);
             sub += 1;
             if sub == self.substeps {
                 sub = 0;
@@ -261,75 +252,6 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
         }
     }
 
-    /// Per guard function of the mode at `x`: its value, and the input-free part of its
-    /// slope (`ha.x + hc`; the slope under input `u` adds `hb u`).
-    fn refresh(&self, id: usize, x: &Vector<S>, cur: &mut ([f64; W], [f64; W])) {
-        let md = self.mode_data(id);
-        let fg = &md.fast;
-        for i in 0..W {
-            cur.0[i] = dot(&fg.h[i], x) + fg.d[i];
-            cur.1[i] = dot(&fg.ha[i], x) + fg.hc[i];
-        }
-    }
-
-    /// Advance with the precomputed flow of mode `md` until the end of the input or
-    /// until a guard may fire inside an internal step; returns `true` in the latter
-    /// case, with `x` and the position `(k, sub)` at the start of that step (`cur` is
-    /// then stale: the caller refreshes it). Modes are not written: they do not change.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn fast_run(
-        &self,
-        md: &ModeData<S, W>,
-        x: &mut Vector<S>,
-        cur: &mut ([f64; W], [f64; W]),
-        u: &[f64],
-        k: &mut usize,
-        sub: &mut usize,
-        states: &mut [f64],
-    ) -> bool {
-        let (h, n) = (self.h, u.len());
-        let single = self.substeps == 1;
-        let fg = &md.fast;
-        while *k + 1 < n {
-            let uk = u[*k];
-            let xn = flow(&md.e, &md.fb, &md.fc, x, uk);
-            let mut positive = 0u64;
-            let mut peak = false;
-            for i in 0..md.funcs.len().min(W) {
-                // Values without the input term are carried over; the held input's
-                // term (zero for functions of the state alone) is added for this step.
-                let (g0, q0) = (cur.0[i] + fg.hu[i] * uk, cur.1[i]);
-                let g1x = dot(&fg.h[i], &xn) + fg.d[i];
-                let g1 = g1x + fg.hu[i] * uk;
-                let q1 = dot(&fg.ha[i], &xn) + fg.hc[i];
-                let (s0, s1) = (q0 + fg.hb[i] * uk, q1 + fg.hb[i] * uk);
-                positive |= ((g1 > 0.0) as u64) << i;
-                // An extremum towards the boundary inside the step: the function rises
-                // at the start and falls at the end; tangent lines bound its peak.
-                peak |= (s0 > 0.0)
-                    & (s1 < 0.0)
-                    & ((g0 + s0 * h > -GRAZE_RTOL) | (g1 - s1 * h > -GRAZE_RTOL));
-                cur.0[i] = g1x;
-                cur.1[i] = q1;
-            }
-            if peak | crossed(positive, &fg.lanes[..md.guards.len().min(W)]) {
-                return true;
-            }
-            *x = xn;
-            if !single {
-                *sub += 1;
-                if *sub < self.substeps {
-                    continue;
-                }
-                *sub = 0;
-            }
-            *k += 1;
-            states[*k * S..(*k + 1) * S].copy_from_slice(x);
-        }
-        false
-    }
-
     /// Advance one internal step locating every guard crossing inside it.
     fn slow_step(
         &mut self,
@@ -374,16 +296,6 @@ impl<'m, const S: usize, const W: usize, M: HybridModel<S>> Engine<'m, S, W, M> 
     }
 }
 
-/// Whether some guard has all its lanes set in `positive`.
-#[inline(always)]
-fn crossed(positive: u64, lanes: &[u64]) -> bool {
-    let mut any = false;
-    for &l in lanes {
-        any |= positive & l == l; // all lanes of this guard are set
-    }
-    any
-}
-
 /// The end of the run of inputs equal to `u[k]` from `k` (exclusive): the samples up to
 /// it follow that input. The last value, which no step uses, is not part of a run.
 fn held_until(u: &[f64], k: usize) -> usize {
@@ -392,6 +304,21 @@ fn held_until(u: &[f64], k: usize) -> usize {
         .iter()
         .position(|&v| v != steps[k])
         .map_or(steps.len(), |i| k + i)
+}
+
+/// The start of the first run of equal inputs from `from` on that lasts `len` samples or
+/// more (as [`held_until`] counts them), or the end of the input where none does.
+fn next_hold(u: &[f64], from: usize, len: usize) -> usize {
+    let last = u.len() - 1;
+    let mut k = from;
+    while k < last {
+        let end = held_until(u, k);
+        if end - k >= len {
+            return k;
+        }
+        k = end;
+    }
+    last
 }
 
 /// Write `modes` into grid rows `from..to` of the row-major mode output.
