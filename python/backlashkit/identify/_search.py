@@ -936,12 +936,17 @@ def fixed_test(pb: Problem, best: LMState, term: Term, recs: list[Record],
 
 def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Record],
            start_drive: TwoMassDrive, z_anchor: np.ndarray, *, two_step=_UNSET,
-           stage: Callable[[int], None] = lambda done: None
-           ) -> tuple[LMState, list[float], tuple[float, float] | None, bool, list[LMState]]:
+           stage: Callable[[int], None] = lambda done: None, restarted: bool = True,
+           seen: list[list[LMState]] | None = None
+           ) -> tuple[LMState, list[float], tuple[float, float] | None, bool,
+                      list[LMState]] | None:
     """Stages 1-4 from ``z_anchor``: the grid, the first window, the continuation, the
-    whole records and the restarts. Returns the best point, the starts' ``theta``, the
-    two-step estimate (``two_step`` reuses one already made), whether the landscape
-    was ambiguous and the rivals of the best point (:func:`rivals_of`)."""
+    whole records and, where ``restarted``, the restarts (:func:`restarts_of`). Returns
+    the best point, the starts' ``theta``, the two-step estimate (``two_step`` reuses
+    one already made), whether the landscape was ambiguous and the rivals of the best
+    point (:func:`rivals_of`). With ``seen`` (the continuation's candidates of earlier
+    searches, extended here), None where every candidate of this one is one of them
+    (:func:`same_point`): its continuation would end where theirs did."""
     short = [search.first.horizon, *search.continuation.horizons]
     rows0 = pb.residual(pb.screen, short[0], sigma)
     zg, minima = grid_minima(pb, rows0, search.grid, z_anchor)
@@ -960,6 +965,10 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     stage(2)
     cont, max_iter = search.continuation, search.max_iter
     cands = distinct(states, cont.candidates, CONTINUE_RATIO * states[0].cost)
+    if seen is not None:
+        if any(all(any(same_point(c, o) for o in old) for c in cands) for old in seen):
+            return None
+        seen.append(cands)
     # two paths, the second finer and from the best candidate only: a long step can
     # jump to a wrong basin where the ringing is rich, a short one elsewhere
     paths = cont.paths(short[0])
@@ -986,14 +995,26 @@ def locate(pb: Problem, search: JointSearch, sigma: np.ndarray, recs: list[Recor
     final_h = search.final_horizon
     rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
     best, rivals = whole_record(pb, ends, rows_full, max_iter)
-    long_h = LONG_WINDOW * short[-1]
+    if restarted:
+        best, rivals = restarts_of(pb, search, sigma, best, rivals, z_anchor)
+    return best, starts, two_step, ambiguous, rivals
+
+
+def restarts_of(pb: Problem, search: JointSearch, sigma: np.ndarray, best: LMState,
+                rivals: list[LMState], z_anchor: np.ndarray
+                ) -> tuple[LMState, list[LMState]]:
+    """The restarts of the whole records' best point (:func:`restart`), with the prior's
+    linear parameters in ``z_anchor``: the best point and its rivals."""
+    final_h = search.final_horizon
+    short_h = [search.first.horizon, *search.continuation.horizons][-1]
+    rows_full = pb.residual(pb.final_spans(final_h), final_h, sigma)
+    long_h = LONG_WINDOW * short_h
     # a final horizon no longer than the long window: the final data are the longest
     rows_long = (rows_full if final_h is not None and final_h <= long_h
                  else pb.residual(pb.screen, long_h, sigma))
-    best, rivals = restart(pb, best, pb.residual(pb.screen, short[-1], sigma), rows_full,
-                           rows_long, search.restarts, max_iter,
-                           dict(zip(pb.free, z_anchor, strict=True)), rivals)
-    return best, starts, two_step, ambiguous, rivals
+    return restart(pb, best, pb.residual(pb.screen, short_h, sigma), rows_full, rows_long,
+                   search.restarts, search.max_iter, dict(zip(pb.free, z_anchor, strict=True)),
+                   rivals)
 
 
 def prior_terms(pb: Problem, best: LMState, sig: np.ndarray, final_h: float | None,
@@ -1036,18 +1057,28 @@ def research(pb: Problem, best: LMState, sig: np.ndarray, search: JointSearch,
     crawls along a narrow valley and stops short of the truth even on noise-free
     records, while the search with the term in it lands on it
     (``test_a_loop_found_after_the_search_is_searched_again``). The first answer is
-    kept where it is lower. Each start costs a search: a fit that keeps a loop searches
-    once more per start of its lag (four, ``terms.TAU_START_SAMPLES``)."""
+    kept where it is lower. Each start costs a search up to the whole records (a fit
+    that keeps a loop searches once more per start of its lag, four,
+    ``terms.TAU_START_SAMPLES``), but one whose first window lands where an earlier
+    start's did stops there (:func:`locate`'s ``seen``): the lag is free in the first
+    window, which on paper A's records takes every start of it to the same candidates.
+    Only the lowest on the whole records is restarted (:func:`restarts_of`): the
+    starts differ in the lag alone, and their restarts, from the same prior, search the
+    same basins again."""
     final_h = search.final_horizon
     rows = pb.residual(pb.final_spans(final_h), final_h, sig)
+    seen: list[list[LMState]] = []
+    found = [(out, z_anchor) for z_anchor in research_anchors(pb, best, anchor, terms, recs)
+             if (out := locate(pb, search, sigma, recs, start_drive, z_anchor,
+                               two_step=two_step, restarted=False, seen=seen)) is not None]
+    (st, *_, rivals), z_anchor = min(found, key=lambda f: f[0][0].cost)
+    st, _ = restarts_of(pb, search, sigma, st, rivals, z_anchor)
     again, sig2, cost = best, sig, best.cost
-    for z_anchor in research_anchors(pb, best, anchor, terms, recs):
-        st, *_ = locate(pb, search, sigma, recs, start_drive, z_anchor, two_step=two_step)
-        st, s2 = reestimate_noise(pb, st, sigma, final_h, len(recs), noise_passes,
-                                  search.max_iter)
-        c = float(np.sum(rows.at(st.z) ** 2))
-        if c < cost:
-            again, sig2, cost = st, s2, c
+    st, s2 = reestimate_noise(pb, st, sigma, final_h, len(recs), noise_passes,
+                              search.max_iter)
+    c = float(np.sum(rows.at(st.z) ** 2))
+    if c < cost:
+        again, sig2, cost = st, s2, c
     tested = [replace(t, searched=True) for t in terms
               if t.mode == "auto" and all(n in pb.names for n in t.params)]
     pb, again, retested = tested_terms(pb, again, sig2, final_h, tested, recs,
