@@ -897,6 +897,33 @@ def test_a_kept_loop_is_searched_again_from_each_of_its_starts():
     assert len(again) == 1 and again[0][-1] == fitted.z[-1]
 
 
+def test_starts_of_the_lag_that_land_together_are_searched_once(monkeypatch):
+    """Paper A's drive with a 1 ms loop: the lag is free in the first window, which takes
+    its starts to the same candidates, so the search again continues only the first of
+    them (the others stop, ``locate(..., seen=)``); the estimate is the one of searching
+    every start to the end."""
+    from backlashkit.identify import _search
+
+    recs = _records(P_TRUE, THETA, tau_i=1e-3, seed=5)
+    real = _search.locate
+    stopped = []
+
+    def counted(*args, **kw):
+        out = real(*args, **kw)
+        if kw.get("seen") is not None:
+            stopped.append(out is None)
+        return out
+
+    monkeypatch.setattr(_search, "locate", counted)
+    fit = _fit(recs, P_TRUE, friction="viscous")
+    assert fit.tau_i_ > 0
+    assert stopped[0] is False and any(stopped), stopped
+    monkeypatch.setattr(_search, "locate", lambda *a, seen=None, **kw: real(*a, **kw))
+    every = _fit(recs, P_TRUE, friction="viscous")
+    assert fit.theta_ == pytest.approx(every.theta_, rel=1e-9)
+    assert fit.tau_i_ == pytest.approx(every.tau_i_, rel=1e-6)
+
+
 def test_one_quantised_speed_is_noted(encoder, coulomb):
     """A record with one encoder speed and one analogue speed is not fitted as
     angles; the warning says so and what to give instead."""
