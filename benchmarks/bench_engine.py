@@ -2,10 +2,10 @@
 torque that changes every sample, against paper A's drive on paper A's record.
 
 A current loop's lag is the drive's fastest mode: at 1 ms the engine splits each sample
-into internal steps (``rho(A) h <= 1/2``), two for a 1 ms loop and eight for a 0.25 ms
-one. A torque that changes every sample (a controller's output, or a record's measured
-torque) is never held long enough for the engine to prove that no contact can change
-(its settling), so every sample is checked. Both are what real drives bring to the
+into internal steps (``rho(A) h <= 1/2``), the more the faster the loop. A torque that
+changes every sample (a controller's output, or a record's measured torque) is never
+held long enough for the engine to prove that no contact can change (its settling), so
+every sample is checked. Both are what real drives bring to the
 fits of issue 20 and to the fleet.
 
 Workloads: paper A's experiment (0.157 N m for 40 s, then 0 for 40 s, at 1 ms, 80 001
