@@ -334,11 +334,11 @@ fn rattling_input_changes_no_bit_in_pieces() {
     // Paper A's record with a torque that changes every sample in its first and last
     // 10 s (the drive rattles in its backlash there) and is held between: in one run,
     // and cut into pieces of 7 samples and of 1000. The fast path checks the guards
-    // over blocks of internal steps (two or more a sample with the current loop), so
-    // the pieces align the blocks otherwise: the same states and modes to the bit.
+    // over blocks of internal steps (several a sample with a current loop), so the
+    // pieces align the blocks otherwise: the same states and modes to the bit.
     // Left out: Coulomb friction without a loop, whose stick-slip chatter under this
-    // input a piece's start, classified from the state alone, enters otherwise (6 493
-    // changes in one run, 6 149 in pieces of 7, before the blocks as after).
+    // input a piece's start, classified from the state alone, can enter otherwise (its
+    // changes differ in number in pieces of 7, before the blocks as after).
     let ts = 1e-3;
     let u: Vec<f64> = paper_input(ts)
         .iter()
